@@ -1,0 +1,274 @@
+//! Rover-CPU devices behind the HAL traits (HAL glue; the only `unsafe` of the project is here).
+//!
+//! The clock is SysTick. The sensors are those of a rover at rest on level ground, the same
+//! situation as the host simulator's first scenario, so both implementations of the HAL can be
+//! compared. The stereo buffers live in the external RAM region (`.extram` in `memory.x`).
+
+use core::sync::atomic::{AtomicU32, Ordering};
+use cortex_m::peripheral::SYST;
+use rover_hal::{
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
+    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
+};
+
+use super::CORE_CLOCK_HZ;
+
+/// Mars gravity, m/s^2.
+const MARS_GRAVITY_M_S2: f64 = 3.711;
+/// Minor-frame period, microseconds (simulated sensor time advances by this per SysTick).
+const FRAME_US: u64 = 5_000;
+
+/// The rover CPU's device types.
+pub struct TargetPlatform;
+
+impl fsw::flight::Platform for TargetPlatform {
+    type Clock = SystickClock;
+    type Imu = StillImu;
+    type Mobility = StillMobility;
+    type Camera = ExtramStereo;
+    type Sun = FixedSun;
+    type Telemetry = CountingTelemetry;
+}
+
+fn frame_time_us(ticks: &AtomicU32) -> u64 {
+    u64::from(ticks.load(Ordering::Relaxed)) * FRAME_US
+}
+
+/// SysTick-based clock: time from the interrupt count, the execution counter from the interrupt
+/// count and the down-counting SysTick value (core clock cycles; instruction-driven in QEMU with
+/// `-icount`).
+pub struct SystickClock {
+    reload: u32,
+    ticks: &'static AtomicU32,
+}
+
+impl SystickClock {
+    /// A clock over SysTick running with `reload` cycles per interrupt.
+    pub fn new(reload: u32, ticks: &'static AtomicU32) -> Self {
+        Self { reload, ticks }
+    }
+}
+
+impl Clock for SystickClock {
+    type Error = ErrorKind;
+    fn now_us(&mut self) -> Result<u64, ErrorKind> {
+        Ok(frame_time_us(self.ticks))
+    }
+    fn counter(&mut self) -> Result<u64, ErrorKind> {
+        // Read the interrupt count on both sides of the SysTick value so a wrap in between is
+        // seen; retry a bounded number of times.
+        for _ in 0..4 {
+            let before = self.ticks.load(Ordering::Relaxed);
+            let current = SYST::get_current();
+            let after = self.ticks.load(Ordering::Relaxed);
+            if before == after {
+                let into_frame = u64::from(self.reload.saturating_sub(current));
+                return Ok(u64::from(before) * u64::from(self.reload) + into_frame);
+            }
+        }
+        Err(ErrorKind::Busy)
+    }
+    fn counter_hz(&self) -> u64 {
+        u64::from(CORE_CLOCK_HZ)
+    }
+}
+
+/// IMU of a rover at rest on level ground.
+pub struct StillImu {
+    ticks: &'static AtomicU32,
+}
+
+impl StillImu {
+    /// An IMU stamped from the SysTick count.
+    pub fn new(ticks: &'static AtomicU32) -> Self {
+        Self { ticks }
+    }
+}
+
+impl Imu for StillImu {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<ImuSample, ErrorKind> {
+        Ok(ImuSample {
+            t_us: frame_time_us(self.ticks),
+            gyro_rad_s: [0.0; 3],
+            accel_m_s2: [0.0, 0.0, -MARS_GRAVITY_M_S2],
+            valid: true,
+        })
+    }
+}
+
+/// Joint encoders of a rover at rest; commands are accepted and held.
+pub struct StillMobility {
+    ticks: &'static AtomicU32,
+    last_command: MobilityCommand,
+}
+
+impl StillMobility {
+    /// A mobility system stamped from the SysTick count.
+    pub fn new(ticks: &'static AtomicU32) -> Self {
+        Self {
+            ticks,
+            last_command: MobilityCommand::default(),
+        }
+    }
+}
+
+impl Mobility for StillMobility {
+    type Error = ErrorKind;
+    fn read_joints(&mut self) -> Result<JointState, ErrorKind> {
+        Ok(JointState {
+            t_us: frame_time_us(self.ticks),
+            steer_angle_rad: self.last_command.steer_angle_rad,
+            wheel_valid: [true; 6],
+            suspension_valid: true,
+            ..JointState::default()
+        })
+    }
+    fn command(&mut self, command: &MobilityCommand) -> Result<(), ErrorKind> {
+        let finite = command
+            .steer_angle_rad
+            .iter()
+            .chain(command.wheel_rate_rad_s.iter())
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(ErrorKind::InvalidRequest);
+        }
+        self.last_command = *command;
+        Ok(())
+    }
+    fn stop(&mut self) -> Result<(), ErrorKind> {
+        self.last_command.wheel_rate_rad_s = [0.0; 6];
+        Ok(())
+    }
+}
+
+/// Both stereo images, in external RAM.
+#[link_section = ".extram"]
+static mut STEREO_BUFFERS: [[u8; IMAGE_PIXELS]; 2] = [[0; IMAGE_PIXELS]; 2];
+
+/// Stereo pair whose images live in the `.extram` region; a capture completes one poll after
+/// its trigger.
+pub struct ExtramStereo {
+    buffers: &'static mut [[u8; IMAGE_PIXELS]; 2],
+    ticks: &'static AtomicU32,
+    pending: Option<u64>,
+    ready: Option<u64>,
+    sequence: u32,
+}
+
+impl ExtramStereo {
+    /// Take the external-RAM buffers (call once) and fill them with a test pattern.
+    pub fn take(ticks: &'static AtomicU32) -> Self {
+        // SAFETY: called once from `main` before interrupts use anything else; this is the only
+        // reference ever made to STEREO_BUFFERS. The region is NOLOAD, so it is written here
+        // before any read.
+        let buffers = unsafe { &mut *core::ptr::addr_of_mut!(STEREO_BUFFERS) };
+        for (i, px) in buffers[0].iter_mut().enumerate() {
+            *px = (i % 251) as u8;
+        }
+        for (i, px) in buffers[1].iter_mut().enumerate() {
+            *px = ((i + 3) % 251) as u8;
+        }
+        Self {
+            buffers,
+            ticks,
+            pending: None,
+            ready: None,
+            sequence: 0,
+        }
+    }
+}
+
+impl StereoCamera for ExtramStereo {
+    type Error = ErrorKind;
+    fn calibration(&self) -> StereoCalibration {
+        // Rocky 8 hazcam: fx = 320 / tan(39.75 deg), fy = 240 / tan(32 deg), 8.4 cm baseline,
+        // 45 deg down (same model as sim-host's hazcam_calibration).
+        let h = core::f64::consts::FRAC_1_SQRT_2;
+        StereoCalibration {
+            fx_px: 384.791_625_3,
+            fy_px: 384.079_510_6,
+            cx_px: 319.5,
+            cy_px: 239.5,
+            baseline_m: 0.084,
+            rot_rover_from_camera: [[0.0, -h, h], [1.0, 0.0, 0.0], [0.0, h, h]],
+            pos_camera_in_rover_m: [0.2, 0.0, -0.6],
+        }
+    }
+    fn trigger(&mut self) -> Result<u64, ErrorKind> {
+        let t = frame_time_us(self.ticks);
+        self.pending = Some(t);
+        self.ready = None;
+        self.sequence = self.sequence.wrapping_add(1);
+        Ok(t)
+    }
+    fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
+        if self.ready.is_some() {
+            return Ok(CaptureStatus::Ready);
+        }
+        match self.pending.take() {
+            Some(t) => {
+                self.ready = Some(t);
+                Ok(CaptureStatus::InProgress)
+            }
+            None => Ok(CaptureStatus::Idle),
+        }
+    }
+    fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
+        let t = self.ready.ok_or(ErrorKind::NotReady)?;
+        Ok(StereoFrame {
+            left: &self.buffers[0],
+            right: &self.buffers[1],
+            capture_t_us: t,
+            sequence: self.sequence,
+        })
+    }
+    fn release(&mut self) -> Result<(), ErrorKind> {
+        self.ready = None;
+        self.pending = None;
+        Ok(())
+    }
+}
+
+/// Sun sensor with the sun 30 deg above the horizon straight ahead.
+pub struct FixedSun {
+    ticks: &'static AtomicU32,
+}
+
+impl FixedSun {
+    /// A sun sensor stamped from the SysTick count.
+    pub fn new(ticks: &'static AtomicU32) -> Self {
+        Self { ticks }
+    }
+}
+
+impl SunSensor for FixedSun {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<SunReading, ErrorKind> {
+        Ok(SunReading {
+            t_us: frame_time_us(self.ticks),
+            sun_dir_rover: [0.866_025_403_784_438_6, 0.0, -0.5],
+            sun_in_view: true,
+        })
+    }
+}
+
+/// Telemetry sink that counts records and bytes (the downlink is not modelled).
+#[derive(Default)]
+pub struct CountingTelemetry {
+    /// Records received.
+    pub records: u32,
+    /// Bytes received.
+    pub bytes: u32,
+}
+
+impl Telemetry for CountingTelemetry {
+    type Error = ErrorKind;
+    fn send(&mut self, record: &[u8]) -> Result<(), ErrorKind> {
+        self.records = self.records.saturating_add(1);
+        self.bytes = self
+            .bytes
+            .saturating_add(u32::try_from(record.len()).unwrap_or(u32::MAX));
+        Ok(())
+    }
+}

@@ -1,0 +1,423 @@
+//! # The flight software's top level
+//!
+//! [`Fsw`] owns every piece of flight state in fixed-size fields and the devices it reads
+//! through the HAL. [`Fsw::tick`] runs one minor frame of the rate-group schedule
+//! ([`SCHEDULE_GROUPS`], [`SCHEDULE_TASKS`]):
+//!
+//! | group | rate (default) | tasks |
+//! |---|---|---|
+//! | RG1 | 200 Hz | IMU read and checks |
+//! | RG2 | 20 Hz | joint read and checks, status telemetry |
+//! | RG3 | 1 Hz | stereo capture trigger |
+//! | RG4 | 0.2 Hz | sun sensor read |
+//! | background | every frame | stereo capture polling and release |
+//!
+//! Every device reading is checked (error, device-flagged invalid, non-finite, time stamp not
+//! advancing, time going backwards) and counted in [`DeviceHealth`]; only checked readings are
+//! kept.
+
+use crate::exec::{
+    ExecConfig, ExecError, Executive, FrameReport, GroupConfig, TaskConfig, TaskSet,
+};
+use crate::telemetry::{self, DeviceHealth, FrameStatus, RecordKind, MAX_RECORD_BYTES};
+use rover_hal::{
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, StereoCamera,
+    SunReading, SunSensor, Telemetry,
+};
+
+/// The set of device types a platform provides (the simulator or the rover CPU).
+pub trait Platform {
+    /// Monotonic clock and execution counter.
+    type Clock: Clock;
+    /// Inertial measurement unit.
+    type Imu: Imu;
+    /// Joint encoders and motors.
+    type Mobility: Mobility;
+    /// Stereo hazcam pair.
+    type Camera: StereoCamera;
+    /// Sun sensor.
+    type Sun: SunSensor;
+    /// Telemetry sink.
+    type Telemetry: Telemetry;
+}
+
+/// The devices, one of each kind, owned by the flight software.
+pub struct Devices<P: Platform> {
+    /// Clock.
+    pub clock: P::Clock,
+    /// IMU.
+    pub imu: P::Imu,
+    /// Mobility.
+    pub mobility: P::Mobility,
+    /// Stereo camera.
+    pub camera: P::Camera,
+    /// Sun sensor.
+    pub sun: P::Sun,
+    /// Telemetry sink.
+    pub telemetry: P::Telemetry,
+}
+
+/// Number of rate groups in the flight schedule.
+pub const GROUP_COUNT: usize = 4;
+/// Number of tasks in the flight schedule.
+pub const TASK_COUNT: usize = 5;
+
+/// Rate-group table (ARCHITECTURE.md sec. 4). Divisors are relative to the 200 Hz minor frame.
+pub const SCHEDULE_GROUPS: [GroupConfig; GROUP_COUNT] = [
+    GroupConfig {
+        name: "RG1",
+        divisor: 1,
+        offset: 0,
+        enabled: true,
+    },
+    GroupConfig {
+        name: "RG2",
+        divisor: 10,
+        offset: 1,
+        enabled: true,
+    },
+    GroupConfig {
+        name: "RG3",
+        divisor: 200,
+        offset: 2,
+        enabled: true,
+    },
+    GroupConfig {
+        name: "RG4",
+        divisor: 1000,
+        offset: 3,
+        enabled: true,
+    },
+];
+
+/// Task table in call order, with budgets in microseconds.
+pub const SCHEDULE_TASKS: [TaskConfig; TASK_COUNT] = [
+    TaskConfig {
+        name: "imu",
+        group: 0,
+        budget_us: 500,
+    },
+    TaskConfig {
+        name: "joints",
+        group: 1,
+        budget_us: 500,
+    },
+    TaskConfig {
+        name: "telemetry",
+        group: 1,
+        budget_us: 200,
+    },
+    TaskConfig {
+        name: "stereo",
+        group: 2,
+        budget_us: 200,
+    },
+    TaskConfig {
+        name: "sun",
+        group: 3,
+        budget_us: 200,
+    },
+];
+
+/// Index of each device in [`FrameStatus::health`].
+#[derive(Debug, Clone, Copy)]
+#[repr(usize)]
+pub enum DeviceId {
+    /// IMU.
+    Imu = 0,
+    /// Joint encoders.
+    Joints = 1,
+    /// Stereo camera.
+    Camera = 2,
+    /// Sun sensor.
+    Sun = 3,
+}
+
+/// Flight state apart from the devices and the executive.
+#[derive(Debug, Clone, Default)]
+pub struct FlightState {
+    /// Last IMU sample that passed the checks.
+    pub imu: Option<ImuSample>,
+    /// Last joint state that passed the checks.
+    pub joints: Option<JointState>,
+    /// Last sun reading with the sun in view that passed the checks.
+    pub sun: Option<SunReading>,
+    /// Time stamp of the capture in progress, microseconds since boot.
+    pub capture_pending_t_us: Option<u64>,
+    /// Time stamp of the last completed stereo capture, microseconds since boot.
+    pub last_capture_t_us: Option<u64>,
+    /// Device health counters, indexed by [`DeviceId`].
+    pub health: [DeviceHealth; 4],
+    /// Stereo frames completed.
+    pub stereo_frames: u32,
+    /// Telemetry records the sink refused.
+    pub telemetry_dropped: u32,
+    /// Status copied from the executive at the end of each frame, for telemetry.
+    pub exec_status: (u64, bool),
+}
+
+/// The flight software: devices, executive and state.
+pub struct Fsw<P: Platform> {
+    devices: DevicesNoClock<P>,
+    clock: P::Clock,
+    exec: Executive<GROUP_COUNT, TASK_COUNT>,
+    state: FlightState,
+}
+
+struct DevicesNoClock<P: Platform> {
+    imu: P::Imu,
+    mobility: P::Mobility,
+    camera: P::Camera,
+    sun: P::Sun,
+    telemetry: P::Telemetry,
+}
+
+impl<P: Platform> Fsw<P> {
+    /// Build the flight software around its devices with the default schedule.
+    pub fn new(devices: Devices<P>, config: ExecConfig) -> Result<Self, ExecError> {
+        let exec = Executive::new(config, SCHEDULE_GROUPS, SCHEDULE_TASKS)?;
+        let Devices {
+            clock,
+            imu,
+            mobility,
+            camera,
+            sun,
+            telemetry,
+        } = devices;
+        Ok(Self {
+            devices: DevicesNoClock {
+                imu,
+                mobility,
+                camera,
+                sun,
+                telemetry,
+            },
+            clock,
+            exec,
+            state: FlightState::default(),
+        })
+    }
+
+    /// Run one minor frame (call once per tick).
+    pub fn tick(&mut self) -> FrameReport {
+        let mut work = Work {
+            devices: &mut self.devices,
+            state: &mut self.state,
+        };
+        let report = self.exec.run_frame(&mut self.clock, &mut work);
+        self.state.exec_status = (self.exec.cycle_slips(), self.exec.timing_fault());
+        report
+    }
+
+    /// The executive, for its statistics.
+    pub fn executive(&self) -> &Executive<GROUP_COUNT, TASK_COUNT> {
+        &self.exec
+    }
+
+    /// The flight state.
+    pub fn state(&self) -> &FlightState {
+        &self.state
+    }
+
+    /// The clock (for drivers that need the time base).
+    pub fn clock_mut(&mut self) -> &mut P::Clock {
+        &mut self.clock
+    }
+}
+
+struct Work<'a, P: Platform> {
+    devices: &'a mut DevicesNoClock<P>,
+    state: &'a mut FlightState,
+}
+
+/// Check a time stamp against the previous one: stale or backwards are faults.
+fn check_time(health: &mut DeviceHealth, previous: Option<u64>, t_us: u64) -> bool {
+    match previous {
+        Some(p) if t_us == p => {
+            health.stale = health.stale.saturating_add(1);
+            false
+        }
+        Some(p) if t_us < p => {
+            health.time_backwards = health.time_backwards.saturating_add(1);
+            false
+        }
+        _ => true,
+    }
+}
+
+fn all_finite(values: &[f64]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+fn count_invalid(health: &mut DeviceHealth) {
+    health.invalid = health.invalid.saturating_add(1);
+}
+
+fn count_error(health: &mut DeviceHealth, kind: ErrorKind) {
+    // A poll with no new data is not a fault; everything else is.
+    if kind != ErrorKind::NotReady {
+        health.errors = health.errors.saturating_add(1);
+    }
+}
+
+impl<P: Platform> Work<'_, P> {
+    fn read_imu(&mut self) {
+        let health = &mut self.state.health[DeviceId::Imu as usize];
+        match self.devices.imu.read() {
+            Err(e) => count_error(health, rover_hal::Error::kind(&e)),
+            Ok(s) => {
+                if !check_time(health, self.state.imu.map(|p| p.t_us), s.t_us) {
+                    return;
+                }
+                if !s.valid || !all_finite(&s.gyro_rad_s) || !all_finite(&s.accel_m_s2) {
+                    count_invalid(health);
+                    return;
+                }
+                health.good = health.good.saturating_add(1);
+                self.state.imu = Some(s);
+            }
+        }
+    }
+
+    fn read_joints(&mut self) {
+        let health = &mut self.state.health[DeviceId::Joints as usize];
+        match self.devices.mobility.read_joints() {
+            Err(e) => count_error(health, rover_hal::Error::kind(&e)),
+            Ok(j) => {
+                if !check_time(health, self.state.joints.map(|p| p.t_us), j.t_us) {
+                    return;
+                }
+                let finite = all_finite(&j.drive_angle_rad)
+                    && all_finite(&j.drive_rate_rad_s)
+                    && all_finite(&j.steer_angle_rad)
+                    && all_finite(&j.bogie_rad)
+                    && j.rocker_rad.is_finite();
+                if !finite || !j.suspension_valid {
+                    count_invalid(health);
+                    return;
+                }
+                health.good = health.good.saturating_add(1);
+                self.state.joints = Some(j);
+            }
+        }
+    }
+
+    fn send_status(&mut self, tick: u64) {
+        let record = FrameStatus {
+            tick,
+            cycle_slips: self.state.exec_status.0,
+            timing_fault: self.state.exec_status.1,
+            health: self.state.health,
+            stereo_frames: self.state.stereo_frames,
+            telemetry_dropped: self.state.telemetry_dropped,
+        };
+        let mut buffer = [0u8; MAX_RECORD_BYTES];
+        let sent = match telemetry::encode(RecordKind::FrameStatus, &record, &mut buffer) {
+            Ok(bytes) => self.devices.telemetry.send(bytes).is_ok(),
+            Err(_) => false,
+        };
+        if !sent {
+            self.state.telemetry_dropped = self.state.telemetry_dropped.saturating_add(1);
+        }
+    }
+
+    fn trigger_stereo(&mut self) {
+        let health = &mut self.state.health[DeviceId::Camera as usize];
+        if self.state.capture_pending_t_us.is_some() {
+            // The previous capture has not completed in a whole RG3 period: count and retry.
+            count_error(health, ErrorKind::Timeout);
+            if self.devices.camera.release().is_err() {
+                count_error(health, ErrorKind::Hardware);
+            }
+            self.state.capture_pending_t_us = None;
+        }
+        match self.devices.camera.trigger() {
+            Ok(t_us) => self.state.capture_pending_t_us = Some(t_us),
+            Err(e) => count_error(health, rover_hal::Error::kind(&e)),
+        }
+    }
+
+    fn poll_stereo(&mut self) -> u32 {
+        let Some(t_us) = self.state.capture_pending_t_us else {
+            return 0;
+        };
+        let health = &mut self.state.health[DeviceId::Camera as usize];
+        match self.devices.camera.poll() {
+            Ok(CaptureStatus::Ready) => {
+                match self.devices.camera.frame() {
+                    Ok(frame) if frame.capture_t_us == t_us => {
+                        let size_ok = frame.left.len() == rover_hal::IMAGE_PIXELS
+                            && frame.right.len() == rover_hal::IMAGE_PIXELS;
+                        if size_ok && check_time(health, self.state.last_capture_t_us, t_us) {
+                            health.good = health.good.saturating_add(1);
+                            self.state.stereo_frames = self.state.stereo_frames.saturating_add(1);
+                            self.state.last_capture_t_us = Some(t_us);
+                        } else if !size_ok {
+                            count_invalid(health);
+                        }
+                    }
+                    Ok(_) => count_invalid(health),
+                    Err(e) => count_error(health, rover_hal::Error::kind(&e)),
+                }
+                if self.devices.camera.release().is_err() {
+                    count_error(health, ErrorKind::Hardware);
+                }
+                self.state.capture_pending_t_us = None;
+                1
+            }
+            Ok(CaptureStatus::InProgress) => 1,
+            Ok(CaptureStatus::Idle) => {
+                // The camera lost the capture.
+                count_error(health, ErrorKind::Other);
+                self.state.capture_pending_t_us = None;
+                1
+            }
+            Err(e) => {
+                count_error(health, rover_hal::Error::kind(&e));
+                1
+            }
+        }
+    }
+
+    fn read_sun(&mut self) {
+        let health = &mut self.state.health[DeviceId::Sun as usize];
+        match self.devices.sun.read() {
+            Err(e) => count_error(health, rover_hal::Error::kind(&e)),
+            Ok(r) => {
+                if !check_time(health, self.state.sun.map(|p| p.t_us), r.t_us) {
+                    return;
+                }
+                let norm2: f64 = r.sun_dir_rover.iter().map(|v| v * v).sum();
+                if !r.sun_in_view {
+                    return;
+                }
+                if !all_finite(&r.sun_dir_rover) || !(0.81..=1.21).contains(&norm2) {
+                    count_invalid(health);
+                    return;
+                }
+                health.good = health.good.saturating_add(1);
+                self.state.sun = Some(r);
+            }
+        }
+    }
+}
+
+impl<P: Platform> TaskSet for Work<'_, P> {
+    fn run_task(&mut self, task: usize, tick: u64) {
+        match task {
+            0 => self.read_imu(),
+            1 => self.read_joints(),
+            2 => self.send_status(tick),
+            3 => self.trigger_stereo(),
+            4 => self.read_sun(),
+            _ => {}
+        }
+    }
+
+    fn background(&mut self, quantum: u32, _tick: u64) -> u32 {
+        if quantum == 0 {
+            return 0;
+        }
+        self.poll_stereo()
+    }
+}

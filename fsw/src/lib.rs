@@ -1,0 +1,26 @@
+//! # fsw: slip-compensated rover navigation flight software
+//!
+//! The flight partition of a six-wheel rocker-bogie rover (JPL Rocky 8 class) that follows a
+//! path on sandy slopes where its wheels slip (seeds H04 = Helmick et al. 2004, H05 = Helmick et
+//! al. 2005, RB = Roumeliotis & Bekey, V99 = Volpe et al.).
+//!
+//! Rules that hold for every module: `no_std`, no allocation, fixed capacities, bounded loops, no
+//! recursion, no panics on any input (bad input is an error value or a fault flag), and
+//! deterministic arithmetic (`libm` for transcendental functions) so that the host simulator and
+//! the rover CPU compute bit-identical outputs from the same inputs.
+//!
+//! Frames and units are those of [`rover_hal`]: rover frame `R` x forward, y right, z down;
+//! navigation frame `N` x north, y east, z down; SI units, time in microseconds since boot.
+//!
+//! Modules (one per seed section, see `docs/architecture.md`):
+//! - [`exec`]: the rate-group cyclic executive.
+//! - [`flight`]: the top-level [`flight::Fsw`] that owns all state and runs one minor frame per
+//!   [`flight::Fsw::tick`].
+//! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
+#![no_std]
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod exec;
+pub mod flight;
+pub mod telemetry;

@@ -1,0 +1,122 @@
+//! # Telemetry records
+//!
+//! Fixed-size records, serialised with `postcard` into a caller-provided buffer (no allocation)
+//! and handed to the HAL [`rover_hal::Telemetry`] sink. Each record starts with a one-byte
+//! [`RecordKind`] tag so a ground tool can split a mixed stream.
+
+use serde::{Deserialize, Serialize};
+
+/// Largest encoded record, bytes. Every record type is checked against it in the tests.
+pub const MAX_RECORD_BYTES: usize = 256;
+
+/// Tag byte that starts every record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[repr(u8)]
+pub enum RecordKind {
+    /// [`FrameStatus`].
+    FrameStatus = 1,
+}
+
+/// Device health counters (FDIR inputs), one set per device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct DeviceHealth {
+    /// Successful reads that passed the checks.
+    pub good: u32,
+    /// Calls that returned an error.
+    pub errors: u32,
+    /// Readings with a repeated time stamp (stale).
+    pub stale: u32,
+    /// Readings with a time stamp earlier than the previous one.
+    pub time_backwards: u32,
+    /// Readings flagged invalid by the device or containing non-finite or out-of-range values.
+    pub invalid: u32,
+}
+
+impl DeviceHealth {
+    /// Total number of bad readings of any kind.
+    pub fn faults(&self) -> u32 {
+        self.errors
+            .saturating_add(self.stale)
+            .saturating_add(self.time_backwards)
+            .saturating_add(self.invalid)
+    }
+}
+
+/// Periodic status record (RG2): executive counters and device health.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct FrameStatus {
+    /// Minor-frame tick of the record.
+    pub tick: u64,
+    /// Frames whose execution exceeded the minor-frame period.
+    pub cycle_slips: u64,
+    /// Latched timing fault (consecutive cycle slips).
+    pub timing_fault: bool,
+    /// Health of the IMU, joints, stereo camera and sun sensor, in that order.
+    pub health: [DeviceHealth; 4],
+    /// Stereo frames completed since boot.
+    pub stereo_frames: u32,
+    /// Telemetry records the sink refused (counted, then dropped).
+    pub telemetry_dropped: u32,
+}
+
+/// Encoding failed: the buffer is too small for the record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EncodeError;
+
+/// Encode a record with its tag into `buffer`; returns the used prefix.
+pub fn encode<'a, T: Serialize>(
+    kind: RecordKind,
+    record: &T,
+    buffer: &'a mut [u8],
+) -> Result<&'a [u8], EncodeError> {
+    let (tag, body) = buffer.split_first_mut().ok_or(EncodeError)?;
+    *tag = kind as u8;
+    let used = postcard::to_slice(record, body)
+        .map_err(|_| EncodeError)?
+        .len();
+    buffer.get(..used + 1).ok_or(EncodeError)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// TLM-1: the largest record fits MAX_RECORD_BYTES and decodes back to itself.
+    #[test]
+    fn tlm_1_frame_status_round_trip() {
+        let record = FrameStatus {
+            tick: u64::MAX,
+            cycle_slips: u64::MAX,
+            timing_fault: true,
+            health: [DeviceHealth {
+                good: u32::MAX,
+                errors: u32::MAX,
+                stale: u32::MAX,
+                time_backwards: u32::MAX,
+                invalid: u32::MAX,
+            }; 4],
+            stereo_frames: u32::MAX,
+            telemetry_dropped: u32::MAX,
+        };
+        let mut buffer = [0u8; MAX_RECORD_BYTES];
+        let bytes = match encode(RecordKind::FrameStatus, &record, &mut buffer) {
+            Ok(b) => b,
+            Err(e) => panic!("encode failed: {e:?}"),
+        };
+        assert_eq!(bytes[0], RecordKind::FrameStatus as u8);
+        let decoded: FrameStatus = match postcard::from_bytes(&bytes[1..]) {
+            Ok(d) => d,
+            Err(e) => panic!("decode failed: {e:?}"),
+        };
+        assert_eq!(decoded, record);
+        let mut small = [0u8; 8];
+        assert_eq!(
+            encode(RecordKind::FrameStatus, &record, &mut small),
+            Err(EncodeError)
+        );
+        assert_eq!(
+            encode(RecordKind::FrameStatus, &record, &mut []),
+            Err(EncodeError)
+        );
+    }
+}

@@ -1,0 +1,266 @@
+//! Simulated devices behind the `rover-hal` traits.
+//!
+//! Time is simulated: the simulator advances [`SimTime`] by one minor frame per tick, and every
+//! device stamps its readings from it. The execution counter is the host's monotonic clock in
+//! nanoseconds, used for timing statistics only.
+
+use rover_hal::{
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
+    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
+};
+use std::cell::Cell;
+use std::rc::Rc;
+use std::time::Instant;
+
+/// Mars gravity, m/s^2 (REFERENCE.md).
+pub const MARS_GRAVITY_M_S2: f64 = 3.711;
+
+/// Shared simulated time, microseconds since boot.
+#[derive(Clone, Default)]
+pub struct SimTime(Rc<Cell<u64>>);
+
+impl SimTime {
+    /// Current simulated time, microseconds.
+    pub fn now_us(&self) -> u64 {
+        self.0.get()
+    }
+    /// Advance simulated time by `dt_us` microseconds.
+    pub fn advance(&self, dt_us: u64) {
+        self.0.set(self.0.get().saturating_add(dt_us));
+    }
+}
+
+/// Clock: simulated time plus the host's nanosecond counter for execution-time statistics.
+pub struct SimClock {
+    time: SimTime,
+    origin: Instant,
+}
+
+impl SimClock {
+    /// A clock reading `time`.
+    pub fn new(time: SimTime) -> Self {
+        Self {
+            time,
+            origin: Instant::now(),
+        }
+    }
+}
+
+impl Clock for SimClock {
+    type Error = ErrorKind;
+    fn now_us(&mut self) -> Result<u64, ErrorKind> {
+        Ok(self.time.now_us())
+    }
+    fn counter(&mut self) -> Result<u64, ErrorKind> {
+        Ok(u64::try_from(self.origin.elapsed().as_nanos()).unwrap_or(u64::MAX))
+    }
+    fn counter_hz(&self) -> u64 {
+        1_000_000_000
+    }
+}
+
+/// IMU of a rover at rest on level ground: zero rate, specific force `-g` along `z` (down).
+pub struct StillImu {
+    time: SimTime,
+}
+
+impl StillImu {
+    /// An IMU reading `time`.
+    pub fn new(time: SimTime) -> Self {
+        Self { time }
+    }
+}
+
+impl Imu for StillImu {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<ImuSample, ErrorKind> {
+        Ok(ImuSample {
+            t_us: self.time.now_us(),
+            gyro_rad_s: [0.0; 3],
+            accel_m_s2: [0.0, 0.0, -MARS_GRAVITY_M_S2],
+            valid: true,
+        })
+    }
+}
+
+/// Mobility of a rover at rest: joints hold their angles; commands are stored.
+pub struct StillMobility {
+    time: SimTime,
+    /// Last accepted command.
+    pub last_command: Option<MobilityCommand>,
+}
+
+impl StillMobility {
+    /// A mobility system reading `time`.
+    pub fn new(time: SimTime) -> Self {
+        Self {
+            time,
+            last_command: None,
+        }
+    }
+}
+
+impl Mobility for StillMobility {
+    type Error = ErrorKind;
+    fn read_joints(&mut self) -> Result<JointState, ErrorKind> {
+        Ok(JointState {
+            t_us: self.time.now_us(),
+            wheel_valid: [true; 6],
+            suspension_valid: true,
+            ..JointState::default()
+        })
+    }
+    fn command(&mut self, command: &MobilityCommand) -> Result<(), ErrorKind> {
+        let finite = command
+            .steer_angle_rad
+            .iter()
+            .chain(command.wheel_rate_rad_s.iter())
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(ErrorKind::InvalidRequest);
+        }
+        self.last_command = Some(*command);
+        Ok(())
+    }
+    fn stop(&mut self) -> Result<(), ErrorKind> {
+        self.last_command = Some(MobilityCommand::default());
+        Ok(())
+    }
+}
+
+/// Rocky 8 hazcam calibration (REFERENCE.md): 640x480, 79.5 x 64.0 deg FOV, 8.4 cm baseline,
+/// pitched 45 deg down, mounted 0.2 m ahead of and 0.6 m above the rover reference point.
+pub fn hazcam_calibration() -> StereoCalibration {
+    let fx = 320.0 / (39.75f64).to_radians().tan();
+    let fy = 240.0 / (32.0f64).to_radians().tan();
+    let (s, c) = (45f64).to_radians().sin_cos();
+    // Camera z (optical axis) = forward and down at 45 deg; camera x = rover right (+y_R);
+    // camera y = image down = z_K x x_K.
+    StereoCalibration {
+        fx_px: fx,
+        fy_px: fy,
+        cx_px: 319.5,
+        cy_px: 239.5,
+        baseline_m: 0.084,
+        rot_rover_from_camera: [[0.0, -s, c], [1.0, 0.0, 0.0], [0.0, c, s]],
+        pos_camera_in_rover_m: [0.2, 0.0, -0.6],
+    }
+}
+
+/// A stereo pair that completes each capture `latency_frames` polls after its trigger, with a
+/// uniform grey image (the rendered cameras come with the full simulator).
+pub struct GreyStereo {
+    time: SimTime,
+    left: Vec<u8>,
+    right: Vec<u8>,
+    pending: Option<(u64, u32)>,
+    ready: Option<u64>,
+    sequence: u32,
+    latency_polls: u32,
+}
+
+impl GreyStereo {
+    /// A camera reading `time` whose captures complete after `latency_polls` polls.
+    pub fn new(time: SimTime, latency_polls: u32) -> Self {
+        Self {
+            time,
+            left: vec![128; IMAGE_PIXELS],
+            right: vec![128; IMAGE_PIXELS],
+            pending: None,
+            ready: None,
+            sequence: 0,
+            latency_polls,
+        }
+    }
+}
+
+impl StereoCamera for GreyStereo {
+    type Error = ErrorKind;
+    fn calibration(&self) -> StereoCalibration {
+        hazcam_calibration()
+    }
+    fn trigger(&mut self) -> Result<u64, ErrorKind> {
+        let t = self.time.now_us();
+        self.pending = Some((t, self.latency_polls));
+        self.ready = None;
+        self.sequence = self.sequence.wrapping_add(1);
+        Ok(t)
+    }
+    fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
+        if self.ready.is_some() {
+            return Ok(CaptureStatus::Ready);
+        }
+        match self.pending {
+            None => Ok(CaptureStatus::Idle),
+            Some((t, 0)) => {
+                self.ready = Some(t);
+                self.pending = None;
+                Ok(CaptureStatus::Ready)
+            }
+            Some((t, n)) => {
+                self.pending = Some((t, n - 1));
+                Ok(CaptureStatus::InProgress)
+            }
+        }
+    }
+    fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
+        let t = self.ready.ok_or(ErrorKind::NotReady)?;
+        Ok(StereoFrame {
+            left: &self.left,
+            right: &self.right,
+            capture_t_us: t,
+            sequence: self.sequence,
+        })
+    }
+    fn release(&mut self) -> Result<(), ErrorKind> {
+        self.ready = None;
+        self.pending = None;
+        Ok(())
+    }
+}
+
+/// Sun sensor with the sun fixed 30 deg above the horizon, straight ahead of the rover.
+pub struct FixedSun {
+    time: SimTime,
+}
+
+impl FixedSun {
+    /// A sun sensor reading `time`.
+    pub fn new(time: SimTime) -> Self {
+        Self { time }
+    }
+}
+
+impl SunSensor for FixedSun {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<SunReading, ErrorKind> {
+        let (s, c) = (30f64).to_radians().sin_cos();
+        Ok(SunReading {
+            t_us: self.time.now_us(),
+            sun_dir_rover: [c, 0.0, -s],
+            sun_in_view: true,
+        })
+    }
+}
+
+/// Telemetry sink that counts records and bytes and keeps the last record.
+#[derive(Default)]
+pub struct CountingTelemetry {
+    /// Records received.
+    pub records: u64,
+    /// Bytes received.
+    pub bytes: u64,
+    /// The last record.
+    pub last: Vec<u8>,
+}
+
+impl Telemetry for CountingTelemetry {
+    type Error = ErrorKind;
+    fn send(&mut self, record: &[u8]) -> Result<(), ErrorKind> {
+        self.records += 1;
+        self.bytes += record.len() as u64;
+        self.last.clear();
+        self.last.extend_from_slice(record);
+        Ok(())
+    }
+}

@@ -1,0 +1,98 @@
+//! Run the flight software on the simulated devices and summarise the executive's statistics.
+
+use crate::devices::{
+    CountingTelemetry, FixedSun, GreyStereo, SimClock, SimTime, StillImu, StillMobility,
+};
+use fsw::exec::ExecConfig;
+use fsw::flight::{Devices, Fsw, Platform};
+
+/// The simulated platform's device types.
+pub struct SimPlatform;
+
+impl Platform for SimPlatform {
+    type Clock = SimClock;
+    type Imu = StillImu;
+    type Mobility = StillMobility;
+    type Camera = GreyStereo;
+    type Sun = FixedSun;
+    type Telemetry = CountingTelemetry;
+}
+
+/// Per-group figures of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroupSummary {
+    /// Group name.
+    pub name: &'static str,
+    /// Times the group ran.
+    pub runs: u64,
+    /// Largest execution time, microseconds.
+    pub max_us: u64,
+    /// Mean execution time, microseconds.
+    pub mean_us: u64,
+    /// Task overruns in the group.
+    pub overruns: u64,
+}
+
+/// Figures of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSummary {
+    /// Frames run.
+    pub frames: u64,
+    /// Simulated time, seconds.
+    pub sim_time_s: f64,
+    /// Per group.
+    pub groups: Vec<GroupSummary>,
+    /// Frames that exceeded the minor-frame period.
+    pub cycle_slips: u64,
+    /// Stereo frames completed.
+    pub stereo_frames: u32,
+    /// Device faults counted (all devices).
+    pub device_faults: u32,
+}
+
+/// Run `frames` minor frames of the flight software on the still-rover devices.
+pub fn run_still(frames: u64) -> anyhow::Result<RunSummary> {
+    let time = SimTime::default();
+    let config = ExecConfig::default();
+    let devices = Devices::<SimPlatform> {
+        clock: SimClock::new(time.clone()),
+        imu: StillImu::new(time.clone()),
+        mobility: StillMobility::new(time.clone()),
+        camera: GreyStereo::new(time.clone(), 3),
+        sun: FixedSun::new(time.clone()),
+        telemetry: CountingTelemetry::default(),
+    };
+    let mut fsw =
+        Fsw::new(devices, config).map_err(|e| anyhow::anyhow!("flight schedule refused: {e:?}"))?;
+    for _ in 0..frames {
+        fsw.tick();
+        time.advance(u64::from(config.frame_period_us));
+    }
+    let exec = fsw.executive();
+    let groups = exec
+        .groups()
+        .iter()
+        .enumerate()
+        .map(|(g, state)| GroupSummary {
+            name: state.config.name,
+            runs: state.runs,
+            max_us: state.timing.max_us,
+            mean_us: state.timing.mean_us(),
+            overruns: exec
+                .tasks()
+                .iter()
+                .filter(|t| t.config.group == g)
+                .map(|t| t.timing.overruns)
+                .sum(),
+        })
+        .collect();
+    let state = fsw.state();
+    Ok(RunSummary {
+        frames,
+        sim_time_s: time.now_us() as f64 * 1e-6,
+        groups,
+        cycle_slips: exec.cycle_slips(),
+        stereo_frames: state.stereo_frames,
+        device_faults: state.health.iter().map(|h| h.faults()).sum(),
+    })
+}

@@ -1,0 +1,239 @@
+//! `cargo xtask`: the project's commands.
+//!
+//! - `cargo xtask test`: everything CI checks, after its own setup (target, QEMU): format check,
+//!   clippy with warnings denied, host tests (unit, SIL), the cross build of the flight crates
+//!   and the rover-CPU image, and the image's run in QEMU.
+//! - `cargo xtask setup`: only the setup (adds `thumbv7em-none-eabihf`, installs
+//!   `qemu-system-arm` when missing).
+//! - `cargo xtask qemu`: build the rover-CPU image and run it in QEMU `mps2-an500`.
+
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+/// The rover CPU's target triple (Cortex-M7 with double-precision FPU).
+const TARGET: &str = "thumbv7em-none-eabihf";
+/// QEMU machine modelling the rover CPU.
+const QEMU_MACHINE: &str = "mps2-an500";
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let root = workspace_root()?;
+    std::env::set_current_dir(&root)?;
+    match args.first().map(String::as_str) {
+        Some("test") => test(),
+        Some("setup") => setup(),
+        Some("qemu") => {
+            setup()?;
+            qemu_run().map(|_| ())
+        }
+        _ => {
+            eprintln!("usage: cargo xtask <test|setup|qemu>");
+            eprintln!("  test   everything CI checks (does its own setup first)");
+            eprintln!("  setup  add the {TARGET} target and install qemu-system-arm if missing");
+            eprintln!("  qemu   build the rover-CPU image and run it in QEMU {QEMU_MACHINE}");
+            bail!("unknown or missing command")
+        }
+    }
+}
+
+fn workspace_root() -> Result<PathBuf> {
+    let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    Ok(manifest
+        .parent()
+        .context("xtask has no parent folder")?
+        .to_path_buf())
+}
+
+fn step(name: &str) -> Instant {
+    println!("\n==> {name}");
+    Instant::now()
+}
+
+fn run(cmd: &mut Command) -> Result<()> {
+    let shown = format!("{cmd:?}");
+    let status = cmd
+        .status()
+        .with_context(|| format!("cannot start {shown}"))?;
+    if !status.success() {
+        bail!("failed ({status}): {shown}");
+    }
+    Ok(())
+}
+
+fn cargo() -> Command {
+    Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+}
+
+fn have(program: &str, arg: &str) -> bool {
+    Command::new(program)
+        .arg(arg)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// Add the target and install QEMU when missing; say exactly what to do when that fails.
+fn setup() -> Result<()> {
+    let t = step("setup: rust target and QEMU");
+    let installed = Command::new("rustup")
+        .args(["target", "list", "--installed"])
+        .output();
+    match installed {
+        Ok(out) if String::from_utf8_lossy(&out.stdout).contains(TARGET) => {
+            println!("target {TARGET}: present");
+        }
+        Ok(_) => run(Command::new("rustup").args(["target", "add", TARGET]))
+            .with_context(|| format!("run `rustup target add {TARGET}` by hand"))?,
+        Err(_) => println!(
+            "rustup not found: make sure the {TARGET} standard library is installed for your toolchain"
+        ),
+    }
+    for tool in ["rustfmt", "clippy"] {
+        let probe = if tool == "rustfmt" {
+            "rustfmt"
+        } else {
+            "cargo-clippy"
+        };
+        if !have(probe, "--version") {
+            run(Command::new("rustup").args(["component", "add", tool]))
+                .with_context(|| format!("run `rustup component add {tool}` by hand"))?;
+        }
+    }
+    if have("qemu-system-arm", "--version") {
+        println!("qemu-system-arm: present");
+    } else {
+        println!("qemu-system-arm missing: installing it with apt-get");
+        let apt = run(Command::new("apt-get").args(["update", "-qq"])).and_then(|_| {
+            run(Command::new("apt-get")
+                .args(["install", "-y", "-qq", "qemu-system-arm"])
+                .env("DEBIAN_FRONTEND", "noninteractive"))
+        });
+        if apt.is_err() || !have("qemu-system-arm", "--version") {
+            bail!(
+                "qemu-system-arm is required and could not be installed automatically: \
+                 install it with `sudo apt-get install -y qemu-system-arm` (Debian/Ubuntu) \
+                 or your system's package for QEMU's ARM system emulator, then run again"
+            );
+        }
+    }
+    println!("setup done in {:.1} s", t.elapsed().as_secs_f64());
+    Ok(())
+}
+
+fn test() -> Result<()> {
+    let total = Instant::now();
+    setup()?;
+
+    let t = step("format check");
+    run(cargo().args(["fmt", "--all", "--", "--check"]))?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("clippy (host, warnings denied)");
+    run(cargo().args([
+        "clippy",
+        "--workspace",
+        "--all-targets",
+        "--",
+        "-D",
+        "warnings",
+    ]))?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("clippy (flight crates and image for the rover CPU, warnings denied)");
+    run(cargo().args([
+        "clippy",
+        "--release",
+        "--target",
+        TARGET,
+        "-p",
+        "rover-hal",
+        "-p",
+        "fsw",
+        "-p",
+        "fsw-image",
+        "--",
+        "-D",
+        "warnings",
+    ]))?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("host tests (unit, SIL, doc)");
+    run(cargo().args(["test", "--workspace", "--release"]))?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("cross build of the flight crates (no_std, no alloc)");
+    run(cargo().args([
+        "build",
+        "--release",
+        "--target",
+        TARGET,
+        "-p",
+        "fsw",
+        "-p",
+        "rover-hal",
+    ]))?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("rover-CPU image in QEMU");
+    qemu_run()?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    println!(
+        "\nxtask test: all checks passed in {:.1} s",
+        total.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Build the image and run it in QEMU; returns what it printed.
+fn qemu_run() -> Result<String> {
+    run(cargo().args(["build", "--release", "--target", TARGET, "-p", "fsw-image"]))?;
+    let image = Path::new("target")
+        .join(TARGET)
+        .join("release")
+        .join("fsw-image");
+    let output = Command::new("timeout")
+        .arg("600")
+        .arg("qemu-system-arm")
+        .args(qemu_args(&image))
+        .stderr(Stdio::inherit())
+        .output()
+        .context("cannot start qemu-system-arm")?;
+    let text = String::from_utf8_lossy(&output.stdout).into_owned();
+    print!("{text}");
+    if !output.status.success() {
+        bail!("the rover-CPU image failed in QEMU ({})", output.status);
+    }
+    if !text.contains("fsw-image: PASS") {
+        bail!("the rover-CPU image did not report PASS");
+    }
+    Ok(text)
+}
+
+/// QEMU arguments: the rover CPU model, semihosting for output and exit code, and `-icount`
+/// so that virtual time (and so SysTick) advances with the instruction count, deterministically.
+fn qemu_args(image: &Path) -> Vec<String> {
+    [
+        "-machine",
+        QEMU_MACHINE,
+        "-cpu",
+        "cortex-m7",
+        "-nographic",
+        "-monitor",
+        "none",
+        "-serial",
+        "none",
+        "-semihosting-config",
+        "enable=on,target=native",
+        "-icount",
+        "shift=0,align=off,sleep=off",
+        "-kernel",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .chain(std::iter::once(image.display().to_string()))
+    .collect()
+}
