@@ -16,6 +16,7 @@
 //! - [`exec`]: the rate-group cyclic executive.
 //! - [`flight`]: the top-level [`flight::Fsw`] that owns all state and runs one minor frame per
 //!   [`flight::Fsw::tick`].
+//! - [`types`]: shared math types ([`types::RelativePose`]).
 //! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
 #![no_std]
 #![forbid(unsafe_code)]
@@ -24,3 +25,4 @@
 pub mod exec;
 pub mod flight;
 pub mod telemetry;
+pub mod types;

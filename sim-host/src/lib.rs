@@ -9,3 +9,4 @@
 
 pub mod devices;
 pub mod run;
+pub mod surface;
