@@ -421,3 +421,6 @@ impl<P: Platform> TaskSet for Work<'_, P> {
         self.poll_stereo()
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,214 @@
+//! HAL-1: every device reading is checked and counted; bad readings are not kept.
+
+use super::*;
+use rover_hal::{MobilityCommand, StereoCalibration, StereoFrame};
+
+/// A scripted sequence of results, replayed one per call and then repeating the last.
+struct Script<T: Copy, const N: usize> {
+    items: [Result<T, ErrorKind>; N],
+    next: usize,
+}
+
+impl<T: Copy, const N: usize> Script<T, N> {
+    fn new(items: [Result<T, ErrorKind>; N]) -> Self {
+        Self { items, next: 0 }
+    }
+    fn pop(&mut self) -> Result<T, ErrorKind> {
+        let item = self.items[self.next.min(N - 1)];
+        self.next += 1;
+        item
+    }
+}
+
+struct TestClock;
+impl Clock for TestClock {
+    type Error = ErrorKind;
+    fn now_us(&mut self) -> Result<u64, ErrorKind> {
+        Ok(0)
+    }
+    fn counter(&mut self) -> Result<u64, ErrorKind> {
+        Ok(0)
+    }
+    fn counter_hz(&self) -> u64 {
+        1_000_000
+    }
+}
+
+struct TestImu(Script<ImuSample, 7>);
+impl Imu for TestImu {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<ImuSample, ErrorKind> {
+        self.0.pop()
+    }
+}
+
+struct TestMobility(Script<JointState, 4>);
+impl Mobility for TestMobility {
+    type Error = ErrorKind;
+    fn read_joints(&mut self) -> Result<JointState, ErrorKind> {
+        self.0.pop()
+    }
+    fn command(&mut self, _: &MobilityCommand) -> Result<(), ErrorKind> {
+        Ok(())
+    }
+    fn stop(&mut self) -> Result<(), ErrorKind> {
+        Ok(())
+    }
+}
+
+/// A camera that never completes a capture.
+struct StuckCamera;
+impl StereoCamera for StuckCamera {
+    type Error = ErrorKind;
+    fn calibration(&self) -> StereoCalibration {
+        StereoCalibration {
+            fx_px: 1.0,
+            fy_px: 1.0,
+            cx_px: 0.0,
+            cy_px: 0.0,
+            baseline_m: 0.1,
+            rot_rover_from_camera: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            pos_camera_in_rover_m: [0.0; 3],
+        }
+    }
+    fn trigger(&mut self) -> Result<u64, ErrorKind> {
+        Ok(0)
+    }
+    fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
+        Ok(CaptureStatus::InProgress)
+    }
+    fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
+        Err(ErrorKind::NotReady)
+    }
+    fn release(&mut self) -> Result<(), ErrorKind> {
+        Ok(())
+    }
+}
+
+struct TestSun(Script<SunReading, 3>);
+impl SunSensor for TestSun {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<SunReading, ErrorKind> {
+        self.0.pop()
+    }
+}
+
+struct RefusingTelemetry;
+impl Telemetry for RefusingTelemetry {
+    type Error = ErrorKind;
+    fn send(&mut self, _: &[u8]) -> Result<(), ErrorKind> {
+        Err(ErrorKind::Busy)
+    }
+}
+
+struct TestPlatform;
+impl Platform for TestPlatform {
+    type Clock = TestClock;
+    type Imu = TestImu;
+    type Mobility = TestMobility;
+    type Camera = StuckCamera;
+    type Sun = TestSun;
+    type Telemetry = RefusingTelemetry;
+}
+
+fn imu(t_us: u64) -> ImuSample {
+    ImuSample {
+        t_us,
+        gyro_rad_s: [0.0; 3],
+        accel_m_s2: [0.0, 0.0, -3.711],
+        valid: true,
+    }
+}
+
+fn joints(t_us: u64) -> JointState {
+    JointState {
+        t_us,
+        wheel_valid: [true; 6],
+        suspension_valid: true,
+        ..JointState::default()
+    }
+}
+
+/// HAL-1: IMU, joints, camera, sun and telemetry faults are each counted with their kind, and
+/// only checked readings are kept.
+#[test]
+fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
+    let mut nan = imu(30);
+    nan.gyro_rad_s[1] = f64::NAN;
+    let mut flagged = imu(40);
+    flagged.valid = false;
+    let imu_script = Script::new([
+        Ok(imu(10)),              // good
+        Ok(imu(10)),              // stale
+        Ok(imu(5)),               // backwards
+        Ok(nan),                  // non-finite
+        Ok(flagged),              // device says invalid
+        Err(ErrorKind::NotReady), // no new data: not a fault
+        Err(ErrorKind::Timeout),  // fault, repeated from here on
+    ]);
+    let mut bad_joints = joints(2);
+    bad_joints.rocker_rad = f64::INFINITY;
+    let joint_script = Script::new([
+        Ok(joints(1)),
+        Ok(bad_joints),
+        Ok(joints(0)),
+        Err(ErrorKind::Hardware),
+    ]);
+    let long_vector = SunReading {
+        t_us: 1,
+        sun_dir_rover: [2.0, 0.0, 0.0],
+        sun_in_view: true,
+    };
+    let sun_script = Script::new([
+        Ok(long_vector),
+        Ok(SunReading {
+            t_us: 2,
+            sun_dir_rover: [0.0, 0.0, -1.0],
+            sun_in_view: true,
+        }),
+        Err(ErrorKind::Timeout),
+    ]);
+    let devices = Devices::<TestPlatform> {
+        clock: TestClock,
+        imu: TestImu(imu_script),
+        mobility: TestMobility(joint_script),
+        camera: StuckCamera,
+        sun: TestSun(sun_script),
+        telemetry: RefusingTelemetry,
+    };
+    let mut fsw = match Fsw::new(devices, ExecConfig::default()) {
+        Ok(f) => f,
+        Err(e) => panic!("schedule refused: {e:?}"),
+    };
+    // 8 frames: IMU read 8 times; RG2 at tick 1 only; RG3 at tick 2; RG4 at tick 3.
+    for _ in 0..8 {
+        fsw.tick();
+    }
+    let s = fsw.state();
+    let h = s.health[DeviceId::Imu as usize];
+    assert_eq!(
+        (h.good, h.stale, h.time_backwards, h.invalid, h.errors),
+        (1, 1, 1, 2, 2)
+    );
+    assert_eq!(s.imu.map(|i| i.t_us), Some(10));
+    let h = s.health[DeviceId::Joints as usize];
+    assert_eq!((h.good, h.faults()), (1, 0));
+    assert_eq!(s.joints.map(|j| j.t_us), Some(1));
+    // The sun reading with a vector of length 2 is invalid and not kept.
+    let h = s.health[DeviceId::Sun as usize];
+    assert_eq!((h.good, h.invalid), (0, 1));
+    assert!(s.sun.is_none());
+    // The capture is still pending (stuck camera), and telemetry refused the one record.
+    assert!(s.capture_pending_t_us.is_some());
+    assert_eq!(s.telemetry_dropped, 1);
+    // Run to the next RG2 and RG3 releases: joints go backwards, then the camera timeout.
+    for _ in 8..210 {
+        fsw.tick();
+    }
+    let s = fsw.state();
+    let h = s.health[DeviceId::Joints as usize];
+    assert_eq!((h.invalid, h.time_backwards), (1, 1));
+    assert!(h.errors >= 1);
+    assert_eq!(s.health[DeviceId::Camera as usize].errors, 1);
+    assert_eq!(s.stereo_frames, 0);
+}
