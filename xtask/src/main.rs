@@ -14,6 +14,8 @@ use std::time::Instant;
 
 /// The rover CPU's target triple (Cortex-M7 with double-precision FPU).
 const TARGET: &str = "thumbv7em-none-eabihf";
+/// Cargo profile of the rover-CPU image (fat LTO, one codegen unit; see Cargo.toml).
+const FLIGHT_PROFILE: &str = "flight";
 /// QEMU machine modelling the rover CPU.
 const QEMU_MACHINE: &str = "mps2-an500";
 
@@ -190,10 +192,18 @@ fn test() -> Result<()> {
 
 /// Build the image and run it in QEMU; returns what it printed.
 fn qemu_run() -> Result<String> {
-    run(cargo().args(["build", "--release", "--target", TARGET, "-p", "fsw-image"]))?;
+    run(cargo().args([
+        "build",
+        "--profile",
+        FLIGHT_PROFILE,
+        "--target",
+        TARGET,
+        "-p",
+        "fsw-image",
+    ]))?;
     let image = Path::new("target")
         .join(TARGET)
-        .join("release")
+        .join(FLIGHT_PROFILE)
         .join("fsw-image");
     let output = Command::new("timeout")
         .arg("600")
