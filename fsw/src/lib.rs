@@ -17,6 +17,7 @@
 //! - [`flight`]: the top-level [`flight::Fsw`] that owns all state and runs one minor frame per
 //!   [`flight::Fsw::tick`].
 //! - [`types`]: shared math types ([`types::RelativePose`]).
+//! - [`guidance`]: carrot heading and slip-compensation loops (H04 sec. 5, H05 sec. V).
 //! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
 #![no_std]
 #![forbid(unsafe_code)]
@@ -24,5 +25,6 @@
 
 pub mod exec;
 pub mod flight;
+pub mod guidance;
 pub mod telemetry;
 pub mod types;
