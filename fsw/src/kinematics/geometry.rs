@@ -139,7 +139,9 @@ const fn bogie_wheel(mount: WheelMount, front: bool) -> WheelChain {
     } else {
         WheelChain {
             mount,
-            steer: row(-2.872, bogie, 1.0, 0.0, 0.1285, HALF_PI),
+            // Table 2 prints -2.872 = -(pi - 0.2698) rounded; the exact value keeps the middle
+            // steering axes vertical on level ground.
+            steer: row(0.2698 - PI, bogie, 1.0, 0.0, 0.1285, HALF_PI),
             axle: row(0.0, Steer, -1.0, -0.1273, 0.0, HALF_PI),
             contact: row(PI, Fixed, 1.0, 0.0, 0.0, HALF_PI),
         }
@@ -159,7 +161,8 @@ const fn rear_wheel(sign: f64) -> WheelChain {
 
 /// Rocky 8 (H04 Appendix A, Table 2), base frame `R` (x forward, y right, z down).
 ///
-/// Deviations from the printed table, all documented in `docs/kinematics.md`: the steering
+/// Deviations from the printed table, all documented in `docs/kinematics.md`: `S_3, S_4` use
+/// `rho + 0.2698 - pi` for the printed `rho - 2.872` (its 4-digit rounding); the steering
 /// angle enters the `A_i` rows with sign -1 so that a positive `psi_i` turns the wheel to the
 /// right (about `+z_R`, like positive yaw, and as eq. 22 requires for a crab to the right),
 /// because Table 2's steering axes `z_Si` point up; `M_i` carries the wheel radius

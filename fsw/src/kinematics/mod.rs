@@ -18,14 +18,28 @@
 //! See `docs/kinematics.md` for the frame drawing, the resolved ambiguities and the
 //! equation-to-function map.
 
+pub mod forward;
 pub mod geometry;
+pub mod inverse;
+pub mod jacobian;
+pub mod odometry;
+pub mod planar;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_inverse;
 
+pub use forward::{forward_kinematics, forward_kinematics_from_joints, ForwardSolution};
 pub use geometry::{
     wheel_contact_points, wheel_frames, RoverGeometry, WheelFrames, ROCKY8, WHEEL_RADIUS_M,
 };
+pub use inverse::{
+    instantaneous_centre, inverse_kinematics, max_speed_scale, Icr, InverseSolution, VehicleCommand,
+};
+pub use jacobian::{wheel_jacobians, WheelJacobian};
+pub use odometry::{KinematicOdometry, OdometryConfig};
+pub use planar::{planar_body_rates, planar_pose_increment};
 
 use crate::types::Vec6;
 use rover_hal::WHEEL_COUNT;

@@ -1,5 +1,7 @@
 //! Unit tests of the kinematics module (requirement ids KIN-n in `docs/requirements.md`).
 
+#![allow(clippy::needless_range_loop)]
+
 use super::geometry::*;
 use super::*;
 use crate::types::Vec3;
@@ -111,4 +113,188 @@ fn kin_1_bad_angles_refused() {
         wheel_contact_points(&ROCKY8, &s),
         Err(KinematicsError::NonFinite)
     );
+}
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+pub(crate) fn random_state(rng: &mut ChaCha8Rng) -> SuspensionState {
+    SuspensionState {
+        rocker_rad: rng.random_range(-0.4..0.4),
+        bogie_rad: [rng.random_range(-0.6..0.6), rng.random_range(-0.6..0.6)],
+        steer_rad: core::array::from_fn(|_| rng.random_range(-1.5..1.5)),
+    }
+}
+
+/// KIN-2: the wheel Jacobian columns (eq. 13-14) agree with central finite differences of the
+/// eq. 12 transforms to 1e-6, over random suspension states.
+#[test]
+fn kin_2_jacobians_match_finite_differences() {
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let h = 1e-6;
+    let mut worst: f64 = 0.0;
+    for _ in 0..200 {
+        let s = random_state(&mut rng);
+        let jac = jacobian::wheel_jacobians(&ROCKY8, &s).unwrap();
+        let frames = wheel_frames(&ROCKY8, &s).unwrap();
+        for i in 0..6 {
+            // Rocker column: -dp/dbeta.
+            let (mut sp, mut sm) = (s, s);
+            sp.rocker_rad += h;
+            sm.rocker_rad -= h;
+            let fd = (wheel_contact_points(&ROCKY8, &sp).unwrap()[i]
+                - wheel_contact_points(&ROCKY8, &sm).unwrap()[i])
+                / (2.0 * h);
+            worst = worst.max((jac[i].rocker + fd).norm());
+            // Bogie column of the wheel's own bogie; the other bogie does not move it.
+            for k in 0..2 {
+                let (mut sp, mut sm) = (s, s);
+                sp.bogie_rad[k] += h;
+                sm.bogie_rad[k] -= h;
+                let fd = (wheel_contact_points(&ROCKY8, &sp).unwrap()[i]
+                    - wheel_contact_points(&ROCKY8, &sm).unwrap()[i])
+                    / (2.0 * h);
+                let expect = if jac[i].bogie_index == Some(k) {
+                    jac[i].bogie
+                } else {
+                    Vec3::zeros()
+                };
+                worst = worst.max((expect + fd).norm());
+            }
+            // Steering: the rolling direction turns about the steering axis.
+            let (mut sp, mut sm) = (s, s);
+            sp.steer_rad[i] += h;
+            sm.steer_rad[i] -= h;
+            let fd = (wheel_frames(&ROCKY8, &sp).unwrap()[i].rolling_dir
+                - wheel_frames(&ROCKY8, &sm).unwrap()[i].rolling_dir)
+                / (2.0 * h);
+            let analytic = frames[i].steer_axis.cross(&frames[i].rolling_dir);
+            worst = worst.max((analytic - fd).norm());
+            // Drive column is r times the unit rolling direction, normal to the steering axis.
+            assert!((jac[i].drive.norm() - WHEEL_RADIUS_M).abs() < 1e-12);
+            assert!(jac[i].drive.dot(&frames[i].steer_axis).abs() < 1e-12);
+        }
+    }
+    assert!(worst < 1e-6, "worst Jacobian error {worst}");
+}
+
+/// Body rates that a rigid motion plus suspension rates imply at each contact (test oracle):
+/// the drive rates that make eq. 14 hold exactly when the steering points along the motion.
+fn consistent_drive(
+    s: &SuspensionState,
+    t: &BodyRates,
+    rates: &SuspensionRates,
+) -> Option<[f64; 6]> {
+    let jac = jacobian::wheel_jacobians(&ROCKY8, s).unwrap();
+    let v = Vec3::new(t[0], t[1], t[2]);
+    let w = Vec3::new(t[3], t[4], t[5]);
+    let mut drive = [0.0; 6];
+    for i in 0..6 {
+        let bogie = match jac[i].bogie_index {
+            Some(k) => rates.bogie_rad_s[k],
+            None => 0.0,
+        };
+        let need = v + w.cross(&jac[i].contact_point_m)
+            - jac[i].rocker * rates.rocker_rad_s
+            - jac[i].bogie * bogie;
+        // Must lie along the rolling direction.
+        let along = need.dot(&jac[i].drive) / jac[i].drive.norm_squared();
+        if (need - jac[i].drive * along).norm() > 1e-9 {
+            return None;
+        }
+        drive[i] = along;
+    }
+    Some(drive)
+}
+
+/// KIN-3: forward kinematics (eq. 15) recovers a straight drive and a turn in place exactly on
+/// level ground, drops invalid wheels, refuses fewer than three valid wheels, and reports the
+/// misfit of inconsistent (slipping) wheels.
+#[test]
+fn kin_3_forward_kinematics_cases_and_masks() {
+    let s = level();
+    let none = SuspensionRates::default();
+    // Straight: all wheels 1 rad/s -> 0.1 m/s forward.
+    let sol = forward_kinematics(&ROCKY8, &s, &none, &[1.0; 6], &[true; 6]).unwrap();
+    let expect = BodyRates::new(0.1, 0.0, 0.0, 0.0, 0.0, 0.0);
+    assert!(
+        (sol.body_rates - expect).norm() < 1e-12,
+        "{}",
+        sol.body_rates
+    );
+    assert!(sol.residual_rms_m_s < 1e-12);
+    assert_eq!(sol.observed, [true; 6]);
+    // Yaw at 0.2 rad/s about the origin, steering tangent: built from the oracle.
+    let t = BodyRates::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.2);
+    let mut st = s;
+    let p = wheel_contact_points(&ROCKY8, &s).unwrap();
+    for i in 0..6 {
+        st.steer_rad[i] = libm::atan2(p[i].x, -p[i].y);
+        if st.steer_rad[i].abs() > 1.6 {
+            st.steer_rad[i] -= core::f64::consts::PI * st.steer_rad[i].signum();
+        }
+    }
+    let drive = consistent_drive(&st, &t, &none).unwrap();
+    let sol = forward_kinematics(&ROCKY8, &st, &none, &drive, &[true; 6]).unwrap();
+    assert!((sol.body_rates - t).norm() < 1e-12);
+    // Invalid wheel with a garbage rate: dropped, same answer.
+    let mut bad = drive;
+    bad[3] = f64::NAN;
+    let mut valid = [true; 6];
+    valid[3] = false;
+    let sol = forward_kinematics(&ROCKY8, &st, &none, &bad, &valid).unwrap();
+    assert_eq!(sol.valid_wheels, 5);
+    assert!((sol.body_rates - t).norm() < 1e-12);
+    // Two valid wheels: unobservable.
+    let valid = [true, true, false, false, false, false];
+    assert_eq!(
+        forward_kinematics(&ROCKY8, &st, &none, &drive, &valid),
+        Err(KinematicsError::Unobservable { valid_wheels: 2 })
+    );
+    // A slipping wheel (spinning twice as fast) shows in the residual.
+    let mut slip = [1.0; 6];
+    slip[0] = 2.0;
+    let sol = forward_kinematics(&ROCKY8, &s, &none, &slip, &[true; 6]).unwrap();
+    assert!(sol.residual_rms_m_s > 0.01);
+}
+
+/// KIN-3: over random suspension states, suspension rates and rigid body rates, forward
+/// kinematics returns the body rates that generated the joint rates (1e-9), including the
+/// unactuated z, roll and pitch.
+#[test]
+fn kin_3_forward_kinematics_recovers_rigid_motion() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut worst: f64 = 0.0;
+    let mut tested = 0;
+    for _ in 0..300 {
+        let s0 = random_state(&mut rng);
+        let cmd = VehicleCommand {
+            x_dot_m_s: rng.random_range(-0.1..0.1),
+            y_dot_m_s: rng.random_range(-0.1..0.1),
+            yaw_rate_rad_s: rng.random_range(-0.3..0.3),
+        };
+        // IK supplies steering and unactuated rates (z, roll, pitch, suspension) consistent
+        // with the contacts; the drive rates come from the independent oracle above.
+        let k = inverse::max_speed_scale(&ROCKY8, &s0, &cmd, 1.9)
+            .unwrap()
+            .min(1.0);
+        let cmd = VehicleCommand {
+            x_dot_m_s: cmd.x_dot_m_s * k,
+            y_dot_m_s: cmd.y_dot_m_s * k,
+            yaw_rate_rad_s: cmd.yaw_rate_rad_s * k,
+        };
+        let ik = inverse::inverse_kinematics(&ROCKY8, &s0, &cmd).unwrap();
+        let mut s = s0;
+        s.steer_rad = ik.command.steer_angle_rad;
+        let t = ik.body_rates;
+        let Some(drive) = consistent_drive(&s, &t, &ik.suspension_rates) else {
+            panic!("oracle failed");
+        };
+        let sol =
+            forward_kinematics(&ROCKY8, &s, &ik.suspension_rates, &drive, &[true; 6]).unwrap();
+        worst = worst.max((sol.body_rates - t).norm());
+        tested += 1;
+    }
+    assert!(tested > 250);
+    assert!(worst < 1e-9, "worst {worst}");
 }
