@@ -194,6 +194,22 @@ pub const ROCKY8: RoverGeometry = {
     }
 };
 
+/// `(sin, cos)` with exact values at the right angles of the D-H tables (0, +-pi/2, pi), which
+/// also saves the transcendental calls for the constant twists.
+fn sin_cos(angle: f64) -> (f64, f64) {
+    if angle == 0.0 {
+        (0.0, 1.0)
+    } else if angle == HALF_PI {
+        (1.0, 0.0)
+    } else if angle == -HALF_PI {
+        (-1.0, 0.0)
+    } else if angle == PI {
+        (0.0, -1.0)
+    } else {
+        (libm::sin(angle), libm::cos(angle))
+    }
+}
+
 /// A rigid transform `T_b^a` (frame `b` expressed in frame `a`): `p_a = rot * p_b + pos`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Frame {
@@ -214,8 +230,8 @@ impl Frame {
 
     /// Standard D-H transform `Rz(gamma) Tz(d) Tx(a) Rx(alpha)`.
     pub fn from_dh(gamma_rad: f64, d_m: f64, a_m: f64, alpha_rad: f64) -> Self {
-        let (sg, cg) = (libm::sin(gamma_rad), libm::cos(gamma_rad));
-        let (sa, ca) = (libm::sin(alpha_rad), libm::cos(alpha_rad));
+        let (sg, cg) = sin_cos(gamma_rad);
+        let (sa, ca) = sin_cos(alpha_rad);
         Frame {
             rot: Mat3::new(cg, -sg * ca, sg * sa, sg, cg * ca, -cg * sa, 0.0, sa, ca),
             pos: Vec3::new(a_m * cg, a_m * sg, d_m),
@@ -286,6 +302,13 @@ pub struct WheelFrames {
     pub bogie: Option<usize>,
 }
 
+/// Frames shared by several wheels: `T_D^R` and `T_rho1^R`, `T_rho2^R`.
+#[derive(Debug, Clone, Copy)]
+struct SharedFrames {
+    rocker: Frame,
+    bogies: [Frame; 2],
+}
+
 /// Checks a suspension state against the geometry's limits.
 pub(crate) fn check_suspension(
     geometry: &RoverGeometry,
@@ -325,19 +348,16 @@ fn revolute_rate(parent: &Frame, sign: f64, point: &Vec3) -> Vec3 {
 /// [`wheel_frames`]).
 fn wheel_frames_unchecked(
     geometry: &RoverGeometry,
+    shared: &SharedFrames,
     chain: &WheelChain,
     q: &ChainJoints,
 ) -> WheelFrames {
-    let frame_d = Frame::identity().then(&geometry.rocker.frame(q));
+    let frame_d = shared.rocker;
     // Frame whose z axis the rocker joint turns about, with the sign of beta in that row.
-    let (parent, bogie) = match chain.mount {
-        WheelMount::RightBogie => (Some(&geometry.bogies[0]), Some(0)),
-        WheelMount::LeftBogie => (Some(&geometry.bogies[1]), Some(1)),
-        WheelMount::Rocker => (None, None),
-    };
-    let (rocker_sign, frame_before_steer) = match parent {
-        Some(bogie_row) => (bogie_row.joint_sign, frame_d.then(&bogie_row.frame(q))),
-        None => (chain.steer.joint_sign, frame_d),
+    let (rocker_sign, frame_before_steer, bogie) = match chain.mount {
+        WheelMount::RightBogie => (geometry.bogies[0].joint_sign, shared.bogies[0], Some(0)),
+        WheelMount::LeftBogie => (geometry.bogies[1].joint_sign, shared.bogies[1], Some(1)),
+        WheelMount::Rocker => (chain.steer.joint_sign, frame_d, None),
     };
     let frame_s = frame_before_steer.then(&chain.steer.frame(q));
     let frame_a = frame_s.then(&chain.axle.frame(q));
@@ -378,14 +398,27 @@ pub(crate) fn wheel_frames_trusted(
     geometry: &RoverGeometry,
     state: &SuspensionState,
 ) -> [WheelFrames; WHEEL_COUNT] {
+    let q0 = ChainJoints {
+        rocker_rad: state.rocker_rad,
+        bogie_rad: state.bogie_rad,
+        steer_rad: 0.0,
+    };
+    // `T_D^R` and `T_rho^R` are shared by the wheels.
+    let rocker = geometry.rocker.frame(&q0);
+    let shared = SharedFrames {
+        rocker,
+        bogies: [
+            rocker.then(&geometry.bogies[0].frame(&q0)),
+            rocker.then(&geometry.bogies[1].frame(&q0)),
+        ],
+    };
     // `from_fn` only calls with `i < WHEEL_COUNT`, the length of both arrays.
     core::array::from_fn(|i| {
         let q = ChainJoints {
-            rocker_rad: state.rocker_rad,
-            bogie_rad: state.bogie_rad,
             steer_rad: state.steer_rad[i],
+            ..q0
         };
-        wheel_frames_unchecked(geometry, &geometry.wheels[i], &q)
+        wheel_frames_unchecked(geometry, &shared, &geometry.wheels[i], &q)
     })
 }
 
