@@ -350,14 +350,27 @@ proptest! {
             bogie_rad: [angles[1], angles[2]],
             steer_rad: [angles[3], angles[4], angles[5], angles[6], angles[7], angles[8]],
         };
-        let _ = wheel_contact_points(&ROCKY8, &s);
+        let contacts = wheel_contact_points(&ROCKY8, &s);
+        let angles_bad = angles.iter().any(|a| !a.is_finite());
+        if angles_bad {
+            prop_assert_eq!(contacts, Err(KinematicsError::NonFinite));
+        }
         let sr = SuspensionRates { rocker_rad_s: rates[0], bogie_rad_s: [rates[1], rates[2]] };
         let drive = [rates[3], rates[4], rates[5], rates[6], rates[7], rates[8]];
-        if let Ok(fk) = forward_kinematics(&ROCKY8, &s, &sr, &drive, &valid) {
+        let fk = forward_kinematics(&ROCKY8, &s, &sr, &drive, &valid);
+        if let Ok(fk) = fk {
             prop_assert!(fk.body_rates.iter().all(|x| x.is_finite()));
         }
+        let valid_drive_bad = drive.iter().zip(valid.iter()).any(|(d, ok)| *ok && !d.is_finite());
+        if valid_drive_bad || rates[..3].iter().any(|r| !r.is_finite()) {
+            prop_assert!(fk.is_err());
+        }
         let command = cmd(c[0], c[1], c[2]);
-        if let Ok(ik) = inverse_kinematics(&ROCKY8, &s, &command) {
+        let ik = inverse_kinematics(&ROCKY8, &s, &command);
+        if angles_bad || c.iter().any(|x| !x.is_finite()) {
+            prop_assert!(ik.is_err());
+        }
+        if let Ok(ik) = ik {
             prop_assert!(ik.command.wheel_rate_rad_s.iter().all(|x| x.is_finite()));
             prop_assert!(ik.command.steer_angle_rad.iter().all(|x| x.abs() <= ROCKY8.limits.steer_rad));
         }
@@ -381,5 +394,32 @@ proptest! {
         if let Ok(p) = odo.relative_pose() {
             prop_assert!(p.trans_0_1_m.iter().all(|x| x.is_finite()));
         }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(1000))]
+    /// KIN-9: in-range angles and any finite command up to 10 m/s: inverse kinematics succeeds
+    /// or reports the wheel-rate limit, and then succeeds after `max_speed_scale`.
+    #[test]
+    fn kin_9_in_range_inputs_always_answer(
+        rocker in -0.6..0.6f64,
+        bogie in proptest::array::uniform2(-1.0..1.0f64),
+        steer in proptest::array::uniform6(-1.75..1.75f64),
+        c in proptest::array::uniform3(-10.0..10.0f64),
+    ) {
+        let s = SuspensionState { rocker_rad: rocker, bogie_rad: bogie, steer_rad: steer };
+        let command = cmd(c[0], c[1], c[2]);
+        match inverse_kinematics(&ROCKY8, &s, &command) {
+            Ok(ik) => prop_assert!(ik.command.wheel_rate_rad_s.iter().all(|r| r.abs() <= 2.0 + 1e-6)),
+            Err(KinematicsError::WheelRateLimit { .. }) => {
+                let k = max_speed_scale(&ROCKY8, &s, &command, 2.0).unwrap();
+                let scaled = cmd(c[0] * k, c[1] * k, c[2] * k);
+                prop_assert!(inverse_kinematics(&ROCKY8, &s, &scaled).is_ok());
+            }
+            Err(e) => prop_assert!(false, "unexpected {:?}", e),
+        }
+        let fk = forward_kinematics(&ROCKY8, &s, &SuspensionRates::default(), &[1.0; 6], &[true; 6]);
+        prop_assert!(fk.is_ok());
     }
 }
