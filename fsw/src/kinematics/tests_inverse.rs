@@ -423,3 +423,54 @@ proptest! {
         prop_assert!(fk.is_ok());
     }
 }
+
+/// KIN-3: forward kinematics from a HAL joint reading uses its drive rates, angles and validity
+/// flags and refuses a reading whose suspension encoders are invalid.
+#[test]
+fn kin_3_forward_kinematics_from_joint_reading() {
+    let mut j = reading(0, [0.0; 6], [0.0; 6]);
+    j.drive_rate_rad_s = [1.0; 6];
+    j.wheel_valid[0] = false;
+    j.drive_rate_rad_s[0] = f64::NAN;
+    let none = SuspensionRates::default();
+    let sol = forward_kinematics_from_joints(&ROCKY8, &j, &none).unwrap();
+    assert_eq!(sol.valid_wheels, 5);
+    assert!((sol.body_rates[0] - 0.1).abs() < 1e-12);
+    j.suspension_valid = false;
+    assert_eq!(
+        forward_kinematics_from_joints(&ROCKY8, &j, &none),
+        Err(KinematicsError::SuspensionInvalid)
+    );
+}
+
+/// KIN-8: the planar pose increment integrates a straight step and a turn in place along the
+/// arc (hand values: 0.1 rad of drive at r = 0.1 m is 1 cm; the IK turn-in-place rates for
+/// 0.5 rad of yaw give dyaw = 0.5 and no translation).
+#[test]
+fn kin_8_planar_pose_increment() {
+    let a = reading(0, [0.0; 6], [0.0; 6]);
+    let b = reading(1, [0.1; 6], [0.0; 6]);
+    let d = planar_pose_increment(&ROCKY8, &a, &b).unwrap();
+    assert!((d[0] - 0.01).abs() < 1e-12 && d[1].abs() < 1e-12 && d[2].abs() < 1e-12);
+    let ik = inverse_kinematics(&ROCKY8, &level(), &cmd(0.0, 0.0, 0.1)).unwrap();
+    let steer = ik.command.steer_angle_rad;
+    let drive = ik.command.wheel_rate_rad_s.map(|r| r * 5.0);
+    let d = planar_pose_increment(
+        &ROCKY8,
+        &reading(0, [0.0; 6], steer),
+        &reading(1, drive, steer),
+    )
+    .unwrap();
+    assert!((d[2] - 0.5).abs() < 1e-9 && d[0].abs() < 1e-9 && d[1].abs() < 1e-9);
+    // Arc: constant body rates (0.1, 0, 0.1) for 1 s -> chord (sin 0.1, 1 - cos 0.1).
+    let ik = inverse_kinematics(&ROCKY8, &level(), &cmd(0.1, 0.0, 0.1)).unwrap();
+    let steer = ik.command.steer_angle_rad;
+    let d = planar_pose_increment(
+        &ROCKY8,
+        &reading(0, [0.0; 6], steer),
+        &reading(1, ik.command.wheel_rate_rad_s, steer),
+    )
+    .unwrap();
+    assert!((d[0] - libm::sin(0.1)).abs() < 1e-9);
+    assert!((d[1] - (1.0 - libm::cos(0.1))).abs() < 1e-9);
+}
