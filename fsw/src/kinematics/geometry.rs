@@ -41,6 +41,76 @@ pub struct DhRow {
     pub a_m: f64,
     /// Twist `alpha` about the new `x` axis, rad.
     pub alpha_rad: f64,
+    /// `[sin, cos]` of `gamma_offset_rad`, computed by [`DhRow::new`].
+    gamma_offset_sin_cos: [f64; 2],
+    /// `[sin, cos]` of `alpha_rad`, computed by [`DhRow::new`].
+    alpha_sin_cos: [f64; 2],
+}
+
+impl DhRow {
+    /// A row `gamma = gamma_offset_rad + joint_sign * joint` (`joint_sign` is +1 or -1; any
+    /// negative value counts as -1), `d`, `a`, `alpha`. The sines and cosines of the constant
+    /// angles are computed here, at compile time for a `const` table.
+    pub const fn new(
+        gamma_offset_rad: f64,
+        joint: JointVariable,
+        joint_sign: f64,
+        d_m: f64,
+        a_m: f64,
+        alpha_rad: f64,
+    ) -> Self {
+        DhRow {
+            gamma_offset_rad,
+            joint,
+            joint_sign: if joint_sign < 0.0 { -1.0 } else { 1.0 },
+            d_m,
+            a_m,
+            alpha_rad,
+            gamma_offset_sin_cos: const_sin_cos(gamma_offset_rad),
+            alpha_sin_cos: const_sin_cos(alpha_rad),
+        }
+    }
+}
+
+/// `[sin x, cos x]` in a `const` context: exact at 0, +-pi/2 and pi, otherwise a Taylor series
+/// (30 terms) after reduction to `[-pi, pi]`, accurate to a few ulp. Used only for the constant
+/// angles of a D-H table; non-finite or huge angles give `[NaN, NaN]`.
+const fn const_sin_cos(x: f64) -> [f64; 2] {
+    if x == 0.0 {
+        return [0.0, 1.0];
+    } else if x == HALF_PI {
+        return [1.0, 0.0];
+    } else if x == -HALF_PI {
+        return [-1.0, 0.0];
+    } else if x == PI || x == -PI {
+        return [0.0, -1.0];
+    }
+    if !(x.is_finite()) || x > 64.0 || x < -64.0 {
+        return [f64::NAN, f64::NAN];
+    }
+    let two_pi = 2.0 * PI;
+    let mut r = x;
+    let mut n = 0;
+    while n < 12 && r > PI {
+        r -= two_pi;
+        n += 1;
+    }
+    while n < 24 && r < -PI {
+        r += two_pi;
+        n += 1;
+    }
+    let r2 = r * r;
+    let (mut sin, mut cos) = (r, 1.0);
+    let (mut sin_term, mut cos_term) = (r, 1.0);
+    let mut k = 1.0;
+    while k < 30.0 {
+        sin_term *= -r2 / ((2.0 * k) * (2.0 * k + 1.0));
+        cos_term *= -r2 / ((2.0 * k - 1.0) * (2.0 * k));
+        sin += sin_term;
+        cos += cos_term;
+        k += 1.0;
+    }
+    [sin, cos]
 }
 
 /// What a wheel's steering frame `S_i` hangs from (eq. 12 and its rear-wheel exception).
@@ -108,14 +178,7 @@ const fn row(
     a_m: f64,
     alpha_rad: f64,
 ) -> DhRow {
-    DhRow {
-        gamma_offset_rad,
-        joint,
-        joint_sign,
-        d_m,
-        a_m,
-        alpha_rad,
-    }
+    DhRow::new(gamma_offset_rad, joint, joint_sign, d_m, a_m, alpha_rad)
 }
 
 /// Rocky 8 wheel radius, m. H04 Table 2 leaves it as `-1.000` in the `M_i` rows; 0.10 m is the
@@ -232,6 +295,11 @@ impl Frame {
     pub fn from_dh(gamma_rad: f64, d_m: f64, a_m: f64, alpha_rad: f64) -> Self {
         let (sg, cg) = sin_cos(gamma_rad);
         let (sa, ca) = sin_cos(alpha_rad);
+        Self::from_sin_cos(sg, cg, d_m, a_m, sa, ca)
+    }
+
+    /// [`Frame::from_dh`] from the sines and cosines of `gamma` and `alpha`.
+    pub fn from_sin_cos(sg: f64, cg: f64, d_m: f64, a_m: f64, sa: f64, ca: f64) -> Self {
         Frame {
             rot: Mat3::new(cg, -sg * ca, sg * sa, sg, cg * ca, -cg * sa, 0.0, sa, ca),
             pos: Vec3::new(a_m * cg, a_m * sg, d_m),
@@ -257,28 +325,34 @@ impl Frame {
     }
 }
 
-/// Joint values entering one wheel's chain.
+/// `[sin, cos]` of the joint values entering one wheel's chain (computed once per call).
 #[derive(Debug, Clone, Copy)]
 struct ChainJoints {
-    rocker_rad: f64,
-    bogie_rad: [f64; 2],
-    steer_rad: f64,
+    rocker: [f64; 2],
+    bogies: [[f64; 2]; 2],
+    steer: [f64; 2],
 }
 
 impl DhRow {
-    fn variable(&self, q: &ChainJoints) -> f64 {
+    fn variable(&self, q: &ChainJoints) -> [f64; 2] {
         match self.joint {
-            JointVariable::Fixed => 0.0,
-            JointVariable::Rocker => q.rocker_rad,
-            JointVariable::RightBogie => q.bogie_rad[0],
-            JointVariable::LeftBogie => q.bogie_rad[1],
-            JointVariable::Steer => q.steer_rad,
+            JointVariable::Fixed => [0.0, 1.0],
+            JointVariable::Rocker => q.rocker,
+            JointVariable::RightBogie => q.bogies[0],
+            JointVariable::LeftBogie => q.bogies[1],
+            JointVariable::Steer => q.steer,
         }
     }
 
+    /// `Rz(offset + sign * q) Tz(d) Tx(a) Rx(alpha)` by the angle-sum identities (no
+    /// transcendental call).
     fn frame(&self, q: &ChainJoints) -> Frame {
-        let gamma = self.gamma_offset_rad + self.joint_sign * self.variable(q);
-        Frame::from_dh(gamma, self.d_m, self.a_m, self.alpha_rad)
+        let [sq, cq] = self.variable(q);
+        let sq = self.joint_sign * sq;
+        let [so, co] = self.gamma_offset_sin_cos;
+        let (sg, cg) = (so * cq + co * sq, co * cq - so * sq);
+        let [sa, ca] = self.alpha_sin_cos;
+        Frame::from_sin_cos(sg, cg, self.d_m, self.a_m, sa, ca)
     }
 }
 
@@ -398,10 +472,14 @@ pub(crate) fn wheel_frames_trusted(
     geometry: &RoverGeometry,
     state: &SuspensionState,
 ) -> [WheelFrames; WHEEL_COUNT] {
+    let sc = |angle: f64| {
+        let (s, c) = sin_cos(angle);
+        [s, c]
+    };
     let q0 = ChainJoints {
-        rocker_rad: state.rocker_rad,
-        bogie_rad: state.bogie_rad,
-        steer_rad: 0.0,
+        rocker: sc(state.rocker_rad),
+        bogies: [sc(state.bogie_rad[0]), sc(state.bogie_rad[1])],
+        steer: [0.0, 1.0],
     };
     // `T_D^R` and `T_rho^R` are shared by the wheels.
     let rocker = geometry.rocker.frame(&q0);
@@ -415,7 +493,7 @@ pub(crate) fn wheel_frames_trusted(
     // `from_fn` only calls with `i < WHEEL_COUNT`, the length of both arrays.
     core::array::from_fn(|i| {
         let q = ChainJoints {
-            steer_rad: state.steer_rad[i],
+            steer: sc(state.steer_rad[i]),
             ..q0
         };
         wheel_frames_unchecked(geometry, &shared, &geometry.wheels[i], &q)
@@ -432,4 +510,25 @@ pub fn wheel_contact_points(
 ) -> Result<[Vec3; WHEEL_COUNT], KinematicsError> {
     let frames = wheel_frames(geometry, state)?;
     Ok(frames.map(|f| f.contact_point_m))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// KIN-1: the compile-time sines and cosines of the table's constant angles agree with libm.
+    #[test]
+    fn kin_1_const_sin_cos_matches_libm() {
+        let mut x = -7.0;
+        while x < 7.0 {
+            let [s, c] = const_sin_cos(x);
+            assert!((s - libm::sin(x)).abs() < 2e-15 && (c - libm::cos(x)).abs() < 2e-15);
+            x += 0.0137;
+        }
+        for x in [0.2698, 0.2698 - PI, PI, -HALF_PI] {
+            let [s, c] = const_sin_cos(x);
+            assert!((s - libm::sin(x)).abs() < 2e-15 && (c - libm::cos(x)).abs() < 2e-15);
+        }
+        assert!(const_sin_cos(f64::NAN)[0].is_nan());
+    }
 }
