@@ -16,6 +16,8 @@
 //! - [`exec`]: the rate-group cyclic executive.
 //! - [`flight`]: the top-level [`flight::Fsw`] that owns all state and runs one minor frame per
 //!   [`flight::Fsw::tick`].
+//! - [`kinematics`]: rocker-bogie kinematics of Rocky 8 (H04 sec. 3, App. A): D-H model,
+//!   contact points, wheel Jacobians, forward/inverse kinematics, vehicle odometry, planar model.
 //! - [`types`]: shared math types ([`types::RelativePose`]).
 //! - [`guidance`]: carrot heading and slip-compensation loops (H04 sec. 5, H05 sec. V).
 //! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
@@ -26,5 +28,6 @@
 pub mod exec;
 pub mod flight;
 pub mod guidance;
+pub mod kinematics;
 pub mod telemetry;
 pub mod types;

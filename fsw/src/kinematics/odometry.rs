@@ -1,0 +1,266 @@
+//! Vehicle odometry: forward kinematics (eq. 15) integrated over an interval into a
+//! [`RelativePose`] with a covariance propagated from encoder noise (the measurement the EKF
+//! gates with a 5-dof Mahalanobis test, H04 sec. 4, eq. 46).
+//!
+//! Each pair of successive joint readings gives joint increments (drive angles, rocker and
+//! bogie angles); eq. 15 is linear in the rates, so the same least squares applied to the
+//! increments at the mid-point configuration gives the body displacement of the step
+//! `[dp (m); dphi (rad)]` in the rover frame at the step start. Steps compose as
+//! `T_0,k+1 = T_0,k * exp(step)`. The covariance over `[delta_theta; delta_p]` (perturbation
+//! in `R0`, the [`RelativePose`] convention) propagates as `P' = F P F^T + G Q G^T` with
+//! `F = [[I, 0], [-[R dp]x, I]]`, `G = diag(R, R)` and `Q` the step covariance from the
+//! encoder noise mapped through the least squares.
+
+use super::forward::{contact_velocities, ContactLeastSquares};
+use super::geometry::{check_suspension, wheel_frames_trusted, RoverGeometry};
+use super::jacobian::WheelJacobian;
+use super::{KinematicsError, SuspensionRates, SuspensionState};
+use crate::types::{Mat3, Mat6, Quat, RelativePose, Vec3, Vec6};
+use rover_hal::{JointState, WHEEL_COUNT};
+
+/// Noise model of the vehicle odometry (standard deviations per joint-reading step).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OdometryConfig {
+    /// Noise of each drive-angle increment, rad (quantisation and read noise).
+    pub drive_increment_noise_rad: f64,
+    /// Additional drive noise proportional to the increment (model error of the no-slip,
+    /// fixed-contact assumptions), dimensionless fraction of `|delta_theta|`.
+    pub drive_fraction: f64,
+    /// Noise of the steering angle, rad.
+    pub steer_noise_rad: f64,
+    /// Noise of each rocker or bogie angle increment, rad.
+    pub suspension_increment_noise_rad: f64,
+    /// Components of `[delta_theta; delta_p]` reported as observed. Default: all but the
+    /// vertical translation `delta_p_z` (H04: 5 of 6 DOF; the vertical motion of the contacts
+    /// is assumed, not measured, see `docs/kinematics.md`).
+    pub observed: [bool; 6],
+}
+
+impl Default for OdometryConfig {
+    /// Defaults: 1 mrad per drive increment (a 4096-count encoder), 2 % of travel model
+    /// error, 10 mrad steering, 1 mrad per suspension increment.
+    fn default() -> Self {
+        OdometryConfig {
+            drive_increment_noise_rad: 1e-3,
+            drive_fraction: 0.02,
+            steer_noise_rad: 1e-2,
+            suspension_increment_noise_rad: 1e-3,
+            observed: [true, true, true, true, true, false],
+        }
+    }
+}
+
+/// Integrates forward kinematics over an interval (vehicle odometry, H04 sec. 3-4).
+#[derive(Debug, Clone)]
+pub struct KinematicOdometry {
+    geometry: RoverGeometry,
+    config: OdometryConfig,
+    last: Option<JointState>,
+    t0_us: u64,
+    rot_0_k: Quat,
+    trans_0_k_m: Vec3,
+    covariance: Mat6,
+}
+
+fn skew(v: &Vec3) -> Mat3 {
+    Mat3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+fn finite_reading(j: &JointState) -> bool {
+    let angles = [j.rocker_rad, j.bogie_rad[0], j.bogie_rad[1]];
+    let wheels_ok = j
+        .drive_angle_rad
+        .iter()
+        .zip(j.steer_angle_rad.iter())
+        .zip(j.wheel_valid.iter())
+        .all(|((d, s), ok)| !*ok || (d.is_finite() && s.is_finite()));
+    wheels_ok && angles.iter().all(|a| a.is_finite())
+}
+
+impl KinematicOdometry {
+    /// A new integrator; call [`Self::start`] before [`Self::update`].
+    pub fn new(geometry: RoverGeometry, config: OdometryConfig) -> Self {
+        KinematicOdometry {
+            geometry,
+            config,
+            last: None,
+            t0_us: 0,
+            rot_0_k: Quat::identity(),
+            trans_0_k_m: Vec3::zeros(),
+            covariance: Mat6::zeros(),
+        }
+    }
+
+    /// Start a new interval at the reading `joints` (time `t0 = joints.t_us`). Errors: the
+    /// reading is non-finite or its suspension encoders are invalid (the interval stays
+    /// unstarted).
+    pub fn start(&mut self, joints: &JointState) -> Result<(), KinematicsError> {
+        self.last = None;
+        if !joints.suspension_valid {
+            return Err(KinematicsError::SuspensionInvalid);
+        }
+        if !finite_reading(joints) {
+            return Err(KinematicsError::NonFinite);
+        }
+        self.last = Some(*joints);
+        self.t0_us = joints.t_us;
+        self.rot_0_k = Quat::identity();
+        self.trans_0_k_m = Vec3::zeros();
+        self.covariance = Mat6::zeros();
+        Ok(())
+    }
+
+    /// Add the step from the previous reading to `joints`. A wheel invalid in either reading is
+    /// dropped for this step. On error the step is not applied; errors other than
+    /// [`KinematicsError::TimeNotAdvancing`] also end the interval (call [`Self::start`]).
+    pub fn update(&mut self, joints: &JointState) -> Result<(), KinematicsError> {
+        let prev = self.last.ok_or(KinematicsError::NotStarted)?;
+        if joints.t_us <= prev.t_us {
+            return Err(KinematicsError::TimeNotAdvancing);
+        }
+        let result = self.step(&prev, joints);
+        self.last = match result {
+            Ok(()) => Some(*joints),
+            Err(_) => None,
+        };
+        result
+    }
+
+    fn step(&mut self, prev: &JointState, cur: &JointState) -> Result<(), KinematicsError> {
+        if !(prev.suspension_valid && cur.suspension_valid) {
+            return Err(KinematicsError::SuspensionInvalid);
+        }
+        if !finite_reading(cur) {
+            return Err(KinematicsError::NonFinite);
+        }
+        let valid: [bool; WHEEL_COUNT] =
+            core::array::from_fn(|i| prev.wheel_valid[i] && cur.wheel_valid[i]);
+        let mid = |a: f64, b: f64| 0.5 * (a + b);
+        let state = SuspensionState {
+            rocker_rad: mid(prev.rocker_rad, cur.rocker_rad),
+            bogie_rad: [
+                mid(prev.bogie_rad[0], cur.bogie_rad[0]),
+                mid(prev.bogie_rad[1], cur.bogie_rad[1]),
+            ],
+            steer_rad: core::array::from_fn(|i| {
+                if valid[i] {
+                    mid(prev.steer_angle_rad[i], cur.steer_angle_rad[i])
+                } else {
+                    0.0
+                }
+            }),
+        };
+        check_suspension(&self.geometry, &state)?;
+        let increments = SuspensionRates {
+            rocker_rad_s: cur.rocker_rad - prev.rocker_rad,
+            bogie_rad_s: [
+                cur.bogie_rad[0] - prev.bogie_rad[0],
+                cur.bogie_rad[1] - prev.bogie_rad[1],
+            ],
+        };
+        let drive: [f64; WHEEL_COUNT] = core::array::from_fn(|i| {
+            if valid[i] {
+                cur.drive_angle_rad[i] - prev.drive_angle_rad[i]
+            } else {
+                0.0
+            }
+        });
+        let frames = wheel_frames_trusted(&self.geometry, &state);
+        let jacobians =
+            frames.map(|f| WheelJacobian::from_frames(&f, self.geometry.wheel_radius_m));
+        let points = frames.map(|f| f.contact_point_m);
+        let lsq = ContactLeastSquares::new(&points, &valid)?;
+        let step = lsq.solve(&contact_velocities(&jacobians, &increments, &drive));
+        if step.iter().any(|x| !x.is_finite()) {
+            return Err(KinematicsError::NonFinite);
+        }
+        let q = self.step_covariance(&lsq, &jacobians, &frames, &drive, &valid);
+        self.compose(&step, &q);
+        Ok(())
+    }
+
+    /// Covariance of the step `[dphi; dp]` (in the step-start frame) from the encoder noise.
+    fn step_covariance(
+        &self,
+        lsq: &ContactLeastSquares,
+        jacobians: &[WheelJacobian; WHEEL_COUNT],
+        frames: &[super::geometry::WheelFrames; WHEEL_COUNT],
+        drive: &[f64; WHEEL_COUNT],
+        valid: &[bool; WHEEL_COUNT],
+    ) -> Mat6 {
+        let c = &self.config;
+        let mut q = Mat6::zeros();
+        // Sensitivity column of the step for one contact-velocity perturbation pattern.
+        let mut add = |b: &[Vec3; WHEEL_COUNT], sigma: f64| {
+            let t = lsq.solve(b);
+            let col = Vec6::new(t[3], t[4], t[5], t[0], t[1], t[2]);
+            q += col * col.transpose() * (sigma * sigma);
+        };
+        for i in 0..WHEEL_COUNT {
+            if !valid[i] {
+                continue;
+            }
+            let mut b = [Vec3::zeros(); WHEEL_COUNT];
+            b[i] = jacobians[i].drive;
+            let sigma = c.drive_increment_noise_rad + c.drive_fraction * libm::fabs(drive[i]);
+            add(&b, sigma);
+            // Steering error turns the rolling direction about the steering axis.
+            b[i] = frames[i].steer_axis.cross(&jacobians[i].drive) * drive[i];
+            add(&b, c.steer_noise_rad);
+        }
+        for k in 0..3 {
+            let unit = SuspensionRates {
+                rocker_rad_s: if k == 0 { 1.0 } else { 0.0 },
+                bogie_rad_s: [
+                    if k == 1 { 1.0 } else { 0.0 },
+                    if k == 2 { 1.0 } else { 0.0 },
+                ],
+            };
+            let b = contact_velocities(jacobians, &unit, &[0.0; WHEEL_COUNT]);
+            let masked: [Vec3; WHEEL_COUNT] =
+                core::array::from_fn(|i| if valid[i] { b[i] } else { Vec3::zeros() });
+            add(&masked, c.suspension_increment_noise_rad);
+        }
+        q
+    }
+
+    fn compose(&mut self, step: &Vec6, q: &Mat6) {
+        let dp = Vec3::new(step[0], step[1], step[2]);
+        let dphi = Vec3::new(step[3], step[4], step[5]);
+        let rot = self.rot_0_k.to_rotation_matrix().into_inner();
+        // Mid-step rotation for the translation (second order in the step).
+        let half = Quat::from_scaled_axis(dphi * 0.5);
+        let dp_0 = rot * (half * dp);
+        let mut f = Mat6::identity();
+        f.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-skew(&dp_0)));
+        let mut g = Mat6::zeros();
+        g.fixed_view_mut::<3, 3>(0, 0).copy_from(&rot);
+        g.fixed_view_mut::<3, 3>(3, 3).copy_from(&rot);
+        self.covariance = f * self.covariance * f.transpose() + g * q * g.transpose();
+        self.trans_0_k_m += dp_0;
+        self.rot_0_k *= Quat::from_scaled_axis(dphi);
+    }
+
+    /// The relative pose from the interval start to the last reading (see [`RelativePose`]
+    /// for the convention; unobserved components per [`OdometryConfig::observed`]).
+    /// Error: [`KinematicsError::NotStarted`] when no interval is running.
+    pub fn relative_pose(&self) -> Result<RelativePose, KinematicsError> {
+        let last = self.last.ok_or(KinematicsError::NotStarted)?;
+        Ok(RelativePose {
+            t0_us: self.t0_us,
+            t1_us: last.t_us,
+            rot_0_1: self.rot_0_k,
+            trans_0_1_m: self.trans_0_k_m,
+            covariance: self.covariance,
+            observed: self.config.observed,
+        })
+    }
+
+    /// [`Self::relative_pose`], then start a new interval at the last reading.
+    pub fn take(&mut self) -> Result<RelativePose, KinematicsError> {
+        let pose = self.relative_pose()?;
+        let last = self.last.ok_or(KinematicsError::NotStarted)?;
+        self.start(&last)?;
+        Ok(pose)
+    }
+}
