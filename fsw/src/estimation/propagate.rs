@@ -15,8 +15,8 @@
 //! twice into position; bias walks integrated into attitude, velocity and position), see
 //! `docs/estimation.md`.
 
-use super::state::{clone_index, exp_quat, renormalize, CoreCov, CORE_DIM, DIM};
-use super::state::{rot, skew, ImuHold, I_BA, I_BG, I_P, I_THETA, I_V};
+use super::state::{clone_index, exp_quat, renormalize, Cov, CORE_DIM, DIM};
+use super::state::{rot, ImuHold, I_BA, I_BG, I_P, I_THETA, I_V};
 use super::{Ekf, EstError};
 use crate::types::{Mat3, Vec3};
 use rover_hal::ImuSample;
@@ -31,40 +31,41 @@ pub struct PropagationStep {
     pub gap: bool,
 }
 
-/// The non-identity blocks of the discrete error-state transition `F_k` (eq. 27).
+/// The discrete error-state transition `F_k` (eq. 27), kept as the quantities its non-identity
+/// blocks are made of:
+/// `F_tt = exp(-[w]x dt)`, `F_tbg = -I dt + [w]x dt^2/2`,
+/// `F_vt = -C [f]x dt + C [f]x [w]x dt^2/2`, `F_vbg = C [f]x dt^2/2`, `F_vba = -C dt`,
+/// `F_pt = -C [f]x dt^2/2`, `F_pv = I dt`, `F_pba = -C dt^2/2`.
 #[derive(Debug, Clone, Copy)]
 struct Transition {
     th_th: Mat3,
-    th_bg: Mat3,
-    v_th: Mat3,
-    v_bg: Mat3,
-    v_ba: Mat3,
-    p_th: Mat3,
-    p_ba: Mat3,
+    c: Mat3,
+    w: Vec3,
+    f: Vec3,
     dt: f64,
+    h: f64,
 }
 
 impl Transition {
     /// `F_k` of eq. 27 for body rate `w` (rad/s), specific force `f` (m/s^2, rover frame),
     /// attitude `c` (`C(q_nr)`), rotation increment `delta = exp([w]x dt)`, step `dt` (s).
     fn new(w: &Vec3, f: &Vec3, c: &Mat3, delta: &Mat3, dt: f64) -> Self {
-        let wx = skew(w);
-        let cfx = c * skew(f);
-        let h = 0.5 * dt * dt;
         Self {
             th_th: delta.transpose(),
-            th_bg: wx * h - Mat3::identity() * dt,
-            v_th: cfx * wx * h - cfx * dt,
-            v_bg: cfx * h,
-            v_ba: -c * dt,
-            p_th: -cfx * h,
-            p_ba: -c * h,
+            c: *c,
+            w: *w,
+            f: *f,
             dt,
+            h: 0.5 * dt * dt,
         }
     }
 
-    /// `col <- F_k col` for one column of the top 15 rows (the zero and identity blocks are
-    /// skipped: the bias rows are unchanged).
+    /// `col <- F_k col` for one column of the top 15 rows. The blocks are applied as cross
+    /// products and two products by `C` (the zero and identity blocks are skipped; the bias rows
+    /// are unchanged):
+    /// - `th' = F_tt th - dt bg + h (w x bg)`;
+    /// - `v' = v - C (f x u + dt ba)` with `u = dt th - h (w x th) - h bg`;
+    /// - `p' = p + dt v - h C (f x th + ba)`, where `h = dt^2/2`.
     #[inline(always)]
     fn apply(&self, c: &mut [f64; CORE_DIM]) {
         let th = Vec3::new(c[I_THETA], c[I_THETA + 1], c[I_THETA + 2]);
@@ -72,9 +73,11 @@ impl Transition {
         let v = Vec3::new(c[I_V], c[I_V + 1], c[I_V + 2]);
         let ba = Vec3::new(c[I_BA], c[I_BA + 1], c[I_BA + 2]);
         let p = Vec3::new(c[I_P], c[I_P + 1], c[I_P + 2]);
-        let th2 = self.th_th * th + self.th_bg * bg;
-        let v2 = v + self.v_th * th + self.v_bg * bg + self.v_ba * ba;
-        let p2 = p + self.p_th * th + v * self.dt + self.p_ba * ba;
+        let (dt, h) = (self.dt, self.h);
+        let th2 = self.th_th * th - bg * dt + self.w.cross(&bg) * h;
+        let u = th * dt - self.w.cross(&th) * h - bg * h;
+        let v2 = v - self.c * (self.f.cross(&u) + ba * dt);
+        let p2 = p + v * dt - self.c * (self.f.cross(&th) + ba) * h;
         for k in 0..3 {
             c[I_THETA + k] = th2[k];
             c[I_V + k] = v2[k];
@@ -194,24 +197,51 @@ impl Ekf {
                 }
             }
         }
-        // Core block: (F P_cc) F' = (F (F P_cc)')', then symmetrize and add Q.
-        let mut a: CoreCov = self.p.fixed_view::<CORE_DIM, CORE_DIM>(0, 0).transpose();
-        for col in a.as_mut_slice().chunks_exact_mut(CORE_DIM) {
-            if let Ok(top) = <&mut [f64; CORE_DIM]>::try_from(col) {
-                phi.apply(top);
+        // Core block B = A F' with A = F P_cc now in place. The bias rows of F are identity
+        // rows, so B[:, b] = A[:, b] for the bias columns (already in place), and only the nine
+        // columns j in {theta, v, p} need B[:, j] = F A[j, :]' (B symmetric).
+        const MOVING: [usize; 9] = [
+            I_THETA,
+            I_THETA + 1,
+            I_THETA + 2,
+            I_V,
+            I_V + 1,
+            I_V + 2,
+            I_P,
+            I_P + 1,
+            I_P + 2,
+        ];
+        let mut b = [[0.0f64; CORE_DIM]; 9];
+        for (bj, &j) in b.iter_mut().zip(MOVING.iter()) {
+            for (k, v) in bj.iter_mut().enumerate() {
+                *v = self.p[(j, k)];
+            }
+            phi.apply(bj);
+        }
+        for (bj, &j) in b.iter().zip(MOVING.iter()) {
+            for (k, v) in bj.iter().enumerate() {
+                self.p[(k, j)] = *v;
+                self.p[(j, k)] = *v;
             }
         }
-        let mut core = (a + a.transpose()) * 0.5;
-        add_process_noise(&mut core, &self.config.imu_noise, c, phi.dt);
-        self.p
-            .fixed_view_mut::<CORE_DIM, CORE_DIM>(0, 0)
-            .copy_from(&core);
+        // The theta/v/p block was written twice (rows and columns); make it exactly symmetric.
+        for (a, &i) in MOVING.iter().enumerate() {
+            for &j in MOVING.iter().skip(a + 1) {
+                let m = 0.5 * (self.p[(i, j)] + self.p[(j, i)]);
+                self.p[(i, j)] = m;
+                self.p[(j, i)] = m;
+            }
+        }
+        add_process_noise(&mut self.p, &self.config.imu_noise, c, phi.dt);
         // Clone rows of the core columns mirror the clone columns (symmetry).
         for (slot, on) in live.iter().enumerate() {
             if *on {
                 let i = clone_index(slot);
-                let block = self.p.fixed_view::<CORE_DIM, 6>(0, i).transpose();
-                self.p.fixed_view_mut::<6, CORE_DIM>(i, 0).copy_from(&block);
+                for r in 0..6 {
+                    for k in 0..CORE_DIM {
+                        self.p[(i + r, k)] = self.p[(k, i + r)];
+                    }
+                }
             }
         }
     }
@@ -234,7 +264,7 @@ impl Ekf {
 /// `s_bg^2 dt`; velocity `s_a^2 dt + s_ba^2 dt^3/3`, velocity-accel bias `-C s_ba^2 dt^2/2`,
 /// accel bias `s_ba^2 dt`; position-velocity `s_a^2 dt^2/2`, position `s_a^2 dt^3/3`,
 /// position-accel bias `-C s_ba^2 dt^3/6`.
-fn add_process_noise(core: &mut CoreCov, noise: &super::ImuNoise, c: &Mat3, dt: f64) {
+fn add_process_noise(core: &mut Cov, noise: &super::ImuNoise, c: &Mat3, dt: f64) {
     let sq = |v: f64| v * v;
     let qg = sq(noise.gyro_rad_s_sqrt_hz);
     let qbg = sq(noise.gyro_bias_rad_s2_sqrt_hz);
