@@ -161,7 +161,6 @@ fn est_3_relative_pose_jacobian_matches_finite_differences() {
         &p0_diag([0.01, 1e-4, 0.01, 1e-3, 0.01]),
     )
     .unwrap();
-    let pose0 = truth.pose;
     ekf.clone_at(0).unwrap();
     for _ in 0..400 {
         truth.advance(&mut rng);
@@ -169,7 +168,6 @@ fn est_3_relative_pose_jacobian_matches_finite_differences() {
     }
     // The measurement the filter predicts (zero residual), so the finite differences see the
     // Jacobian and not the curvature of the rotation log at a non-zero residual.
-    let _ = pose0;
     let (q0, p0) = ekf.clone_pose(ekf.clone_handle(0).unwrap()).unwrap();
     let x = ekf.state();
     let m = RelativePose {

@@ -1,7 +1,7 @@
 //! Monte Carlo acceptance tests of the estimator (issue 4 acceptance, EST-8 to EST-12).
 
 use super::harness::{run, RunStats, Scenario};
-use super::truth::{gauss3, Motion, Truth};
+use super::truth::{Motion, Truth};
 use super::*;
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -225,5 +225,4 @@ fn est_12_heading_bounded_with_sun_over_1km() {
             assert!(e.abs() < 4.0 * s, "error {e} sigma {s}");
         }
     }
-    let _ = gauss3;
 }
