@@ -6,8 +6,9 @@
 //! - `U = P H'` (gathered from the `C` columns), `S = H P H' + R` (eq. 52);
 //! - `K = U S^-1` (eq. 53), through the Cholesky factor of `S`;
 //! - Joseph form `P <- (I - K H) P (I - K H)' + K R K'`, which with `H P = U'` expands exactly to
-//!   `P - K U' - U K' + K S K'` (eq. 54 in a form that stays symmetric and positive
-//!   semi-definite under rounding), followed by explicit symmetrization;
+//!   `P - K U' - U K' + K S K' = P - U K' - K W'`, `W = U - K S` (eq. 54; the Joseph form holds for
+//!   any gain, so the rounding error of `K` enters at second order only), evaluated on the upper triangle only and
+//!   mirrored, so `P` stays exactly symmetric;
 //! - `dx = K r` (eq. 55-56), injected into the nominal state ([`Ekf::inject`]).
 
 use super::state::{Cov, ErrorVec, DIM};
@@ -85,24 +86,21 @@ impl Ekf {
         }
         let k = kt.transpose();
         let dx: ErrorVec = k * inn.r;
-        let ks: SMatrix<f64, DIM, M> = k * inn.s;
-        // P - K U' - U K' + K S K'
-        self.p.gemm(-1.0, &k, &u.transpose(), 1.0);
-        self.p.gemm(-1.0, &u, &kt, 1.0);
-        self.p.gemm(1.0, &ks, &kt, 1.0);
-        symmetrize(&mut self.p);
+        // Joseph form P - K U' - U K' + K S K' = P - U K' - K W' with W = U - K S (zero up to
+        // rounding), evaluated on the upper triangle and mirrored: exactly symmetric.
+        let w: SMatrix<f64, DIM, M> = u - k * inn.s;
+        for j in 0..DIM {
+            for i in 0..=j {
+                let mut acc = 0.0;
+                for m in 0..M {
+                    acc += u[(i, m)] * k[(j, m)] + k[(i, m)] * w[(j, m)];
+                }
+                let v = self.p[(i, j)] - acc;
+                self.p[(i, j)] = v;
+                self.p[(j, i)] = v;
+            }
+        }
         self.inject(&dx);
         self.check_health()
-    }
-}
-
-/// `P <- (P + P')/2` in place.
-pub(crate) fn symmetrize(p: &mut Cov) {
-    for j in 0..DIM {
-        for i in 0..j {
-            let m = 0.5 * (p[(i, j)] + p[(j, i)]);
-            p[(i, j)] = m;
-            p[(j, i)] = m;
-        }
     }
 }
