@@ -14,6 +14,8 @@
 //!
 //! Modules (one per seed section, see `docs/architecture.md`):
 //! - [`exec`]: the rate-group cyclic executive.
+//! - [`estimation`]: the error-state EKF (IMU propagation, stochastic-cloning relative-pose
+//!   updates, Mahalanobis slip gate, sun sensor, zero-velocity updates; H04 sec. 4, RB).
 //! - [`flight`]: the top-level [`flight::Fsw`] that owns all state and runs one minor frame per
 //!   [`flight::Fsw::tick`].
 //! - [`kinematics`]: rocker-bogie kinematics of Rocky 8 (H04 sec. 3, App. A): D-H model,
@@ -25,6 +27,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod estimation;
 pub mod exec;
 pub mod flight;
 pub mod guidance;
