@@ -16,6 +16,8 @@
 //! - [`exec`]: the rate-group cyclic executive.
 //! - [`flight`]: the top-level [`flight::Fsw`] that owns all state and runs one minor frame per
 //!   [`flight::Fsw::tick`].
+//! - [`kinematics`]: rocker-bogie kinematics of Rocky 8 (H04 sec. 3, App. A): D-H model,
+//!   contact points, wheel Jacobians, forward/inverse kinematics, vehicle odometry, planar model.
 //! - [`types`]: shared math types ([`types::RelativePose`]).
 //! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
 #![no_std]
@@ -24,5 +26,6 @@
 
 pub mod exec;
 pub mod flight;
+pub mod kinematics;
 pub mod telemetry;
 pub mod types;
