@@ -4,7 +4,8 @@
 //! replaced by the flight software's own motor commands through [`CommandSource::Flight`].
 //!
 //! - [`DriverMode::TruthCarrot`]: carrot following on the TRUE position (a 0.6 m lookahead on the
-//!   path); it sees every slip and so compensates it perfectly.
+//!   path) with the TRUE crab angle (direction of the ground velocity in `R`, low-pass filtered
+//!   over 1 s) subtracted from the heading: it sees every slip and so compensates it.
 //! - [`DriverMode::OpenLoop`]: holds each segment's heading (true yaw, as a gyro would give)
 //!   and ends the segment when wheel odometry has covered its length; no slip compensation, so
 //!   on a cross slope the rover drifts downhill (H05 Fig. 9 "without compensation").
@@ -34,6 +35,7 @@ pub struct ReferenceDriver {
     segment: usize,
     odometer_m: f64,
     segment_start_m: f64,
+    crab_rad: f64,
     done: bool,
 }
 
@@ -54,6 +56,7 @@ impl ReferenceDriver {
             segment: 0,
             odometer_m: 0.0,
             segment_start_m: 0.0,
+            crab_rad: 0.0,
             done: false,
         }
     }
@@ -93,7 +96,12 @@ impl ReferenceDriver {
                     self.done = true;
                     return hold(world);
                 }
-                (carrot[1] - pos[1]).atan2(carrot[0] - pos[0])
+                let v = t.velocity_r_m_s;
+                if v[0] > 0.02 {
+                    let crab = v[1].atan2(v[0]);
+                    self.crab_rad += (crab - self.crab_rad) * (FRAME_US as f64 * 1e-6);
+                }
+                (carrot[1] - pos[1]).atan2(carrot[0] - pos[0]) - self.crab_rad
             }
             DriverMode::OpenLoop => {
                 let a = self.waypoints[self.segment];
@@ -131,8 +139,8 @@ fn hold(world: &World) -> MobilityCommand {
     }
 }
 
-/// Planar inverse kinematics of the simulator: steering angles (H04 sign: positive turns the
-/// wheel left) and wheel rates for the body twist `[vx, vy, omega]` (m/s, m/s, rad/s in `R`).
+/// Planar inverse kinematics of the simulator: steering angles (positive turns the wheel right,
+/// as in `fsw::kinematics`) and wheel rates for the body twist `[vx, vy, omega]` (m/s, m/s, rad/s in `R`).
 pub fn inverse_kinematics(
     xy: &[[f64; 2]; WHEELS],
     radius_m: f64,
@@ -146,7 +154,7 @@ pub fn inverse_kinematics(
         if speed < 1e-9 {
             continue;
         }
-        let mut psi = -vy.atan2(vx);
+        let mut psi = vy.atan2(vx);
         let mut rate = speed / radius_m;
         if psi.abs() > std::f64::consts::FRAC_PI_2 {
             psi -= std::f64::consts::PI.copysign(psi);

@@ -18,9 +18,10 @@ use crate::sensors::sun::SunParams;
 use crate::slip::{SlipModel, SlipState};
 use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
-use crate::vehicle::geometry::{DhGeometry, VehicleGeometry, WHEELS};
+use crate::vehicle::geometry::{perturbed, rocky8, VehicleGeometry, WheelPose, WHEELS};
 use crate::vehicle::motors::MotorParams;
 use crate::vehicle::placement::{place, BodyPose, JointLimits, Placement, Suspension};
+use fsw::kinematics::RoverGeometry;
 use nalgebra::{Matrix3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -75,7 +76,7 @@ pub struct Truth {
     pub pose: BodyPose,
     /// Suspension.
     pub suspension: Suspension,
-    /// Actual steering angles, rad (H04: positive turns the wheel left).
+    /// Actual steering angles, rad (positive turns the wheel right, as in `fsw::kinematics`).
     pub steer_rad: [f64; WHEELS],
     /// Actual wheel rates, rad/s.
     pub wheel_rate_rad_s: [f64; WHEELS],
@@ -95,8 +96,9 @@ pub struct Truth {
 pub struct World {
     /// Terrain.
     pub terrain: Terrain,
-    /// The simulator's (true) vehicle geometry, with the per-seed dimension errors.
-    pub geometry: DhGeometry,
+    /// The simulator's (true) vehicle geometry: the flight code's Rocky 8 with the per-seed
+    /// dimension errors.
+    pub geometry: RoverGeometry,
     /// Joint limits.
     pub limits: JointLimits,
     /// Truth state.
@@ -140,7 +142,7 @@ impl World {
         let mut streams = Streams::new(seed);
         let terrain = Terrain::new(scenario.terrain.clone(), seed, &scenario.waypoints);
         let sigma = scenario.sensors.dimension_error_m;
-        let geometry = DhGeometry::rocky8().perturbed(|_| {
+        let geometry = perturbed(&rocky8(), |_| {
             let n: f64 = StandardNormal.sample(&mut streams.geometry);
             sigma * n
         });
@@ -159,7 +161,7 @@ impl World {
             pitch_rad: 0.0,
             roll_rad: 0.0,
         };
-        let limits = JointLimits::default();
+        let limits = JointLimits::of(&geometry);
         let steer = [0.0; WHEELS];
         let p = place(
             &geometry,
@@ -208,11 +210,24 @@ impl World {
         &self.slip
     }
 
+    /// The wheels in `R` at the current joint angles (`None` outside the geometry's range,
+    /// which the placement's stops prevent).
+    pub fn wheel_poses(&self) -> Option<[WheelPose; WHEELS]> {
+        let s = &self.truth.suspension;
+        self.geometry
+            .wheels(s.rocker_rad, s.bogie_rad, &self.truth.steer_rad)
+    }
+
     /// Wheel positions in `R` projected on the body's x-y plane, m.
     pub fn wheel_xy(&self) -> [[f64; 2]; WHEELS] {
         let s = &self.truth.suspension;
-        let a = self.geometry.axle_centres(s.rocker_rad, s.bogie_rad);
-        a.map(|p| [p[0], p[1]])
+        let poses = self
+            .geometry
+            .wheels(s.rocker_rad, s.bogie_rad, &[0.0; WHEELS]);
+        match poses {
+            Some(p) => p.map(|w| [w.axle_m.x, w.axle_m.y]),
+            None => [[0.0; 2]; WHEELS],
+        }
     }
 
     /// Advance the world by one minor frame.
@@ -228,14 +243,16 @@ impl World {
                     .step(t.wheel_rate_rad_s[i], self.command.wheel_rate_rad_s[i], dt);
             t.wheel_angle_rad[i] += t.wheel_rate_rad_s[i] * dt;
         }
-        // Least-squares body twist from the wheel rim velocities (H04 positive psi: left).
+        // Least-squares body twist from the wheel rim velocities along each wheel's rolling
+        // direction (fsw::kinematics conventions).
         let xy = self.wheel_xy();
         let r = self.geometry.wheel_radius_m();
+        let rolling = self.wheel_poses().map(|w| w.map(|p| p.rolling_dir));
         let (mut ata, mut atb) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
         for i in 0..WHEELS {
-            let (s, c) = self.truth.steer_rad[i].sin_cos();
+            let dir = rolling.map_or(Vector3::x(), |d| d[i]);
             let v = r * self.truth.wheel_rate_rad_s[i];
-            let (vx, vy) = (v * c, -v * s);
+            let (vx, vy) = (v * dir.x, v * dir.y);
             // v_i = [1 0 -y; 0 1 x] [vx vy omega].
             let rows = [
                 Vector3::new(1.0, 0.0, -xy[i][1]),

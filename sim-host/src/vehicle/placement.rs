@@ -10,8 +10,9 @@
 //! in the least-squares sense, and the body is raised until no wheel penetrates the ground (the
 //! wheels that then float are off the ground, as on a real vehicle at its joint limits).
 
-use super::geometry::{link_pitch, VehicleGeometry, WHEELS};
+use super::geometry::{VehicleGeometry, WHEELS};
 use crate::surface::TerrainSurface;
+use fsw::kinematics::RoverGeometry;
 use nalgebra::{Rotation3, SMatrix, SVector, Vector3};
 
 /// Body pose of the rover in the world frame `W` (x north, y east, z down).
@@ -43,7 +44,7 @@ pub struct Suspension {
     pub bogie_rad: [f64; 2],
 }
 
-/// Joint limits of the suspension (simulator assumptions; H04 does not state them).
+/// Mechanical stops of the suspension.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JointLimits {
     /// `|beta|` limit, rad.
@@ -52,11 +53,13 @@ pub struct JointLimits {
     pub bogie_rad: f64,
 }
 
-impl Default for JointLimits {
-    fn default() -> Self {
+impl JointLimits {
+    /// The stops of the truth vehicle: 95 % of the range the flight geometry accepts (no source
+    /// gives Rocky 8's stops; the margin keeps every simulated state inside the flight range).
+    pub fn of(geometry: &RoverGeometry) -> Self {
         Self {
-            rocker_rad: 0.35,
-            bogie_rad: 0.6,
+            rocker_rad: 0.95 * geometry.limits.rocker_rad,
+            bogie_rad: 0.95 * geometry.limits.bogie_rad,
         }
     }
 }
@@ -80,21 +83,6 @@ pub struct Placement {
 
 type Unknowns = SVector<f64, 6>;
 
-/// Spin axis of each wheel in `R`: the link's lateral axis turned by the steering angle about
-/// the link's upward steering axis (H04 Table 2: `psi` about `z_S`, which points up, so a
-/// positive `psi` turns the wheel to the left).
-pub fn spin_axes(suspension: &Suspension, steer_rad: &[f64; WHEELS]) -> [Vector3<f64>; WHEELS] {
-    let pitch = link_pitch(suspension.rocker_rad, suspension.bogie_rad);
-    let mut out = [Vector3::zeros(); WHEELS];
-    for i in 0..WHEELS {
-        let (s, c) = steer_rad[i].sin_cos();
-        let (sp, cp) = pitch[i].sin_cos();
-        // Ry(pitch) * (sin psi, cos psi, 0).
-        out[i] = Vector3::new(cp * s, c, -sp * s);
-    }
-    out
-}
-
 fn residuals(
     geometry: &dyn VehicleGeometry,
     terrain: &dyn TerrainSurface,
@@ -115,13 +103,15 @@ fn residuals(
     };
     let rot = pose.rot_w_from_r();
     let p = Vector3::from(pose.pos_m);
-    let axles = geometry.axle_centres(susp.rocker_rad, susp.bogie_rad);
-    let spins = spin_axes(&susp, steer_rad);
+    let Some(wheels) = geometry.wheels(susp.rocker_rad, susp.bogie_rad, steer_rad) else {
+        // Outside the geometry's range: a large residual pushes Newton back.
+        return Unknowns::repeat(1.0);
+    };
     let r = geometry.wheel_radius_m();
     let mut e = Unknowns::zeros();
     for i in 0..WHEELS {
-        let c = p + rot * Vector3::from(axles[i]);
-        let s = rot * spins[i];
+        let c = p + rot * wheels[i].axle_m;
+        let s = rot * wheels[i].spin_axis;
         let n = terrain.normal_up(c.x, c.y);
         // Upward normal in W (z down).
         let up = Vector3::new(n[0], n[1], -n[2]);

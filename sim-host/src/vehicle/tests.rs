@@ -1,6 +1,6 @@
 //! Placement tests on hand-computed cases (SIM-3).
 
-use super::geometry::{DhGeometry, VehicleGeometry, ROCKY8_WHEEL_RADIUS_M};
+use super::geometry::{rocky8, VehicleGeometry};
 use super::placement::{place, BodyPose, JointLimits, Suspension};
 use crate::surface::TerrainSurface;
 use crate::terrain::{BaseShape, Terrain, TerrainSpec};
@@ -29,7 +29,7 @@ fn start(z: f64) -> BodyPose {
 /// above the ground (the axles are at `z_R = 0`), and all six wheels touch.
 #[test]
 fn sim_3_flat_ground() {
-    let g = DhGeometry::rocky8();
+    let g = rocky8();
     let t = terrain(BaseShape::Flat);
     let p = place(
         &g,
@@ -37,13 +37,13 @@ fn sim_3_flat_ground() {
         &start(-0.2),
         &Suspension::default(),
         &[0.0; 6],
-        &JointLimits::default(),
+        &JointLimits::of(&g),
     );
     for c in p.clearance_m {
         assert!(c.abs() < 1e-9);
     }
     assert!(
-        (p.pose.pos_m[2] + ROCKY8_WHEEL_RADIUS_M).abs() < 2e-4,
+        (p.pose.pos_m[2] + g.wheel_radius_m()).abs() < 2e-4,
         "{:?}",
         p.pose
     );
@@ -60,7 +60,7 @@ fn sim_3_flat_ground() {
 #[test]
 fn sim_3_step_under_both_front_wheels() {
     let height = 0.08;
-    let g = DhGeometry::rocky8();
+    let g = rocky8();
     let t = terrain(BaseShape::Step {
         x_m: 0.2,
         height_m: height,
@@ -72,7 +72,7 @@ fn sim_3_step_under_both_front_wheels() {
         &start(-0.1),
         &Suspension::default(),
         &[0.0; 6],
-        &JointLimits::default(),
+        &JointLimits::of(&g),
     );
     for (i, c) in p.clearance_m.iter().enumerate() {
         assert!(c.abs() < 1e-8, "wheel {} clearance {c}", i + 1);
@@ -119,7 +119,7 @@ fn sim_3_step_under_both_front_wheels() {
 #[test]
 fn sim_3_step_under_right_front_wheel() {
     let height = 0.08;
-    let g = DhGeometry::rocky8();
+    let g = rocky8();
     let t = terrain(BaseShape::Step {
         x_m: 0.2,
         height_m: height,
@@ -131,7 +131,7 @@ fn sim_3_step_under_right_front_wheel() {
         &start(-0.1),
         &Suspension::default(),
         &[0.0; 6],
-        &JointLimits::default(),
+        &JointLimits::of(&g),
     );
     for c in p.clearance_m {
         assert!(c.abs() < 1e-8);
@@ -148,7 +148,7 @@ fn sim_3_step_under_right_front_wheel() {
 /// SIM-3: on a 15 deg cross slope the body rolls by the slope and the joints stay at zero.
 #[test]
 fn sim_3_planar_slope() {
-    let g = DhGeometry::rocky8();
+    let g = rocky8();
     let t = terrain(BaseShape::Plane {
         slope_deg: 15.0,
         downhill_azimuth_deg: 90.0,
@@ -159,7 +159,7 @@ fn sim_3_planar_slope() {
         &start(-0.1),
         &Suspension::default(),
         &[0.0; 6],
-        &JointLimits::default(),
+        &JointLimits::of(&g),
     );
     for c in p.clearance_m {
         assert!(c.abs() < 1e-8);
