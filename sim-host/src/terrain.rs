@@ -20,11 +20,22 @@ fn lattice(ix: i64, iy: i64, seed: u64) -> f64 {
     (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
+/// `floor` as an integer without a library call (inputs are terrain coordinates, far inside
+/// the `i64` range).
+fn floor_i64(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x {
+        i - 1
+    } else {
+        i
+    }
+}
+
 /// Smooth value noise in `[-1, 1]` with unit lattice spacing (quintic interpolation, so its
 /// gradient is continuous).
 pub fn value_noise(x: f64, y: f64, seed: u64) -> f64 {
-    let (fx, fy) = (x.floor(), y.floor());
-    let (ix, iy) = (fx as i64, fy as i64);
+    let (ix, iy) = (floor_i64(x), floor_i64(y));
+    let (fx, fy) = (ix as f64, iy as f64);
     let (tx, ty) = (x - fx, y - fy);
     let s = |t: f64| t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
     let (sx, sy) = (s(tx), s(ty));

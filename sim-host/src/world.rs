@@ -20,7 +20,10 @@ use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
 use crate::vehicle::geometry::{perturbed, rocky8, VehicleGeometry, WheelPose, WHEELS};
 use crate::vehicle::motors::MotorParams;
-use crate::vehicle::placement::{place, BodyPose, JointLimits, Placement, Suspension};
+use crate::vehicle::placement::{
+    place, place_cached, BodyPose, JointLimits, NormalCache, Placement, PlacementJacobian,
+    Suspension,
+};
 use fsw::kinematics::RoverGeometry;
 use nalgebra::{Matrix3, Vector3};
 use rand::SeedableRng;
@@ -122,6 +125,9 @@ pub struct World {
     encoder_every: u64,
     sun_every: u64,
     prev_velocity_w: Vector3<f64>,
+    jacobian: Option<PlacementJacobian>,
+    normals: NormalCache,
+    wheels: Option<[WheelPose; WHEELS]>,
     /// Latest IMU sample (before faults).
     pub imu_sample: ImuSample,
     /// Latest joint reading (before faults).
@@ -130,6 +136,8 @@ pub struct World {
     pub sun_reading: SunReading,
     /// Steps taken.
     pub steps: u64,
+    /// Newton iterations of the placement solver, summed over all steps (diagnostics).
+    pub placement_iterations: u64,
 }
 
 fn rot_matrix(r: &nalgebra::Rotation3<f64>) -> Matrix3<f64> {
@@ -194,11 +202,16 @@ impl World {
             encoder_every: u64::from(200 / scenario.sensors.encoder_hz),
             sun_every: u64::from(200 / scenario.sensors.sun_hz),
             prev_velocity_w: Vector3::zeros(),
+            jacobian: None,
+            normals: [None; WHEELS],
+            wheels: None,
             imu_sample: ImuSample::default(),
             joints: JointState::default(),
             sun_reading: SunReading::default(),
             steps: 0,
+            placement_iterations: 0,
         };
+        world.update_wheels();
         world.sample_imu(Vector3::zeros(), Vector3::zeros(), 0.0);
         world.sample_joints();
         world.sample_sun();
@@ -210,21 +223,23 @@ impl World {
         &self.slip
     }
 
-    /// The wheels in `R` at the current joint angles (`None` outside the geometry's range,
-    /// which the placement's stops prevent).
+    /// The wheels in `R` at the joint angles of the last placement (`None` outside the
+    /// geometry's range, which the placement's stops prevent).
     pub fn wheel_poses(&self) -> Option<[WheelPose; WHEELS]> {
-        let s = &self.truth.suspension;
-        self.geometry
-            .wheels(s.rocker_rad, s.bogie_rad, &self.truth.steer_rad)
+        self.wheels
     }
 
-    /// Wheel positions in `R` projected on the body's x-y plane, m.
-    pub fn wheel_xy(&self) -> [[f64; 2]; WHEELS] {
+    fn update_wheels(&mut self) {
         let s = &self.truth.suspension;
-        let poses = self
+        self.wheels = self
             .geometry
-            .wheels(s.rocker_rad, s.bogie_rad, &[0.0; WHEELS]);
-        match poses {
+            .wheels(s.rocker_rad, s.bogie_rad, &self.truth.steer_rad);
+    }
+
+    /// Axle positions in `R` projected on the body's x-y plane, m (the axle centres do not
+    /// move with steering).
+    pub fn wheel_xy(&self) -> [[f64; 2]; WHEELS] {
+        match self.wheels {
             Some(p) => p.map(|w| [w.axle_m.x, w.axle_m.y]),
             None => [[0.0; 2]; WHEELS],
         }
@@ -290,14 +305,17 @@ impl World {
         pose.pos_m[0] += v_w.x * dt;
         pose.pos_m[1] += v_w.y * dt;
         pose.yaw_rad = wrap_pi(pose.yaw_rad + omega * cr / cp * dt);
-        let placed: Placement = place(
+        let placed: Placement = place_cached(
             &self.geometry,
             &self.terrain,
             &pose,
             &self.truth.suspension,
             &self.truth.steer_rad,
             &self.limits,
+            &mut self.jacobian,
+            &mut self.normals,
         );
+        self.placement_iterations += u64::from(placed.iterations);
         let t = &mut self.truth;
         t.distance_m += (v_w.x * v_w.x + v_w.y * v_w.y).sqrt() * dt;
         t.pose = placed.pose;
@@ -307,6 +325,7 @@ impl World {
         t.velocity_r_m_s = [vx, vy];
         t.t_us = t.t_us.saturating_add(FRAME_US);
         self.steps += 1;
+        self.update_wheels();
         // Sensors.
         let rot1 = self.truth.pose.rot_w_from_r();
         let p0 = Vector3::from(pose0.pos_m);

@@ -83,6 +83,16 @@ pub struct Placement {
 
 type Unknowns = SVector<f64, 6>;
 
+/// Upward terrain normals in `W` under the six axles, with the axle's north/east where each
+/// was evaluated; kept between placements and refreshed when the axle has moved more than
+/// [`NORMAL_REFRESH_M`].
+pub type NormalCache = [Option<([f64; 2], Vector3<f64>)>; WHEELS];
+
+/// Horizontal axle motion after which the terrain normal under it is evaluated again, m.
+pub const NORMAL_REFRESH_M: f64 = 0.002;
+
+/// Residuals `e(u)`. The terrain normal under each axle comes from `normals` (see
+/// [`NormalCache`]).
 fn residuals(
     geometry: &dyn VehicleGeometry,
     terrain: &dyn TerrainSurface,
@@ -90,6 +100,7 @@ fn residuals(
     u: &Unknowns,
     steer_rad: &[f64; WHEELS],
     contacts: &mut [[f64; 3]; WHEELS],
+    normals: &mut NormalCache,
 ) -> Unknowns {
     let pose = BodyPose {
         pos_m: [pose.pos_m[0], pose.pos_m[1], u[0]],
@@ -112,9 +123,21 @@ fn residuals(
     for i in 0..WHEELS {
         let c = p + rot * wheels[i].axle_m;
         let s = rot * wheels[i].spin_axis;
-        let n = terrain.normal_up(c.x, c.y);
-        // Upward normal in W (z down).
-        let up = Vector3::new(n[0], n[1], -n[2]);
+        let up = match normals[i] {
+            Some((xy, n))
+                if (xy[0] - c.x).powi(2) + (xy[1] - c.y).powi(2)
+                    < NORMAL_REFRESH_M * NORMAL_REFRESH_M =>
+            {
+                n
+            }
+            _ => {
+                let n = terrain.normal_up(c.x, c.y);
+                // Upward normal in W (z down).
+                let n = Vector3::new(n[0], n[1], -n[2]);
+                normals[i] = Some(([c.x, c.y], n));
+                n
+            }
+        };
         let perp = up - s * up.dot(&s);
         let norm = perp.norm();
         let dir = if norm > 1e-9 {
@@ -139,6 +162,37 @@ pub fn place(
     steer_rad: &[f64; WHEELS],
     limits: &JointLimits,
 ) -> Placement {
+    place_cached(
+        geometry,
+        terrain,
+        pose,
+        guess,
+        steer_rad,
+        limits,
+        &mut None,
+        &mut [None; WHEELS],
+    )
+}
+
+/// Jacobian `d e / d u` kept between placements (chord method).
+pub type PlacementJacobian = SMatrix<f64, 6, 6>;
+
+/// [`place`] reusing the Jacobian of an earlier placement (the chord method: between two 5 ms
+/// steps the configuration barely changes) and the terrain normals under the axles
+/// ([`NormalCache`]). The Jacobian is recomputed by finite differences
+/// when there is none or when an iteration reduces the residual by less than 4x; the solution
+/// is the same (to the 1e-9 m tolerance), only cheaper.
+#[allow(clippy::too_many_arguments)]
+pub fn place_cached(
+    geometry: &dyn VehicleGeometry,
+    terrain: &dyn TerrainSurface,
+    pose: &BodyPose,
+    guess: &Suspension,
+    steer_rad: &[f64; WHEELS],
+    limits: &JointLimits,
+    cache: &mut Option<PlacementJacobian>,
+    normals: &mut NormalCache,
+) -> Placement {
     let mut u = Unknowns::new(
         pose.pos_m[2],
         pose.roll_rad,
@@ -159,22 +213,51 @@ pub fn place(
         limits.bogie_rad,
     ];
     let h = 1e-7;
-    for _ in 0..30 {
+    let mut previous = f64::INFINITY;
+    for _ in 0..40 {
         iterations += 1;
-        let e = residuals(geometry, terrain, pose, &u, steer_rad, &mut contacts);
-        if e.amax() < 1e-10 {
+        let e = residuals(
+            geometry,
+            terrain,
+            pose,
+            &u,
+            steer_rad,
+            &mut contacts,
+            normals,
+        );
+        let size = e.amax();
+        if size < 1e-9 {
             break;
         }
-        let mut jac = SMatrix::<f64, 6, 6>::zeros();
-        let mut scratch = [[0.0; 3]; WHEELS];
+        let stale = size > 0.25 * previous;
+        previous = size;
+        let mut jac = match cache {
+            Some(j) if !stale => *j,
+            _ => {
+                let mut j = PlacementJacobian::zeros();
+                let mut scratch = [[0.0; 3]; WHEELS];
+                for k in 0..6 {
+                    let mut up = u;
+                    up[k] += h;
+                    let ep = residuals(
+                        geometry,
+                        terrain,
+                        pose,
+                        &up,
+                        steer_rad,
+                        &mut scratch,
+                        normals,
+                    );
+                    j.set_column(k, &((ep - e) / h));
+                }
+                *cache = Some(j);
+                j
+            }
+        };
         for k in 0..6 {
             if !free[k] {
-                continue;
+                jac.set_column(k, &Unknowns::zeros());
             }
-            let mut up = u;
-            up[k] += h;
-            let ep = residuals(geometry, terrain, pose, &up, steer_rad, &mut scratch);
-            jac.set_column(k, &((ep - e) / h));
         }
         // Least squares on the free unknowns (Levenberg damping keeps it defined).
         let jtj = jac.transpose() * jac + SMatrix::<f64, 6, 6>::identity() * 1e-12;
@@ -195,7 +278,15 @@ pub fn place(
             }
         }
     }
-    let mut e = residuals(geometry, terrain, pose, &u, steer_rad, &mut contacts);
+    let mut e = residuals(
+        geometry,
+        terrain,
+        pose,
+        &u,
+        steer_rad,
+        &mut contacts,
+        normals,
+    );
     let at_limit = free.iter().any(|f| !f);
     if at_limit {
         // Raise the body until no wheel penetrates (twice: the contacts move a little).
@@ -204,7 +295,15 @@ pub fn place(
             if lowest < 0.0 {
                 u[0] += lowest;
             }
-            e = residuals(geometry, terrain, pose, &u, steer_rad, &mut contacts);
+            e = residuals(
+                geometry,
+                terrain,
+                pose,
+                &u,
+                steer_rad,
+                &mut contacts,
+                normals,
+            );
         }
     }
     let mut clearance = [0.0; WHEELS];
