@@ -254,8 +254,8 @@ pub fn place_cached(
                 j
             }
         };
-        for k in 0..6 {
-            if !free[k] {
+        for (k, is_free) in free.iter().enumerate() {
+            if !is_free {
                 jac.set_column(k, &Unknowns::zeros());
             }
         }
