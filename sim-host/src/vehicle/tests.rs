@@ -172,3 +172,43 @@ fn sim_3_planar_slope() {
     assert!(p.suspension.rocker_rad.abs() < 1e-3);
     let _ = g.wheel_radius_m();
 }
+
+/// SIM-3: at a mechanical stop the joint is held at its limit, no wheel penetrates the ground,
+/// and the wheels that cannot follow lift off (here a 0.2 m step under the right front wheel
+/// with +-0.05 rad stops).
+#[test]
+fn sim_3_joint_stops_hold_and_wheels_lift() {
+    let g = rocky8();
+    let t = terrain(BaseShape::Step {
+        x_m: 0.2,
+        height_m: 0.2,
+        right_only: true,
+    });
+    let limits = JointLimits {
+        rocker_rad: 0.05,
+        bogie_rad: 0.05,
+    };
+    let p = place(
+        &g,
+        &t,
+        &start(-0.1),
+        &Suspension::default(),
+        &[0.0; 6],
+        &limits,
+    );
+    assert!(p.at_limit);
+    assert!(p.suspension.rocker_rad.abs() <= 0.05 + 1e-12);
+    assert!(p
+        .suspension
+        .bogie_rad
+        .iter()
+        .all(|b| b.abs() <= 0.05 + 1e-12));
+    assert!(
+        p.clearance_m.iter().all(|c| *c > -1e-6),
+        "{:?}",
+        p.clearance_m
+    );
+    let touching = p.clearance_m.iter().filter(|c| c.abs() < 1e-3).count();
+    let lifted = p.clearance_m.iter().filter(|c| **c > 1e-3).count();
+    assert!(touching >= 1 && lifted >= 1, "{:?}", p.clearance_m);
+}
