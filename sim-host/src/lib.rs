@@ -1,12 +1,31 @@
 //! # sim-host: the host simulator of a Rocky 8 class rover
 //!
 //! Implements every `rover-hal` device for a simulated rover and runs the flight software
-//! ([`fsw::flight::Fsw`]) in closed loop on the host. This first version simulates a rover
-//! standing still on level ground (IMU at rest under Mars gravity, joint encoders at rest, a
-//! stereo pair that completes a capture a fixed number of frames after its trigger, a sun
-//! sensor); it exists so the HAL has two implementations (this one and the rover-CPU image) and
-//! the executive's schedule and timing can be checked on the host.
+//! ([`fsw::flight::Fsw`]) in closed loop on the host. The truth comes from physics and
+//! geometry; the flight code sees only HAL readings. See `docs/simulator.md`.
+//!
+//! - [`terrain`]: analytic height models (yard with rocks, slopes, rough terrain, dunes, step).
+//! - [`vehicle`]: Rocky 8 geometry, placement on the terrain, motors.
+//! - [`slip`]: terramechanics-inspired slip model.
+//! - [`sensors`]: IMU, encoders, sun sensor, fault injection.
+//! - [`camera`]: the stereo renderer interface.
+//! - [`world`]: the truth state and its step; [`hal_devices`]: the HAL devices on it.
+//! - [`driver`]: the simulator's reference driver (not flight code).
+//! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
+//! - [`devices`], [`run`]: the standing-still devices of the `still` command.
 
+pub mod camera;
 pub mod devices;
+pub mod driver;
+pub mod hal_devices;
+pub mod output;
+pub mod report;
 pub mod run;
+pub mod scenario;
+pub mod sensors;
+pub mod sim;
+pub mod slip;
 pub mod surface;
+pub mod terrain;
+pub mod vehicle;
+pub mod world;

@@ -1,0 +1,319 @@
+//! The `rover-hal` devices of the simulated rover, reading the shared [`World`] and applying
+//! the scenario's injected faults. The flight software sees only these readings.
+
+use crate::camera::StereoRenderer;
+use crate::devices::hazcam_calibration;
+use crate::sensors::faults::{FaultDevice, FaultKind};
+use crate::world::World;
+use nalgebra::Vector3;
+use rover_hal::{
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
+    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, IMAGE_PIXELS,
+};
+use std::cell::RefCell;
+use std::rc::Rc;
+use std::time::Instant;
+
+/// The world shared by the simulation loop and the devices.
+pub type SharedWorld = Rc<RefCell<World>>;
+
+/// What the clock's execution counter counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CounterMode {
+    /// Host nanoseconds: real execution times of the flight code on this host (varies run to
+    /// run).
+    Host,
+    /// Simulated time in nanoseconds: every task measures 0 us, so every output is
+    /// reproducible bit for bit.
+    SimTime,
+}
+
+/// Clock device.
+pub struct WorldClock {
+    world: SharedWorld,
+    mode: CounterMode,
+    origin: Instant,
+}
+
+impl WorldClock {
+    /// A clock on `world`.
+    pub fn new(world: SharedWorld, mode: CounterMode) -> Self {
+        Self {
+            world,
+            mode,
+            origin: Instant::now(),
+        }
+    }
+}
+
+impl Clock for WorldClock {
+    type Error = ErrorKind;
+    fn now_us(&mut self) -> Result<u64, ErrorKind> {
+        let w = self.world.borrow();
+        Ok(w.faults.stamp(FaultDevice::Clock, w.truth.t_us))
+    }
+    fn counter(&mut self) -> Result<u64, ErrorKind> {
+        Ok(match self.mode {
+            CounterMode::Host => {
+                u64::try_from(self.origin.elapsed().as_nanos()).unwrap_or(u64::MAX)
+            }
+            CounterMode::SimTime => self.world.borrow().truth.t_us.saturating_mul(1000),
+        })
+    }
+    fn counter_hz(&self) -> u64 {
+        1_000_000_000
+    }
+}
+
+/// Common fault handling of a sampled device: dropout, stuck, NaN, time jump.
+fn faulted<T: Copy>(
+    world: &World,
+    device: FaultDevice,
+    fresh: T,
+    last: &mut Option<T>,
+    nan: impl Fn(&mut T),
+    stamp: impl Fn(&mut T, u64),
+) -> Result<T, ErrorKind> {
+    let t = world.truth.t_us;
+    if world.faults.active(device, FaultKind::Dropout, t).is_some() {
+        return Err(ErrorKind::Timeout);
+    }
+    let mut out = match (world.faults.active(device, FaultKind::Stuck, t), *last) {
+        (Some(_), Some(previous)) => previous,
+        _ => fresh,
+    };
+    if world.faults.active(device, FaultKind::Nan, t).is_some() {
+        nan(&mut out);
+    }
+    *last = Some(out);
+    let mut stamped = out;
+    stamp(&mut stamped, world.faults.stamp(device, t));
+    Ok(stamped)
+}
+
+/// IMU device (200 Hz, one sample per minor frame).
+pub struct WorldImu {
+    world: SharedWorld,
+    last: Option<ImuSample>,
+}
+
+impl WorldImu {
+    /// An IMU on `world`.
+    pub fn new(world: SharedWorld) -> Self {
+        Self { world, last: None }
+    }
+}
+
+impl Imu for WorldImu {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<ImuSample, ErrorKind> {
+        let w = self.world.borrow();
+        faulted(
+            &w,
+            FaultDevice::Imu,
+            w.imu_sample,
+            &mut self.last,
+            |s| s.gyro_rad_s = [f64::NAN; 3],
+            |s, t| s.t_us = t,
+        )
+    }
+}
+
+/// Mobility device: joint encoders and motor commands.
+pub struct WorldMobility {
+    world: SharedWorld,
+    last: Option<JointState>,
+}
+
+impl WorldMobility {
+    /// Mobility on `world`.
+    pub fn new(world: SharedWorld) -> Self {
+        Self { world, last: None }
+    }
+}
+
+impl Mobility for WorldMobility {
+    type Error = ErrorKind;
+    fn read_joints(&mut self) -> Result<JointState, ErrorKind> {
+        let w = self.world.borrow();
+        faulted(
+            &w,
+            FaultDevice::Joints,
+            w.joints,
+            &mut self.last,
+            |j| j.rocker_rad = f64::NAN,
+            |j, t| j.t_us = t,
+        )
+    }
+    fn command(&mut self, command: &MobilityCommand) -> Result<(), ErrorKind> {
+        let finite = command
+            .steer_angle_rad
+            .iter()
+            .chain(command.wheel_rate_rad_s.iter())
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(ErrorKind::InvalidRequest);
+        }
+        self.world.borrow_mut().flight_command = Some(*command);
+        Ok(())
+    }
+    fn stop(&mut self) -> Result<(), ErrorKind> {
+        let mut w = self.world.borrow_mut();
+        let steer = w.truth.steer_rad;
+        w.flight_command = Some(MobilityCommand {
+            steer_angle_rad: steer,
+            wheel_rate_rad_s: [0.0; 6],
+        });
+        Ok(())
+    }
+}
+
+/// Sun sensor device.
+pub struct WorldSun {
+    world: SharedWorld,
+    last: Option<SunReading>,
+}
+
+impl WorldSun {
+    /// A sun sensor on `world`.
+    pub fn new(world: SharedWorld) -> Self {
+        Self { world, last: None }
+    }
+}
+
+impl SunSensor for WorldSun {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<SunReading, ErrorKind> {
+        let w = self.world.borrow();
+        faulted(
+            &w,
+            FaultDevice::Sun,
+            w.sun_reading,
+            &mut self.last,
+            |s| s.sun_dir_rover = [f64::NAN; 3],
+            |s, t| s.t_us = t,
+        )
+    }
+}
+
+/// Stereo camera device: renders the pair at the trigger from the true camera pose and
+/// completes `latency_polls` polls later.
+pub struct WorldStereo {
+    world: SharedWorld,
+    renderer: Box<dyn StereoRenderer>,
+    calib: StereoCalibration,
+    left: Vec<u8>,
+    right: Vec<u8>,
+    pending: Option<(u64, u32)>,
+    ready: Option<u64>,
+    sequence: u32,
+    latency_polls: u32,
+    seed: u64,
+    /// Frames rendered.
+    pub rendered: u32,
+}
+
+impl WorldStereo {
+    /// A camera on `world` drawing with `renderer`.
+    pub fn new(
+        world: SharedWorld,
+        renderer: Box<dyn StereoRenderer>,
+        latency_polls: u32,
+        seed: u64,
+    ) -> Self {
+        Self {
+            world,
+            renderer,
+            calib: hazcam_calibration(),
+            left: vec![0; IMAGE_PIXELS],
+            right: vec![0; IMAGE_PIXELS],
+            pending: None,
+            ready: None,
+            sequence: 0,
+            latency_polls,
+            seed,
+            rendered: 0,
+        }
+    }
+}
+
+impl StereoCamera for WorldStereo {
+    type Error = ErrorKind;
+    fn calibration(&self) -> StereoCalibration {
+        self.calib
+    }
+    fn trigger(&mut self) -> Result<u64, ErrorKind> {
+        let w = self.world.borrow();
+        let t = w.truth.t_us;
+        if w.faults
+            .active(FaultDevice::Camera, FaultKind::Dropout, t)
+            .is_some()
+        {
+            return Err(ErrorKind::Timeout);
+        }
+        self.sequence = self.sequence.wrapping_add(1);
+        let stuck = w
+            .faults
+            .active(FaultDevice::Camera, FaultKind::Stuck, t)
+            .is_some();
+        if w.faults
+            .active(FaultDevice::Camera, FaultKind::BlackFrame, t)
+            .is_some()
+        {
+            self.left.fill(0);
+            self.right.fill(0);
+        } else if !(stuck && self.rendered > 0) {
+            let rot = w.truth.pose.rot_w_from_r();
+            let r_rk = nalgebra::Matrix3::from_fn(|i, j| self.calib.rot_rover_from_camera[i][j]);
+            let r_wk = rot.matrix() * r_rk;
+            let pos = Vector3::from(w.truth.pose.pos_m)
+                + rot * Vector3::from(self.calib.pos_camera_in_rover_m);
+            let rows = [0, 1, 2].map(|i| [r_wk[(i, 0)], r_wk[(i, 1)], r_wk[(i, 2)]]);
+            self.renderer.render(
+                &w.terrain,
+                rows,
+                [pos.x, pos.y, pos.z],
+                &self.calib,
+                self.seed ^ u64::from(self.sequence).wrapping_mul(0x9E37_79B9),
+                &mut self.left,
+                &mut self.right,
+            );
+            self.rendered += 1;
+        }
+        let stamp = w.faults.stamp(FaultDevice::Camera, t);
+        self.pending = Some((stamp, self.latency_polls));
+        self.ready = None;
+        Ok(stamp)
+    }
+    fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
+        if self.ready.is_some() {
+            return Ok(CaptureStatus::Ready);
+        }
+        match self.pending {
+            None => Ok(CaptureStatus::Idle),
+            Some((t, 0)) => {
+                self.ready = Some(t);
+                self.pending = None;
+                Ok(CaptureStatus::Ready)
+            }
+            Some((t, n)) => {
+                self.pending = Some((t, n - 1));
+                Ok(CaptureStatus::InProgress)
+            }
+        }
+    }
+    fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
+        let t = self.ready.ok_or(ErrorKind::NotReady)?;
+        Ok(StereoFrame {
+            left: &self.left,
+            right: &self.right,
+            capture_t_us: t,
+            sequence: self.sequence,
+        })
+    }
+    fn release(&mut self) -> Result<(), ErrorKind> {
+        self.ready = None;
+        self.pending = None;
+        Ok(())
+    }
+}

@@ -1,0 +1,184 @@
+//! `summary.json`: the figures of a run, with `null` for flight estimates that do not exist
+//! yet (EKF, VO, 3D and 2D kinematics).
+
+use crate::sim::RunResult;
+use serde::Serialize;
+
+/// Four flight estimates.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PerEstimate {
+    /// EKF.
+    pub ekf: Option<f64>,
+    /// Visual odometry.
+    pub vo: Option<f64>,
+    /// 3D kinematic odometry.
+    pub kin3d: Option<f64>,
+    /// Planar kinematic odometry.
+    pub kin2d: Option<f64>,
+}
+
+/// Attitude errors of the estimates that carry attitude.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct AttitudeErrors {
+    /// EKF.
+    pub ekf: Option<f64>,
+    /// Visual odometry.
+    pub vo: Option<f64>,
+}
+
+/// Cross-track error of the true path, m.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct CrossTrack {
+    /// Root mean square.
+    pub rms: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+/// Slip figures.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SlipSummary {
+    /// Fraction of kinematic updates the flight slip gate rejected (`null` until the gate exists).
+    pub gate_reject_fraction: Option<f64>,
+    /// Mean true longitudinal slip ratio while driving.
+    pub mean_slip_ratio: f64,
+    /// Mean true lateral slip angle while driving, deg.
+    pub mean_slip_angle_deg: f64,
+}
+
+/// Visual-odometry figures (`null` until flight VO exists).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct VoSummary {
+    /// Relative poses delivered.
+    pub updates: Option<u64>,
+    /// Failed attempts.
+    pub failures: Option<u64>,
+    /// Mean features per frame.
+    pub mean_features: Option<f64>,
+    /// Mean inliers per frame.
+    pub mean_inliers: Option<f64>,
+}
+
+/// Timing of one rate group.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct GroupTimingJson {
+    /// Largest execution time, us.
+    pub max_us: u64,
+    /// Mean execution time, us.
+    pub mean_us: u64,
+    /// Task overruns.
+    pub overruns: u64,
+}
+
+/// The summary.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Summary {
+    /// Scenario name.
+    pub scenario: String,
+    /// Seed.
+    pub seed: u64,
+    /// Simulated time, s.
+    pub sim_time_s: f64,
+    /// True distance travelled, m.
+    pub distance_m: f64,
+    /// Final position error per estimate, m.
+    pub final_error_m: PerEstimate,
+    /// Final position error / distance x 100.
+    pub error_pct: PerEstimate,
+    /// Largest attitude error, deg.
+    pub max_attitude_error_deg: AttitudeErrors,
+    /// Cross-track error of the truth against the path.
+    pub cross_track_m: CrossTrack,
+    /// Goal reached within the scenario's tolerance.
+    pub goal_reached: bool,
+    /// Final distance to the goal, m.
+    pub goal_miss_m: f64,
+    /// Slip.
+    pub slip: SlipSummary,
+    /// VO.
+    pub vo: VoSummary,
+    /// Per rate group (name -> figures), in schedule order.
+    pub timing: serde_json::Map<String, serde_json::Value>,
+    /// Device faults counted by the flight software.
+    pub device_faults: u32,
+    /// Stereo frames completed by the flight software.
+    pub stereo_frames: u32,
+    /// Wall-clock time of the run, s (the only field that differs between identical runs when
+    /// the counter is simulated time).
+    pub wall_time_s: f64,
+}
+
+const NONE4: PerEstimate = PerEstimate {
+    ekf: None,
+    vo: None,
+    kin3d: None,
+    kin2d: None,
+};
+
+/// Build the summary of `run`.
+pub fn summarise(run: &RunResult) -> Summary {
+    let n = run.records.len().max(1) as f64;
+    let rms = (run
+        .records
+        .iter()
+        .map(|r| r.cross_track_m.powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt();
+    let max = run
+        .records
+        .iter()
+        .map(|r| r.cross_track_m)
+        .fold(0.0, f64::max);
+    let moving: Vec<_> = run
+        .records
+        .windows(2)
+        .filter(|w| w[1].distance_m > w[0].distance_m + 1e-5)
+        .map(|w| w[1])
+        .collect();
+    let m = moving.len().max(1) as f64;
+    let mut timing = serde_json::Map::new();
+    for g in &run.timing {
+        let value = serde_json::to_value(GroupTimingJson {
+            max_us: g.max_us,
+            mean_us: g.mean_us,
+            overruns: g.overruns,
+        })
+        .unwrap_or(serde_json::Value::Null);
+        timing.insert(g.name.clone(), value);
+    }
+    Summary {
+        scenario: run.scenario.clone(),
+        seed: run.seed,
+        sim_time_s: run.sim_time_s,
+        distance_m: run.distance_m,
+        final_error_m: NONE4,
+        error_pct: NONE4,
+        max_attitude_error_deg: AttitudeErrors {
+            ekf: None,
+            vo: None,
+        },
+        cross_track_m: CrossTrack { rms, max },
+        goal_reached: run.goal_reached,
+        goal_miss_m: run.goal_miss_m,
+        slip: SlipSummary {
+            gate_reject_fraction: None,
+            mean_slip_ratio: moving.iter().map(|r| r.slip_ratio).sum::<f64>() / m,
+            mean_slip_angle_deg: moving
+                .iter()
+                .map(|r| r.slip_angle_rad.to_degrees())
+                .sum::<f64>()
+                / m,
+        },
+        vo: VoSummary {
+            updates: None,
+            failures: None,
+            mean_features: None,
+            mean_inliers: None,
+        },
+        timing,
+        device_faults: run.device_faults,
+        stereo_frames: run.stereo_frames,
+        wall_time_s: run.wall_time_s,
+    }
+}

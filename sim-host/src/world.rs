@@ -1,0 +1,411 @@
+#![allow(clippy::needless_range_loop)] // wheel loops index several parallel arrays
+//! The simulated world: terrain, vehicle truth state, motors, slip and the sensor models. One
+//! [`World::step`] advances everything by one minor frame (5 ms) and refreshes the readings the
+//! HAL devices hand to the flight software.
+//!
+//! Motion model per step: motors follow the command; each wheel's ground velocity is its rim
+//! speed along its heading; the body's planar twist `[vx, vy, omega]` in `R` is their least-
+//! squares fit; slip scales `vx` by `1 - s` and adds a downhill crab `|v| tan(alpha)` along
+//! `y_R`; the body moves by that twist on the terrain (horizontal displacement of
+//! `R_WR [vx, vy, 0] dt`); then the placement solver finds height, roll, pitch, rocker and
+//! bogies on the terrain at the new north, east and yaw.
+
+use crate::scenario::Scenario;
+use crate::sensors::encoders::EncoderParams;
+use crate::sensors::faults::Faults;
+use crate::sensors::imu::ImuModel;
+use crate::sensors::sun::SunParams;
+use crate::slip::{SlipModel, SlipState};
+use crate::surface::TerrainSurface;
+use crate::terrain::Terrain;
+use crate::vehicle::geometry::{perturbed, rocky8, VehicleGeometry, WheelPose, WHEELS};
+use crate::vehicle::motors::MotorParams;
+use crate::vehicle::placement::{
+    place, place_cached, BodyPose, JointLimits, NormalCache, Placement, PlacementJacobian,
+    Suspension,
+};
+use fsw::kinematics::RoverGeometry;
+use nalgebra::{Matrix3, Vector3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rover_hal::{ImuSample, JointState, MobilityCommand, SunReading};
+
+/// Mars gravity, m/s^2 (REFERENCE.md).
+pub const MARS_GRAVITY_M_S2: f64 = 3.711;
+/// Minor frame, microseconds (200 Hz).
+pub const FRAME_US: u64 = 5_000;
+
+/// Independent random streams, one per consumer, so that adding draws in one model does not
+/// change the others.
+#[derive(Debug, Clone)]
+pub struct Streams {
+    /// Slip.
+    pub slip: ChaCha8Rng,
+    /// IMU.
+    pub imu: ChaCha8Rng,
+    /// Encoders.
+    pub encoders: ChaCha8Rng,
+    /// Sun sensor.
+    pub sun: ChaCha8Rng,
+    /// Geometry dimension errors.
+    pub geometry: ChaCha8Rng,
+}
+
+impl Streams {
+    /// Streams for `seed`.
+    pub fn new(seed: u64) -> Self {
+        let s = |k: u64| {
+            let mut r = ChaCha8Rng::seed_from_u64(seed);
+            r.set_stream(k);
+            r
+        };
+        Self {
+            slip: s(1),
+            imu: s(2),
+            encoders: s(3),
+            sun: s(4),
+            geometry: s(5),
+        }
+    }
+}
+
+/// Truth of the vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Truth {
+    /// Time, microseconds since boot.
+    pub t_us: u64,
+    /// Body pose in `W`.
+    pub pose: BodyPose,
+    /// Suspension.
+    pub suspension: Suspension,
+    /// Actual steering angles, rad (positive turns the wheel right, as in `fsw::kinematics`).
+    pub steer_rad: [f64; WHEELS],
+    /// Actual wheel rates, rad/s.
+    pub wheel_rate_rad_s: [f64; WHEELS],
+    /// Wheel angles, rad.
+    pub wheel_angle_rad: [f64; WHEELS],
+    /// Slip over the last step.
+    pub slip: SlipState,
+    /// Ground velocity of the body in `R` over the last step `[vx, vy]`, m/s.
+    pub velocity_r_m_s: [f64; 2],
+    /// Horizontal distance travelled, m.
+    pub distance_m: f64,
+    /// Clearance of each wheel (0 on the ground), m.
+    pub clearance_m: [f64; WHEELS],
+}
+
+/// The world.
+pub struct World {
+    /// Terrain.
+    pub terrain: Terrain,
+    /// The simulator's (true) vehicle geometry: the flight code's Rocky 8 with the per-seed
+    /// dimension errors.
+    pub geometry: RoverGeometry,
+    /// Joint limits.
+    pub limits: JointLimits,
+    /// Truth state.
+    pub truth: Truth,
+    /// Motor command the motors follow (from the reference driver or the flight software).
+    pub command: MobilityCommand,
+    /// Last command the flight software sent through `Mobility::command` (`None`: none yet).
+    pub flight_command: Option<MobilityCommand>,
+    steer_motor: MotorParams,
+    drive_motor: MotorParams,
+    slip: SlipModel,
+    imu: ImuModel,
+    /// Encoder model.
+    pub encoders: EncoderParams,
+    /// Sun model.
+    pub sun: SunParams,
+    /// Faults.
+    pub faults: Faults,
+    /// Random streams.
+    pub streams: Streams,
+    encoder_every: u64,
+    sun_every: u64,
+    prev_velocity_w: Vector3<f64>,
+    jacobian: Option<PlacementJacobian>,
+    normals: NormalCache,
+    wheels: Option<[WheelPose; WHEELS]>,
+    /// Latest IMU sample (before faults).
+    pub imu_sample: ImuSample,
+    /// Latest joint reading (before faults).
+    pub joints: JointState,
+    /// Latest sun reading (before faults).
+    pub sun_reading: SunReading,
+    /// Steps taken.
+    pub steps: u64,
+    /// Newton iterations of the placement solver, summed over all steps (diagnostics).
+    pub placement_iterations: u64,
+}
+
+fn rot_matrix(r: &nalgebra::Rotation3<f64>) -> Matrix3<f64> {
+    *r.matrix()
+}
+
+impl World {
+    /// Build the world of `scenario` for `seed`.
+    pub fn new(scenario: &Scenario, seed: u64) -> anyhow::Result<Self> {
+        let mut streams = Streams::new(seed);
+        let terrain = Terrain::new(scenario.terrain.clone(), seed, &scenario.waypoints);
+        let sigma = scenario.sensors.dimension_error_m;
+        let geometry = perturbed(&rocky8(), |_| {
+            let n: f64 = StandardNormal.sample(&mut streams.geometry);
+            sigma * n
+        });
+        let slip = SlipModel::new(scenario.soil.params()?, scenario.slip, &mut streams.slip);
+        let imu = ImuModel::new(scenario.sensors.imu, &mut streams.imu);
+        let [start, next] = [scenario.waypoints[0], scenario.waypoints[1]];
+        let yaw = (next[1] - start[1]).atan2(next[0] - start[0]);
+        let r = geometry.wheel_radius_m();
+        let pose = BodyPose {
+            pos_m: [
+                start[0],
+                start[1],
+                -(terrain.height_m(start[0], start[1]) + r),
+            ],
+            yaw_rad: yaw,
+            pitch_rad: 0.0,
+            roll_rad: 0.0,
+        };
+        let limits = JointLimits::of(&geometry);
+        let steer = [0.0; WHEELS];
+        let p = place(
+            &geometry,
+            &terrain,
+            &pose,
+            &Suspension::default(),
+            &steer,
+            &limits,
+        );
+        let mut world = Self {
+            terrain,
+            geometry,
+            limits,
+            truth: Truth {
+                pose: p.pose,
+                suspension: p.suspension,
+                clearance_m: p.clearance_m,
+                ..Truth::default()
+            },
+            command: MobilityCommand::default(),
+            flight_command: None,
+            steer_motor: MotorParams::steering(),
+            drive_motor: MotorParams::drive(),
+            slip,
+            imu,
+            encoders: scenario.sensors.encoders,
+            sun: scenario.sensors.sun,
+            faults: Faults::new(scenario.faults.clone()),
+            streams,
+            encoder_every: u64::from(200 / scenario.sensors.encoder_hz),
+            sun_every: u64::from(200 / scenario.sensors.sun_hz),
+            prev_velocity_w: Vector3::zeros(),
+            jacobian: None,
+            normals: [None; WHEELS],
+            wheels: None,
+            imu_sample: ImuSample::default(),
+            joints: JointState::default(),
+            sun_reading: SunReading::default(),
+            steps: 0,
+            placement_iterations: 0,
+        };
+        world.update_wheels();
+        world.sample_imu(Vector3::zeros(), Vector3::zeros(), 0.0);
+        world.sample_joints();
+        world.sample_sun();
+        Ok(world)
+    }
+
+    /// The slip model (soil parameters after the per-seed draw).
+    pub fn slip_model(&self) -> &SlipModel {
+        &self.slip
+    }
+
+    /// The wheels in `R` at the joint angles of the last placement (`None` outside the
+    /// geometry's range, which the placement's stops prevent).
+    pub fn wheel_poses(&self) -> Option<[WheelPose; WHEELS]> {
+        self.wheels
+    }
+
+    fn update_wheels(&mut self) {
+        let s = &self.truth.suspension;
+        self.wheels = self
+            .geometry
+            .wheels(s.rocker_rad, s.bogie_rad, &self.truth.steer_rad);
+    }
+
+    /// Axle positions in `R` projected on the body's x-y plane, m (the axle centres do not
+    /// move with steering).
+    pub fn wheel_xy(&self) -> [[f64; 2]; WHEELS] {
+        match self.wheels {
+            Some(p) => p.map(|w| [w.axle_m.x, w.axle_m.y]),
+            None => [[0.0; 2]; WHEELS],
+        }
+    }
+
+    /// Advance the world by one minor frame.
+    pub fn step(&mut self) {
+        let dt = FRAME_US as f64 * 1e-6;
+        let t = &mut self.truth;
+        for i in 0..WHEELS {
+            t.steer_rad[i] =
+                self.steer_motor
+                    .step(t.steer_rad[i], self.command.steer_angle_rad[i], dt);
+            t.wheel_rate_rad_s[i] =
+                self.drive_motor
+                    .step(t.wheel_rate_rad_s[i], self.command.wheel_rate_rad_s[i], dt);
+            t.wheel_angle_rad[i] += t.wheel_rate_rad_s[i] * dt;
+        }
+        // Least-squares body twist from the wheel rim velocities along each wheel's rolling
+        // direction (fsw::kinematics conventions).
+        let xy = self.wheel_xy();
+        let r = self.geometry.wheel_radius_m();
+        let rolling = self.wheel_poses().map(|w| w.map(|p| p.rolling_dir));
+        let (mut ata, mut atb) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
+        for i in 0..WHEELS {
+            let dir = rolling.map_or(Vector3::x(), |d| d[i]);
+            let v = r * self.truth.wheel_rate_rad_s[i];
+            let (vx, vy) = (v * dir.x, v * dir.y);
+            // v_i = [1 0 -y; 0 1 x] [vx vy omega].
+            let rows = [
+                Vector3::new(1.0, 0.0, -xy[i][1]),
+                Vector3::new(0.0, 1.0, xy[i][0]),
+            ];
+            for (row, b) in rows.iter().zip([vx, vy]) {
+                ata += row * row.transpose();
+                atb += row * b;
+            }
+        }
+        let twist = ata
+            .try_inverse()
+            .map(|m| m * atb)
+            .unwrap_or_else(Vector3::zeros);
+        // Slip from the slope along the motion and across the body.
+        let rot = self.truth.pose.rot_w_from_r();
+        let m = rot_matrix(&rot);
+        let (x_r, y_r) = (m.column(0).into_owned(), m.column(1).into_owned());
+        let dir = if twist.x >= 0.0 { 1.0 } else { -1.0 };
+        let slope_along = (-x_r.z * dir).clamp(-1.0, 1.0).asin();
+        let slope_cross = y_r.z.clamp(-1.0, 1.0).asin();
+        let slip = self
+            .slip
+            .step(slope_along, slope_cross, dt, &mut self.streams.slip);
+        let speed = (twist.x * twist.x + twist.y * twist.y).sqrt();
+        let vx = twist.x * (1.0 - slip.slip_ratio);
+        let vy = twist.y * (1.0 - slip.slip_ratio) + speed * slip.slip_angle_rad.tan();
+        let omega = twist.z * (1.0 - slip.slip_ratio.max(0.0));
+        // Move on the terrain and place the vehicle.
+        let v_w = rot * Vector3::new(vx, vy, 0.0);
+        let pose0 = self.truth.pose;
+        let cr = pose0.roll_rad.cos();
+        let cp = pose0.pitch_rad.cos().max(0.2);
+        let mut pose = pose0;
+        pose.pos_m[0] += v_w.x * dt;
+        pose.pos_m[1] += v_w.y * dt;
+        pose.yaw_rad = wrap_pi(pose.yaw_rad + omega * cr / cp * dt);
+        let placed: Placement = place_cached(
+            &self.geometry,
+            &self.terrain,
+            &pose,
+            &self.truth.suspension,
+            &self.truth.steer_rad,
+            &self.limits,
+            &mut self.jacobian,
+            &mut self.normals,
+        );
+        self.placement_iterations += u64::from(placed.iterations);
+        let t = &mut self.truth;
+        t.distance_m += (v_w.x * v_w.x + v_w.y * v_w.y).sqrt() * dt;
+        t.pose = placed.pose;
+        t.suspension = placed.suspension;
+        t.clearance_m = placed.clearance_m;
+        t.slip = slip;
+        t.velocity_r_m_s = [vx, vy];
+        t.t_us = t.t_us.saturating_add(FRAME_US);
+        self.steps += 1;
+        self.update_wheels();
+        // Sensors.
+        let rot1 = self.truth.pose.rot_w_from_r();
+        let p0 = Vector3::from(pose0.pos_m);
+        let p1 = Vector3::from(self.truth.pose.pos_m);
+        let velocity_w = (p1 - p0) / dt;
+        let accel_w = (velocity_w - self.prev_velocity_w) / dt;
+        self.prev_velocity_w = velocity_w;
+        let delta = pose0.rot_w_from_r().inverse() * rot1;
+        let gyro = delta.scaled_axis() / dt;
+        let specific_force = rot1.inverse() * (accel_w - Vector3::new(0.0, 0.0, MARS_GRAVITY_M_S2));
+        self.sample_imu(gyro, specific_force, dt);
+        if self.steps % self.encoder_every == 0 {
+            self.sample_joints();
+        }
+        if self.steps % self.sun_every == 0 {
+            self.sample_sun();
+        }
+    }
+
+    fn sample_imu(&mut self, gyro: Vector3<f64>, specific_force: Vector3<f64>, dt: f64) {
+        let f = if self.steps == 0 {
+            // At start the rover rests: specific force is minus gravity in R.
+            self.truth.pose.rot_w_from_r().inverse() * Vector3::new(0.0, 0.0, -MARS_GRAVITY_M_S2)
+        } else {
+            specific_force
+        };
+        let (g, a) = self.imu.sample(
+            [gyro.x, gyro.y, gyro.z],
+            [f.x, f.y, f.z],
+            dt.max(1e-3),
+            &mut self.streams.imu,
+        );
+        self.imu_sample = ImuSample {
+            t_us: self.truth.t_us,
+            gyro_rad_s: g,
+            accel_m_s2: a,
+            valid: true,
+        };
+    }
+
+    fn sample_joints(&mut self) {
+        let e = &self.encoders;
+        let t = &self.truth;
+        let rng = &mut self.streams.encoders;
+        let mut j = JointState {
+            t_us: t.t_us,
+            wheel_valid: [true; WHEELS],
+            suspension_valid: true,
+            ..JointState::default()
+        };
+        for i in 0..WHEELS {
+            j.drive_angle_rad[i] = e.drive_angle(t.wheel_angle_rad[i]);
+            j.drive_rate_rad_s[i] = e.drive_rate(t.wheel_rate_rad_s[i], rng);
+            j.steer_angle_rad[i] = e.steer_angle(t.steer_rad[i], rng);
+        }
+        j.rocker_rad = e.suspension_angle(t.suspension.rocker_rad, rng);
+        j.bogie_rad = [
+            e.suspension_angle(t.suspension.bogie_rad[0], rng),
+            e.suspension_angle(t.suspension.bogie_rad[1], rng),
+        ];
+        self.joints = j;
+    }
+
+    fn sample_sun(&mut self) {
+        let rot = self.truth.pose.rot_w_from_r();
+        let (v, in_view) = self.sun.measure(&rot, &mut self.streams.sun);
+        self.sun_reading = SunReading {
+            t_us: self.truth.t_us,
+            sun_dir_rover: v,
+            sun_in_view: in_view,
+        };
+    }
+}
+
+/// Wrap an angle to `(-pi, pi]`.
+pub fn wrap_pi(a: f64) -> f64 {
+    let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    if w <= -std::f64::consts::PI {
+        w + std::f64::consts::TAU
+    } else {
+        w
+    }
+}
