@@ -18,11 +18,19 @@
 //!   [`flight::Fsw::tick`].
 //! - [`types`]: shared math types ([`types::RelativePose`]).
 //! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
+//! - [`vo`]: stereo visual odometry (H04 sec. 2, H05 sec. II): Forstner features, ray-gap
+//!   triangulation (eq. 1-8), affine tracking (eq. 9-10), LMedS and maximum-likelihood motion
+//!   (eq. 11), as a resumable pipeline with preallocated buffers.
 #![no_std]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
+
+#[cfg(test)]
+#[macro_use]
+extern crate std;
 
 pub mod exec;
 pub mod flight;
 pub mod telemetry;
 pub mod types;
+pub mod vo;
