@@ -151,7 +151,9 @@ pub fn refine_warp(
 
 /// Correlation search: the integer position within `radius` pixels of `(x0, y0)` where the
 /// template correlates best, with its normalised cross-correlation; `None` if no window fits in
-/// the image.
+/// the image. Coarse to fine: every second position first, then the 8 neighbours of the best
+/// (a quarter of the cost of the full search; the affine refinement then converges from within
+/// one pixel).
 pub fn search_window(
     template: &Template,
     image: &Image,
@@ -161,14 +163,32 @@ pub fn search_window(
 ) -> Option<(i32, i32, f32)> {
     let stats = template_stats(template);
     let mut best: Option<(i32, i32, f32)> = None;
-    for y in y0.saturating_sub(radius)..=y0.saturating_add(radius) {
-        for x in x0.saturating_sub(radius)..=x0.saturating_add(radius) {
-            if let Some(score) = ncc(image, template, stats, x, y) {
-                if best.is_none_or(|(_, _, s)| score > s) {
-                    best = Some((x, y, score));
-                }
+    let mut consider = |x: i32, y: i32, best: &mut Option<(i32, i32, f32)>| {
+        if let Some(score) = ncc(image, template, stats, x, y) {
+            if best.is_none_or(|(_, _, s)| score > s) {
+                *best = Some((x, y, score));
             }
         }
+    };
+    let (y_lo, y_hi) = (y0.saturating_sub(radius), y0.saturating_add(radius));
+    let (x_lo, x_hi) = (x0.saturating_sub(radius), x0.saturating_add(radius));
+    for y in (y_lo..=y_hi).step_by(2) {
+        for x in (x_lo..=x_hi).step_by(2) {
+            consider(x, y, &mut best);
+        }
+    }
+    let (xc, yc, _) = best?;
+    for (dx, dy) in [
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+        (-1, 0),
+        (1, 0),
+        (-1, 1),
+        (0, 1),
+        (1, 1),
+    ] {
+        consider(xc.saturating_add(dx), yc.saturating_add(dy), &mut best);
     }
     best
 }
