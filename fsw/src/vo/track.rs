@@ -163,7 +163,7 @@ pub fn search_window(
 ) -> Option<(i32, i32, f32)> {
     let stats = template_stats(template);
     let mut best: Option<(i32, i32, f32)> = None;
-    let mut consider = |x: i32, y: i32, best: &mut Option<(i32, i32, f32)>| {
+    let consider = |x: i32, y: i32, best: &mut Option<(i32, i32, f32)>| {
         if let Some(score) = ncc(image, template, stats, x, y) {
             if best.is_none_or(|(_, _, s)| score > s) {
                 *best = Some((x, y, score));
