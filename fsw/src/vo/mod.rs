@@ -32,6 +32,8 @@ pub mod stereo;
 pub mod track;
 
 #[cfg(test)]
+mod middlebury_tests;
+#[cfg(test)]
 mod render;
 #[cfg(test)]
 mod tests;
