@@ -190,6 +190,94 @@ pub fn ncc(image: &Image, template: &Template, stats: (i64, i64), x: i32, y: i32
     Some((cov as f64 / denominator) as f32)
 }
 
+/// Largest number of columns [`ncc_scan`] covers in one call.
+pub const SCAN_MAX_COLUMNS: usize = 256;
+
+/// Normalised cross-correlation of `template` along image row `y` at the columns
+/// `x_first + k * step` for `k` in `0..out.len()`, written to `out[k]` (`-inf` where the window
+/// leaves the image, has no contrast, or the span exceeds [`SCAN_MAX_COLUMNS`]). Same values as
+/// [`ncc`]; the window sums come from column sums computed once per call.
+pub fn ncc_scan(
+    image: &Image,
+    template: &Template,
+    stats: (i64, i64),
+    y: i32,
+    x_first: i32,
+    step: usize,
+    out: &mut [f32],
+) {
+    out.iter_mut().for_each(|v| *v = f32::NEG_INFINITY);
+    let half = TEMPLATE_HALF as i32;
+    let Some(y0) = y.checked_sub(half).and_then(|v| usize::try_from(v).ok()) else {
+        return;
+    };
+    let mut rows: [&[u8]; TEMPLATE_SIDE] = [&[]; TEMPLATE_SIDE];
+    for (dy, slot) in rows.iter_mut().enumerate() {
+        match image.row(y0 + dy) {
+            Some(r) => *slot = r,
+            None => return,
+        }
+    }
+    // Columns [c_first, c_end) of the image covered by all windows, clipped to the image.
+    let span = out.len().saturating_sub(1).saturating_mul(step) + TEMPLATE_SIDE;
+    let c_first = x_first.saturating_sub(half);
+    let c_lo = c_first.max(0) as usize;
+    let c_hi = (i64::from(c_first) + span as i64).clamp(0, IMAGE_WIDTH_PX as i64) as usize;
+    if span > SCAN_MAX_COLUMNS || c_lo >= c_hi {
+        return;
+    }
+    let mut col_s = [0u32; SCAN_MAX_COLUMNS];
+    let mut col_s2 = [0u32; SCAN_MAX_COLUMNS];
+    for row in rows.iter() {
+        let Some(pixels) = row.get(c_lo..c_hi) else {
+            return;
+        };
+        for ((s, s2), &p) in col_s.iter_mut().zip(col_s2.iter_mut()).zip(pixels.iter()) {
+            let p = u32::from(p);
+            *s += p;
+            *s2 += p * p;
+        }
+    }
+    let n = TEMPLATE_PIXELS as i64;
+    let (ts, tvar) = stats;
+    if tvar <= 0 {
+        return;
+    }
+    for (k, value) in out.iter_mut().enumerate() {
+        let x0 = i64::from(c_first) + (k * step) as i64;
+        if x0 < c_lo as i64 || x0 + TEMPLATE_SIDE as i64 > c_hi as i64 {
+            continue;
+        }
+        let x0 = x0 as usize;
+        let local = x0 - c_lo;
+        let (Some(cs), Some(cs2)) = (
+            col_s.get(local..local + TEMPLATE_SIDE),
+            col_s2.get(local..local + TEMPLATE_SIDE),
+        ) else {
+            continue;
+        };
+        let s: u32 = cs.iter().sum();
+        let s2: u32 = cs2.iter().sum();
+        let mut st = 0u32;
+        for (row, t_row) in rows.iter().zip(template.chunks_exact(TEMPLATE_SIDE)) {
+            let Some(pixels) = row.get(x0..x0 + TEMPLATE_SIDE) else {
+                continue;
+            };
+            st += pixels
+                .iter()
+                .zip(t_row.iter())
+                .map(|(&p, &t)| u32::from(p) * u32::from(t))
+                .sum::<u32>();
+        }
+        let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
+        if ivar <= 0 {
+            continue;
+        }
+        let cov = n * i64::from(st) - ts * i64::from(s);
+        *value = (cov as f64 / libm::sqrt(ivar as f64 * tvar as f64)) as f32;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -232,5 +320,25 @@ mod tests {
         let c = ncc(&image, &t, stats, 100, 100).unwrap();
         assert!((c - 1.0).abs() < 1e-6);
         assert!(ncc(&image, &t, stats, 2, 100).is_none());
+    }
+
+    #[test]
+    fn vo_11_ncc_scan_equals_ncc() {
+        let mut img = ramp();
+        for (k, p) in img.iter_mut().enumerate() {
+            *p = p.wrapping_mul(37).wrapping_add((k / 7 % 13) as u8);
+        }
+        let image = Image::new(&img).unwrap();
+        let t = image.template(300, 200).unwrap();
+        let stats = template_stats(&t);
+        for (y, x_first, step) in [(200, 250, 1usize), (203, -3, 2), (470, 600, 2), (4, 10, 1)] {
+            let mut out = [0f32; 60];
+            ncc_scan(&image, &t, stats, y, x_first, step, &mut out);
+            for (k, &v) in out.iter().enumerate() {
+                let x = x_first + (k * step) as i32;
+                let expected = ncc(&image, &t, stats, x, y).unwrap_or(f32::NEG_INFINITY);
+                assert_eq!(v, expected, "y {y} x {x}");
+            }
+        }
     }
 }

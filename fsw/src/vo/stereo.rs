@@ -4,7 +4,7 @@
 //! All geometry is in the left camera frame `K` (x right, y down, z optical axis); the left
 //! camera centre is `C1 = 0` and the right one `C2 = (baseline, 0, 0)`.
 
-use super::image::{ncc, template_stats, Image};
+use super::image::{ncc_scan, template_stats, Image};
 use super::track::{refine_warp, Affine2, WarpModel};
 use super::{VoConfig, VoError, MAX_DISPARITY_PX};
 use crate::types::{Mat3, Vec3};
@@ -209,14 +209,15 @@ pub fn match_along_row(
     let mut scores = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
     let d_min = usize::from(config.min_disparity_px);
     let d_max = usize::from(config.max_disparity_px).min(MAX_DISPARITY_PX);
+    // Scan the right row from x = xi - d_max up to xi - d_min; scan[k] is disparity d_max - k.
+    let mut scan = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
+    let count = d_max.saturating_sub(d_min) + 1;
+    if let Some(window) = scan.get_mut(..count) {
+        ncc_scan(right, &template, stats, yi, xi - d_max as i32, 1, window);
+    }
     let mut best = (f32::NEG_INFINITY, 0usize);
-    for d in d_min..=d_max {
-        let Some(x_right) = xi.checked_sub(d as i32) else {
-            break;
-        };
-        let Some(score) = ncc(right, &template, stats, x_right, yi) else {
-            continue;
-        };
+    for (k, &score) in scan.iter().take(count).enumerate() {
+        let d = d_max - k;
         if let Some(slot) = scores.get_mut(d) {
             *slot = score;
         }

@@ -482,3 +482,29 @@ mod properties {
         }
     }
 }
+
+/// VO-15 helper: runs `VO_PROBE_REPS` updates (N = 150) on a rendered pair so that
+/// `perf stat` can count instructions and CPU time per update (difference of two runs).
+#[test]
+#[ignore = "timing probe for perf stat"]
+fn vo_15_update_probe() {
+    let reps: usize = std::env::var("VO_PROBE_REPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    let cal = hazcam();
+    let (l0, r0) = render_pair(&cal, &RoverPose::new(0.0, 0.0, 0.0, Vec3::zeros()));
+    let p1 = RoverPose::new(2f64.to_radians(), 0.0, 0.0, Vec3::new(0.25, 0.0, 0.0));
+    let (l1, r1) = render_pair(&cal, &p1);
+    let mut keyed = Box::new(VisualOdometry::<150>::new(VoConfig::default(), &cal).unwrap());
+    keyed
+        .run_to_completion(&frame(&l0, &r0, 1, 0), None)
+        .unwrap();
+    let (rot, trans) = RoverPose::new(0.0, 0.0, 0.0, Vec3::zeros()).relative_to(&p1);
+    let prior = prior_from(&rot, &(trans * 0.95), 1, 2);
+    for _ in 0..reps {
+        let mut vo = keyed.clone();
+        let out = vo.run_to_completion(&frame(&l1, &r1, 2, 1), Some(&prior));
+        assert!(out.unwrap().pose.is_some());
+    }
+}

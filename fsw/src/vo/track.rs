@@ -6,8 +6,8 @@
 //! image; eq. 9 maps them into the new image, `x2 = a u + b v + c`, `y2 = d u + e v + f` (eq. 9
 //! with `x1, y1` taken relative to the feature, so `(c, f)` is the tracked feature position).
 
-use super::image::{ncc, template_stats, Image, Template, TemplateF};
-use super::{TEMPLATE_HALF, TEMPLATE_SIDE};
+use super::image::{ncc, ncc_scan, template_stats, Image, Template, TemplateF};
+use super::{MAX_SEARCH_RADIUS_PX, TEMPLATE_HALF, TEMPLATE_SIDE};
 use nalgebra::{SMatrix, SVector};
 
 /// Eq. 9 (H04): the affine map of template coordinates into the new image, pixels.
@@ -172,9 +172,15 @@ pub fn search_window(
     };
     let (y_lo, y_hi) = (y0.saturating_sub(radius), y0.saturating_add(radius));
     let (x_lo, x_hi) = (x0.saturating_sub(radius), x0.saturating_add(radius));
+    let columns = (x_hi - x_lo) as usize / 2 + 1;
+    let mut scan = [f32::NEG_INFINITY; MAX_SEARCH_RADIUS_PX + 1];
+    let window = scan.get_mut(..columns).unwrap_or(&mut []);
     for y in (y_lo..=y_hi).step_by(2) {
-        for x in (x_lo..=x_hi).step_by(2) {
-            consider(x, y, &mut best);
+        ncc_scan(image, template, stats, y, x_lo, 2, window);
+        for (k, &score) in window.iter().enumerate() {
+            if score > f32::NEG_INFINITY && best.is_none_or(|(_, _, s)| score > s) {
+                best = Some((x_lo + 2 * k as i32, y, score));
+            }
         }
     }
     let (xc, yc, _) = best?;
