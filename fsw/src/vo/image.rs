@@ -61,15 +61,15 @@ impl<'a> Image<'a> {
         if !(x.is_finite() && y.is_finite()) {
             return None;
         }
-        let x0f = libm::floor(x);
-        let y0f = libm::floor(y);
-        if x0f < 0.0 || y0f < 0.0 || x0f >= (IMAGE_WIDTH_PX - 1) as f64 {
+        // Non-negative and in range, so truncation is the floor.
+        if !(x >= 0.0 && y >= 0.0 && x < (IMAGE_WIDTH_PX - 1) as f64) {
             return None;
         }
-        if y0f >= (IMAGE_HEIGHT_PX - 1) as f64 {
+        if !(y < (IMAGE_HEIGHT_PX - 1) as f64) {
             return None;
         }
-        let (x0, y0) = (x0f as usize, y0f as usize);
+        let (x0, y0) = (x as usize, y as usize);
+        let (x0f, y0f) = (x0 as f64, y0 as f64);
         let r0 = self.row(y0)?;
         let r1 = self.row(y0 + 1)?;
         let p00 = f64::from(*r0.get(x0)?);

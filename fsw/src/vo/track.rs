@@ -88,9 +88,12 @@ pub fn refine_warp(
     let half = TEMPLATE_HALF as f64;
     let mut residual_rms = f64::INFINITY;
     for _ in 0..iterations.max(1) {
-        // Parameters: [a, b, c, d, e, f, gain, bias].
-        let mut h = SMatrix::<f64, 8, 8>::zeros();
-        let mut g = SVector::<f64, 8>::zeros();
+        // Parameters: [a, b, c, d, e, f, gain, bias]; the translation model uses only
+        // [c, f, gain, bias] and accumulates a 4x4 system.
+        let mut h8 = SMatrix::<f64, 8, 8>::zeros();
+        let mut g8 = SVector::<f64, 8>::zeros();
+        let mut h4 = SMatrix::<f64, 4, 4>::zeros();
+        let mut g4 = SVector::<f64, 4>::zeros();
         let mut sum_sq = 0.0;
         for (k, &t) in template.iter().enumerate() {
             let u = (k % TEMPLATE_SIDE) as f64 - half;
@@ -100,23 +103,34 @@ pub fn refine_warp(
             let residual = gain * value + bias - f64::from(t);
             sum_sq += residual * residual;
             let (jx, jy) = (gain * gx, gain * gy);
-            let j = SVector::<f64, 8>::from([jx * u, jx * v, jx, jy * u, jy * v, jy, value, 1.0]);
-            h += j * j.transpose();
-            g += j * residual;
+            match model {
+                WarpModel::Affine => {
+                    let j = SVector::<f64, 8>::from([
+                        jx * u,
+                        jx * v,
+                        jx,
+                        jy * u,
+                        jy * v,
+                        jy,
+                        value,
+                        1.0,
+                    ]);
+                    h8.ger(1.0, &j, &j, 1.0);
+                    g8 += j * residual;
+                }
+                WarpModel::Translation => {
+                    let j = SVector::<f64, 4>::from([jx, jy, value, 1.0]);
+                    h4.ger(1.0, &j, &j, 1.0);
+                    g4 += j * residual;
+                }
+            }
         }
         residual_rms = libm::sqrt(sum_sq / template.len() as f64);
         let delta = match model {
-            WarpModel::Affine => h.cholesky()?.solve(&(-g)),
+            WarpModel::Affine => h8.cholesky()?.solve(&(-g8)),
             WarpModel::Translation => {
-                const IDX: [usize; 4] = [2, 5, 6, 7];
-                let hs = SMatrix::<f64, 4, 4>::from_fn(|r, c| h[(IDX[r], IDX[c])]);
-                let gs = SVector::<f64, 4>::from_fn(|r, _| -g[IDX[r]]);
-                let ds = hs.cholesky()?.solve(&gs);
-                let mut full = SVector::<f64, 8>::zeros();
-                for (r, &i) in IDX.iter().enumerate() {
-                    full[i] = ds[r];
-                }
-                full
+                let ds = h4.cholesky()?.solve(&(-g4));
+                SVector::<f64, 8>::from([0.0, 0.0, ds[0], 0.0, 0.0, ds[1], ds[2], ds[3]])
             }
         };
         if !delta.iter().all(|v| v.is_finite()) {
