@@ -158,22 +158,26 @@ impl ForstnerDetector {
             if det <= 0 {
                 continue;
             }
-            let interest = (det as f64 / trace as f64) as f32;
-            if interest < config.min_interest {
+            // Thresholds without divisions: w >= min_interest, q >= min_roundness, and w above
+            // the cell's best so far; the division runs only for a new best.
+            let (det_f, trace_f) = (det as f64, trace as f64);
+            if det_f < f64::from(config.min_interest) * trace_f {
                 continue;
             }
-            let roundness = (4.0 * det as f64 / (trace as f64 * trace as f64)) as f32;
-            if roundness < config.min_roundness {
+            if 4.0 * det_f < f64::from(config.min_roundness) * trace_f * trace_f {
                 continue;
             }
             let index = cell_row * GRID_COLS + centre / GRID_PX;
             if let Some(cell) = self.cells.get_mut(index) {
-                if interest > cell.interest {
-                    *cell = Candidate {
-                        interest,
-                        x: centre as u16,
-                        y: y as u16,
-                    };
+                if det_f > f64::from(cell.interest) * trace_f {
+                    let interest = (det_f / trace_f) as f32;
+                    if interest > cell.interest {
+                        *cell = Candidate {
+                            interest,
+                            x: centre as u16,
+                            y: y as u16,
+                        };
+                    }
                 }
             }
         }
