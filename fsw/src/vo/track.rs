@@ -152,7 +152,7 @@ pub fn refine_warp(
         if !shape_ok {
             return None;
         }
-        if delta[2].abs() < 1e-3 && delta[5].abs() < 1e-3 {
+        if delta[2].abs() < 5e-3 && delta[5].abs() < 5e-3 {
             break;
         }
     }
