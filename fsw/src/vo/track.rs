@@ -90,7 +90,7 @@ pub fn refine_warp(
     for _ in 0..iterations.max(1) {
         // Parameters: [a, b, c, d, e, f, gain, bias]; the translation model uses only
         // [c, f, gain, bias] and accumulates a 4x4 system.
-        let mut h8 = SMatrix::<f64, 8, 8>::zeros();
+        let mut upper = [0.0f64; 36];
         let mut g8 = SVector::<f64, 8>::zeros();
         let mut h4 = SMatrix::<f64, 4, 4>::zeros();
         let mut g4 = SVector::<f64, 4>::zeros();
@@ -115,7 +115,14 @@ pub fn refine_warp(
                         value,
                         1.0,
                     ]);
-                    h8.ger(1.0, &j, &j, 1.0);
+                    // Upper triangle only (36 of 64 products).
+                    let mut k = 0;
+                    for r in 0..8 {
+                        for c in r..8 {
+                            upper[k] += j[r] * j[c];
+                            k += 1;
+                        }
+                    }
                     g8 += j * residual;
                 }
                 WarpModel::Translation => {
@@ -127,7 +134,18 @@ pub fn refine_warp(
         }
         residual_rms = libm::sqrt(sum_sq / template.len() as f64);
         let delta = match model {
-            WarpModel::Affine => h8.cholesky()?.solve(&(-g8)),
+            WarpModel::Affine => {
+                let mut h8 = SMatrix::<f64, 8, 8>::zeros();
+                let mut k = 0;
+                for r in 0..8 {
+                    for c in r..8 {
+                        h8[(r, c)] = upper[k];
+                        h8[(c, r)] = upper[k];
+                        k += 1;
+                    }
+                }
+                h8.cholesky()?.solve(&(-g8))
+            }
             WarpModel::Translation => {
                 let ds = h4.cholesky()?.solve(&(-g4));
                 SVector::<f64, 8>::from([0.0, 0.0, ds[0], 0.0, 0.0, ds[1], ds[2], ds[3]])
