@@ -23,9 +23,16 @@
 //! - [`types`]: shared math types ([`types::RelativePose`]).
 //! - [`guidance`]: carrot heading and slip-compensation loops (H04 sec. 5, H05 sec. V).
 //! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
+//! - [`vo`]: stereo visual odometry (H04 sec. 2, H05 sec. II): Forstner features, ray-gap
+//!   triangulation (eq. 1-8), affine tracking (eq. 9-10), LMedS and maximum-likelihood motion
+//!   (eq. 11), as a resumable pipeline with preallocated buffers.
 #![no_std]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
+
+#[cfg(test)]
+#[macro_use]
+extern crate std;
 
 pub mod estimation;
 pub mod exec;
@@ -34,3 +41,4 @@ pub mod guidance;
 pub mod kinematics;
 pub mod telemetry;
 pub mod types;
+pub mod vo;

@@ -1,0 +1,351 @@
+//! Feature selection (H04 sec. 2 "Feature Selection"; H05 sec. II.A): Forstner interest
+//! operator on the left image, best pixel per grid cell, sort, top N with a minimum distance.
+//!
+//! The Forstner operator builds, at each pixel, the normal matrix of the gradients over a 5x5
+//! window, `N = sum [gx^2 gx*gy; gx*gy gy^2]`, and scores the pixel by `w = det(N) / trace(N)`
+//! (the inverse of the size of the error ellipse of a corner located at that pixel, so the
+//! paper's "lower interest value is better" is "higher `w` is better" here) with the roundness
+//! `q = 4 det(N) / trace(N)^2` to reject edges. The window sums are kept as running column sums,
+//! one image row per work item, so the operator needs three rows of 640 sums instead of an
+//! interest image.
+
+use super::image::Image;
+use super::{VoConfig, TEMPLATE_HALF};
+use rover_hal::{IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX};
+
+/// Side of a grid cell, pixels (much smaller than the minimum feature distance).
+pub const GRID_PX: usize = 10;
+/// Grid columns.
+pub const GRID_COLS: usize = IMAGE_WIDTH_PX / GRID_PX;
+/// Grid rows.
+pub const GRID_ROWS: usize = IMAGE_HEIGHT_PX / GRID_PX;
+/// Grid cells.
+pub const CELL_COUNT: usize = GRID_COLS * GRID_ROWS;
+/// Half side of the Forstner window (5x5).
+pub const WINDOW_HALF: usize = 2;
+/// Features keep this distance from the image border, pixels (template plus refinement room).
+pub const BORDER_PX: usize = TEMPLATE_HALF + 4;
+/// First image row the operator scores.
+pub const FIRST_ROW: usize = BORDER_PX;
+/// One past the last image row the operator scores.
+pub const END_ROW: usize = IMAGE_HEIGHT_PX - BORDER_PX;
+
+/// The best pixel of a grid cell.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Candidate {
+    /// Forstner interest `w` (0 for an empty cell).
+    pub interest: f32,
+    /// Column, pixels.
+    pub x: u16,
+    /// Row, pixels.
+    pub y: u16,
+}
+
+/// The Forstner operator's running state: column sums of the gradient products over the
+/// window rows, and the best candidate per grid cell.
+#[derive(Debug, Clone)]
+pub struct ForstnerDetector {
+    col_xx: [i32; IMAGE_WIDTH_PX],
+    col_yy: [i32; IMAGE_WIDTH_PX],
+    col_xy: [i32; IMAGE_WIDTH_PX],
+    cells: [Candidate; CELL_COUNT],
+    candidate_count: usize,
+}
+
+impl Default for ForstnerDetector {
+    fn default() -> Self {
+        Self {
+            col_xx: [0; IMAGE_WIDTH_PX],
+            col_yy: [0; IMAGE_WIDTH_PX],
+            col_xy: [0; IMAGE_WIDTH_PX],
+            cells: [Candidate::default(); CELL_COUNT],
+            candidate_count: 0,
+        }
+    }
+}
+
+/// Adds `sign` times the gradient products of image row `y` to the column sums.
+fn accumulate_row(
+    image: &Image,
+    y: usize,
+    sign: i32,
+    col_xx: &mut [i32; IMAGE_WIDTH_PX],
+    col_yy: &mut [i32; IMAGE_WIDTH_PX],
+    col_xy: &mut [i32; IMAGE_WIDTH_PX],
+) {
+    let (Some(up), Some(mid), Some(down)) = (
+        y.checked_sub(1).and_then(|r| image.row(r)),
+        image.row(y),
+        image.row(y + 1),
+    ) else {
+        return;
+    };
+    let columns = col_xx
+        .iter_mut()
+        .zip(col_yy.iter_mut())
+        .zip(col_xy.iter_mut())
+        .skip(1);
+    let gx_iter = mid.iter().zip(mid.iter().skip(2));
+    let gy_iter = up.iter().zip(down.iter()).skip(1);
+    for (((sxx, syy), sxy), ((&l, &r), (&u, &d))) in columns.zip(gx_iter.zip(gy_iter)) {
+        let gx = i32::from(r) - i32::from(l);
+        let gy = i32::from(d) - i32::from(u);
+        *sxx += sign * gx * gx;
+        *syy += sign * gy * gy;
+        *sxy += sign * gx * gy;
+    }
+}
+
+impl ForstnerDetector {
+    /// Clears the cells and the running sums; the next row to score is [`FIRST_ROW`].
+    pub fn reset(&mut self) {
+        self.col_xx = [0; IMAGE_WIDTH_PX];
+        self.col_yy = [0; IMAGE_WIDTH_PX];
+        self.col_xy = [0; IMAGE_WIDTH_PX];
+        self.cells = [Candidate::default(); CELL_COUNT];
+        self.candidate_count = 0;
+    }
+
+    /// Scores image row `y` (rows must come in order from [`FIRST_ROW`] to `END_ROW - 1`, one
+    /// call each) and keeps the best pixel of each grid cell whose interest and roundness pass
+    /// the thresholds of `config`.
+    pub fn process_row(&mut self, image: &Image, y: usize, config: &VoConfig) {
+        if y == FIRST_ROW {
+            self.reset();
+            for r in (FIRST_ROW - WINDOW_HALF)..=(FIRST_ROW + WINDOW_HALF) {
+                accumulate_row(
+                    image,
+                    r,
+                    1,
+                    &mut self.col_xx,
+                    &mut self.col_yy,
+                    &mut self.col_xy,
+                );
+            }
+        } else {
+            let (cxx, cyy, cxy) = (&mut self.col_xx, &mut self.col_yy, &mut self.col_xy);
+            accumulate_row(image, y - WINDOW_HALF - 1, -1, cxx, cyy, cxy);
+            accumulate_row(image, y + WINDOW_HALF, 1, cxx, cyy, cxy);
+        }
+        let cell_row = y / GRID_PX;
+        let window = 2 * WINDOW_HALF + 1;
+        let (mut nxx, mut nyy, mut nxy) = (0i64, 0i64, 0i64);
+        for x in 0..IMAGE_WIDTH_PX - BORDER_PX {
+            let (Some(&a), Some(&b), Some(&c)) =
+                (self.col_xx.get(x), self.col_yy.get(x), self.col_xy.get(x))
+            else {
+                break;
+            };
+            nxx += i64::from(a);
+            nyy += i64::from(b);
+            nxy += i64::from(c);
+            if x >= window {
+                let old = x - window;
+                nxx -= i64::from(self.col_xx.get(old).copied().unwrap_or(0));
+                nyy -= i64::from(self.col_yy.get(old).copied().unwrap_or(0));
+                nxy -= i64::from(self.col_xy.get(old).copied().unwrap_or(0));
+            }
+            // The window now covers columns x-4..=x, centred on x-2.
+            let centre = match x.checked_sub(WINDOW_HALF) {
+                Some(c) if c >= BORDER_PX => c,
+                _ => continue,
+            };
+            let trace = nxx + nyy;
+            if trace <= 0 {
+                continue;
+            }
+            let det = nxx * nyy - nxy * nxy;
+            if det <= 0 {
+                continue;
+            }
+            // Thresholds without divisions: w >= min_interest, q >= min_roundness, and w above
+            // the cell's best so far; the division runs only for a new best.
+            let (det_f, trace_f) = (det as f64, trace as f64);
+            if det_f < f64::from(config.min_interest) * trace_f {
+                continue;
+            }
+            if 4.0 * det_f < f64::from(config.min_roundness) * trace_f * trace_f {
+                continue;
+            }
+            let index = cell_row * GRID_COLS + centre / GRID_PX;
+            if let Some(cell) = self.cells.get_mut(index) {
+                if det_f > f64::from(cell.interest) * trace_f {
+                    let interest = (det_f / trace_f) as f32;
+                    if interest > cell.interest {
+                        *cell = Candidate {
+                            interest,
+                            x: centre as u16,
+                            y: y as u16,
+                        };
+                    }
+                }
+            }
+        }
+    }
+
+    /// Compacts the non-empty cells and sorts them by descending interest (heap sort: bounded,
+    /// no recursion; ties keep a deterministic order). Returns the number of candidates.
+    pub fn sort_candidates(&mut self) -> usize {
+        let mut count = 0usize;
+        for k in 0..CELL_COUNT {
+            let Some(&c) = self.cells.get(k) else { break };
+            if c.interest > 0.0 {
+                if let Some(slot) = self.cells.get_mut(count) {
+                    *slot = c;
+                }
+                count += 1;
+            }
+        }
+        let list = self.cells.get_mut(..count).unwrap_or(&mut []);
+        heap_sort_descending(list);
+        self.candidate_count = count;
+        count
+    }
+
+    /// The sorted candidates (after [`Self::sort_candidates`]).
+    pub fn candidates(&self) -> &[Candidate] {
+        self.cells.get(..self.candidate_count).unwrap_or(&[])
+    }
+}
+
+/// `a` ranks before `b` (higher interest first, then row, then column).
+fn ranks_before(a: &Candidate, b: &Candidate) -> bool {
+    if a.interest != b.interest {
+        return a.interest > b.interest;
+    }
+    (a.y, a.x) < (b.y, b.x)
+}
+
+/// Moves element `root` down the heap of the first `end` elements (min-heap on the rank, so the
+/// final order is best first).
+fn sift_down(list: &mut [Candidate], mut root: usize, end: usize) {
+    for _ in 0..usize::BITS {
+        let left = 2 * root + 1;
+        if left >= end {
+            return;
+        }
+        let right = left + 1;
+        let mut child = left;
+        if right < end {
+            if let (Some(l), Some(r)) = (list.get(left), list.get(right)) {
+                // Min-heap by rank: the child that ranks later goes up.
+                if ranks_before(l, r) {
+                    child = right;
+                }
+            }
+        }
+        let (Some(c), Some(p)) = (list.get(child), list.get(root)) else {
+            return;
+        };
+        if ranks_before(c, p) {
+            return;
+        }
+        list.swap(root, child);
+        root = child;
+    }
+}
+
+/// In-place heap sort, best ranked first (bounded loops, no recursion).
+pub fn heap_sort_descending(list: &mut [Candidate]) {
+    let n = list.len();
+    for start in (0..n / 2).rev() {
+        sift_down(list, start, n);
+    }
+    for end in (1..n).rev() {
+        list.swap(0, end);
+        sift_down(list, 0, end);
+    }
+}
+
+/// Greedy selection (H04 sec. 2): walks the sorted candidates and keeps each one at least
+/// `min_distance_px` from every feature kept so far, until `out` is full. Returns the count.
+pub fn select_with_min_distance(
+    candidates: &[Candidate],
+    min_distance_px: f32,
+    out: &mut [(u16, u16)],
+) -> usize {
+    let min_d2 = min_distance_px * min_distance_px;
+    let mut count = 0usize;
+    for c in candidates {
+        if count >= out.len() {
+            break;
+        }
+        let far = out.get(..count).unwrap_or(&[]).iter().all(|&(x, y)| {
+            let dx = f32::from(x) - f32::from(c.x);
+            let dy = f32::from(y) - f32::from(c.y);
+            dx * dx + dy * dy >= min_d2
+        });
+        if far {
+            if let Some(slot) = out.get_mut(count) {
+                *slot = (c.x, c.y);
+                count += 1;
+            }
+        }
+    }
+    count
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rover_hal::IMAGE_PIXELS;
+    use std::{boxed::Box, vec::Vec};
+
+    #[test]
+    fn vo_1_forstner_finds_corners_not_edges() {
+        // Bright squares on a dark background: corners are features, edges and flats are not.
+        let mut img = vec![20u8; IMAGE_PIXELS];
+        let squares = [(100usize, 100usize), (300, 200), (500, 350)];
+        for &(x0, y0) in &squares {
+            for y in y0..y0 + 40 {
+                for x in x0..x0 + 40 {
+                    img[y * IMAGE_WIDTH_PX + x] = 200;
+                }
+            }
+        }
+        let image = Image::new(&img).unwrap();
+        let mut det = Box::new(ForstnerDetector::default());
+        let config = VoConfig::default();
+        for y in FIRST_ROW..END_ROW {
+            det.process_row(&image, y, &config);
+        }
+        let n = det.sort_candidates();
+        let mut out = [(0u16, 0u16); 20];
+        let k = select_with_min_distance(det.candidates(), 20.0, &mut out);
+        assert_eq!(k, 12, "{n} candidates");
+        for &(x, y) in &out[..k] {
+            let near_corner = squares.iter().any(|&(x0, y0)| {
+                [(x0, y0), (x0 + 39, y0), (x0, y0 + 39), (x0 + 39, y0 + 39)]
+                    .iter()
+                    .any(|&(cx, cy)| {
+                        (x as i32 - cx as i32).abs() <= 2 && (y as i32 - cy as i32).abs() <= 2
+                    })
+            });
+            assert!(near_corner, "({x},{y}) is not at a corner");
+        }
+        let sorted = det.candidates();
+        assert!(sorted.windows(2).all(|w| w[0].interest >= w[1].interest));
+    }
+
+    #[test]
+    fn vo_1_heap_sort_orders_and_min_distance_holds() {
+        let mut list: Vec<Candidate> = (0..500u16)
+            .map(|k| Candidate {
+                interest: ((k as u32 * 7919) % 1000) as f32 + 1.0,
+                x: (k * 13) % 640,
+                y: (k * 7) % 480,
+            })
+            .collect();
+        heap_sort_descending(&mut list);
+        assert!(list.windows(2).all(|w| !ranks_before(&w[1], &w[0])));
+        let mut out = [(0u16, 0u16); 100];
+        let k = select_with_min_distance(&list, 30.0, &mut out);
+        for i in 0..k {
+            for j in 0..i {
+                let dx = out[i].0 as f32 - out[j].0 as f32;
+                let dy = out[i].1 as f32 - out[j].1 as f32;
+                assert!(dx * dx + dy * dy >= 900.0);
+            }
+        }
+    }
+}

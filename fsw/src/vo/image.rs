@@ -1,0 +1,344 @@
+//! Borrowed 8-bit images, image checks, bilinear sampling and normalised cross-correlation.
+//!
+//! Pixel coordinates: x to the right (column), y down (row), the centre of pixel `(0, 0)` at
+//! `(0.0, 0.0)`. Every access is checked: a position outside the image is `None`, never a panic.
+
+use super::{VoConfig, VoError, TEMPLATE_HALF, TEMPLATE_PIXELS, TEMPLATE_SIDE};
+use rover_hal::{IMAGE_HEIGHT_PX, IMAGE_PIXELS, IMAGE_WIDTH_PX};
+
+/// A row-major 8-bit grey image of `IMAGE_WIDTH_PX x IMAGE_HEIGHT_PX` borrowed in place.
+#[derive(Debug, Clone, Copy)]
+pub struct Image<'a> {
+    data: &'a [u8],
+}
+
+/// A correlation template, row-major, [`TEMPLATE_SIDE`] square, grey levels.
+pub type Template = [u8; TEMPLATE_PIXELS];
+
+/// A template sampled at a sub-pixel position, grey levels.
+pub type TemplateF = [f32; TEMPLATE_PIXELS];
+
+impl<'a> Image<'a> {
+    /// Wrap a slice; [`VoError::WrongImageSize`] unless it holds exactly one image.
+    pub fn new(data: &'a [u8]) -> Result<Self, VoError> {
+        if data.len() == IMAGE_PIXELS {
+            Ok(Self { data })
+        } else {
+            Err(VoError::WrongImageSize)
+        }
+    }
+
+    /// Width, pixels.
+    pub const fn width(&self) -> usize {
+        IMAGE_WIDTH_PX
+    }
+
+    /// Height, pixels.
+    pub const fn height(&self) -> usize {
+        IMAGE_HEIGHT_PX
+    }
+
+    /// Row `y` as a slice, `None` outside the image.
+    pub fn row(&self, y: usize) -> Option<&'a [u8]> {
+        let start = y.checked_mul(IMAGE_WIDTH_PX)?;
+        self.data.get(start..start.checked_add(IMAGE_WIDTH_PX)?)
+    }
+
+    /// Pixel at integer `(x, y)`, `None` outside the image.
+    pub fn pixel(&self, x: i32, y: i32) -> Option<u8> {
+        let xu = usize::try_from(x).ok()?;
+        let yu = usize::try_from(y).ok()?;
+        if xu >= IMAGE_WIDTH_PX {
+            return None;
+        }
+        self.row(yu)?.get(xu).copied()
+    }
+
+    /// Bilinear grey level at `(x, y)` and its gradient `(dI/dx, dI/dy)` (the gradient of the
+    /// bilinear interpolant), `None` when the 2x2 neighbourhood leaves the image or `x, y` are not
+    /// finite.
+    pub fn bilinear(&self, x: f64, y: f64) -> Option<(f64, f64, f64)> {
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        // Non-negative and in range, so truncation is the floor.
+        if !(x >= 0.0 && y >= 0.0 && x < (IMAGE_WIDTH_PX - 1) as f64) {
+            return None;
+        }
+        if !(y < (IMAGE_HEIGHT_PX - 1) as f64) {
+            return None;
+        }
+        let (x0, y0) = (x as usize, y as usize);
+        let (x0f, y0f) = (x0 as f64, y0 as f64);
+        let r0 = self.row(y0)?;
+        let r1 = self.row(y0 + 1)?;
+        let p00 = f64::from(*r0.get(x0)?);
+        let p10 = f64::from(*r0.get(x0 + 1)?);
+        let p01 = f64::from(*r1.get(x0)?);
+        let p11 = f64::from(*r1.get(x0 + 1)?);
+        let fx = x - x0f;
+        let fy = y - y0f;
+        let top = p00 + fx * (p10 - p00);
+        let bottom = p01 + fx * (p11 - p01);
+        let value = top + fy * (bottom - top);
+        let gx = (1.0 - fy) * (p10 - p00) + fy * (p11 - p01);
+        let gy = bottom - top;
+        Some((value, gx, gy))
+    }
+
+    /// The template centred on integer `(x, y)`, `None` if it leaves the image.
+    pub fn template(&self, x: i32, y: i32) -> Option<Template> {
+        let half = TEMPLATE_HALF as i32;
+        let x0 = usize::try_from(x.checked_sub(half)?).ok()?;
+        let y0 = usize::try_from(y.checked_sub(half)?).ok()?;
+        let mut out = [0u8; TEMPLATE_PIXELS];
+        for (row_out, dy) in out.chunks_exact_mut(TEMPLATE_SIDE).zip(0..TEMPLATE_SIDE) {
+            let row = self.row(y0 + dy)?;
+            row_out.copy_from_slice(row.get(x0..x0 + TEMPLATE_SIDE)?);
+        }
+        Some(out)
+    }
+
+    /// The template centred on the sub-pixel position `(x, y)` by bilinear sampling, `None` if it
+    /// leaves the image.
+    pub fn template_f(&self, x: f64, y: f64) -> Option<TemplateF> {
+        let mut out = [0f32; TEMPLATE_PIXELS];
+        let half = TEMPLATE_HALF as f64;
+        for (k, value) in out.iter_mut().enumerate() {
+            let u = (k % TEMPLATE_SIDE) as f64 - half;
+            let v = (k / TEMPLATE_SIDE) as f64 - half;
+            *value = self.bilinear(x + u, y + v)?.0 as f32;
+        }
+        Some(out)
+    }
+
+    /// Checks one image for use by the VO: [`VoError::BlankImage`] if the grey-level standard
+    /// deviation is below `config.min_image_std`, [`VoError::SaturatedImage`] if more than
+    /// `config.max_clipped_fraction` of the pixels are 0 or 255. Samples every 4th pixel of every
+    /// 2nd row. Returns a checksum of the samples (FNV-1a, to detect a repeated frame).
+    pub fn check(&self, config: &VoConfig) -> Result<u64, VoError> {
+        let mut sum = 0u64;
+        let mut sum_sq = 0u64;
+        let mut count = 0u64;
+        let mut clipped = 0u64;
+        let mut hash = 0xcbf2_9ce4_8422_2325u64;
+        for y in (0..IMAGE_HEIGHT_PX).step_by(2) {
+            let row = self.row(y).ok_or(VoError::WrongImageSize)?;
+            for &p in row.iter().step_by(4) {
+                let v = u64::from(p);
+                sum += v;
+                sum_sq += v * v;
+                count += 1;
+                if p == 0 || p == 255 {
+                    clipped += 1;
+                }
+                hash = (hash ^ v).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+        let n = count.max(1) as f64;
+        let mean = sum as f64 / n;
+        let variance = (sum_sq as f64 / n - mean * mean).max(0.0);
+        if libm::sqrt(variance) < config.min_image_std {
+            return Err(VoError::BlankImage);
+        }
+        if clipped as f64 > config.max_clipped_fraction * n {
+            return Err(VoError::SaturatedImage);
+        }
+        Ok(hash)
+    }
+}
+
+/// Sums of a template for normalised cross-correlation: `(sum, n * sum_sq - sum^2)`.
+pub fn template_stats(template: &Template) -> (i64, i64) {
+    let mut s = 0i64;
+    let mut s2 = 0i64;
+    for &p in template.iter() {
+        let v = i64::from(p);
+        s += v;
+        s2 += v * v;
+    }
+    (s, TEMPLATE_PIXELS as i64 * s2 - s * s)
+}
+
+/// Zero-mean normalised cross-correlation (-1..1) of `template` (with its [`template_stats`])
+/// against the image window centred on integer `(x, y)`; `None` if the window leaves the image or
+/// either patch has no contrast.
+pub fn ncc(image: &Image, template: &Template, stats: (i64, i64), x: i32, y: i32) -> Option<f32> {
+    let half = TEMPLATE_HALF as i32;
+    let x0 = usize::try_from(x.checked_sub(half)?).ok()?;
+    let y0 = usize::try_from(y.checked_sub(half)?).ok()?;
+    let mut s = 0u32;
+    let mut s2 = 0u32;
+    let mut st = 0u32;
+    for (t_row, dy) in template.chunks_exact(TEMPLATE_SIDE).zip(0..TEMPLATE_SIDE) {
+        let row = image.row(y0 + dy)?.get(x0..x0 + TEMPLATE_SIDE)?;
+        for (&p, &t) in row.iter().zip(t_row.iter()) {
+            let p = u32::from(p);
+            s += p;
+            s2 += p * p;
+            st += p * u32::from(t);
+        }
+    }
+    let n = TEMPLATE_PIXELS as i64;
+    let (ts, tvar) = stats;
+    let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
+    if ivar <= 0 || tvar <= 0 {
+        return None;
+    }
+    let cov = n * i64::from(st) - ts * i64::from(s);
+    let denominator = libm::sqrt(ivar as f64 * tvar as f64);
+    Some((cov as f64 / denominator) as f32)
+}
+
+/// Largest number of columns [`ncc_scan`] covers in one call.
+pub const SCAN_MAX_COLUMNS: usize = 256;
+
+/// Normalised cross-correlation of `template` along image row `y` at the columns
+/// `x_first + k * step` for `k` in `0..out.len()`, written to `out[k]` (`-inf` where the window
+/// leaves the image, has no contrast, or the span exceeds [`SCAN_MAX_COLUMNS`]). Same values as
+/// [`ncc`]; the window sums come from column sums computed once per call.
+pub fn ncc_scan(
+    image: &Image,
+    template: &Template,
+    stats: (i64, i64),
+    y: i32,
+    x_first: i32,
+    step: usize,
+    out: &mut [f32],
+) {
+    out.iter_mut().for_each(|v| *v = f32::NEG_INFINITY);
+    let half = TEMPLATE_HALF as i32;
+    let Some(y0) = y.checked_sub(half).and_then(|v| usize::try_from(v).ok()) else {
+        return;
+    };
+    let mut rows: [&[u8]; TEMPLATE_SIDE] = [&[]; TEMPLATE_SIDE];
+    for (dy, slot) in rows.iter_mut().enumerate() {
+        match image.row(y0 + dy) {
+            Some(r) => *slot = r,
+            None => return,
+        }
+    }
+    // Columns [c_first, c_end) of the image covered by all windows, clipped to the image.
+    let span = out.len().saturating_sub(1).saturating_mul(step) + TEMPLATE_SIDE;
+    let c_first = x_first.saturating_sub(half);
+    let c_lo = c_first.max(0) as usize;
+    let c_hi = (i64::from(c_first) + span as i64).clamp(0, IMAGE_WIDTH_PX as i64) as usize;
+    if span > SCAN_MAX_COLUMNS || c_lo >= c_hi {
+        return;
+    }
+    let mut col_s = [0u32; SCAN_MAX_COLUMNS];
+    let mut col_s2 = [0u32; SCAN_MAX_COLUMNS];
+    for row in rows.iter() {
+        let Some(pixels) = row.get(c_lo..c_hi) else {
+            return;
+        };
+        for ((s, s2), &p) in col_s.iter_mut().zip(col_s2.iter_mut()).zip(pixels.iter()) {
+            let p = u32::from(p);
+            *s += p;
+            *s2 += p * p;
+        }
+    }
+    let n = TEMPLATE_PIXELS as i64;
+    let (ts, tvar) = stats;
+    if tvar <= 0 {
+        return;
+    }
+    for (k, value) in out.iter_mut().enumerate() {
+        let x0 = i64::from(c_first) + (k * step) as i64;
+        if x0 < c_lo as i64 || x0 + TEMPLATE_SIDE as i64 > c_hi as i64 {
+            continue;
+        }
+        let x0 = x0 as usize;
+        let local = x0 - c_lo;
+        let (Some(cs), Some(cs2)) = (
+            col_s.get(local..local + TEMPLATE_SIDE),
+            col_s2.get(local..local + TEMPLATE_SIDE),
+        ) else {
+            continue;
+        };
+        let s: u32 = cs.iter().sum();
+        let s2: u32 = cs2.iter().sum();
+        let mut st = 0u32;
+        for (row, t_row) in rows.iter().zip(template.chunks_exact(TEMPLATE_SIDE)) {
+            let Some(pixels) = row.get(x0..x0 + TEMPLATE_SIDE) else {
+                continue;
+            };
+            st += pixels
+                .iter()
+                .zip(t_row.iter())
+                .map(|(&p, &t)| u32::from(p) * u32::from(t))
+                .sum::<u32>();
+        }
+        let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
+        if ivar <= 0 {
+            continue;
+        }
+        let cov = n * i64::from(st) - ts * i64::from(s);
+        *value = (cov as f64 / libm::sqrt(ivar as f64 * tvar as f64)) as f32;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp() -> [u8; IMAGE_PIXELS] {
+        let mut img = [0u8; IMAGE_PIXELS];
+        for (k, p) in img.iter_mut().enumerate() {
+            let (x, y) = (k % IMAGE_WIDTH_PX, k / IMAGE_WIDTH_PX);
+            *p = ((x + 2 * y) % 251) as u8;
+        }
+        img
+    }
+
+    #[test]
+    fn vo_11_image_access_is_checked() {
+        let img = ramp();
+        let image = Image::new(&img).unwrap();
+        assert_eq!(image.pixel(3, 2), Some(7));
+        assert_eq!(image.pixel(-1, 0), None);
+        assert_eq!(image.pixel(640, 0), None);
+        assert_eq!(image.pixel(0, 480), None);
+        assert!(image.bilinear(639.0, 0.0).is_none());
+        assert!(image.bilinear(f64::NAN, 0.0).is_none());
+        let (v, gx, gy) = image.bilinear(10.25, 20.5).unwrap();
+        assert!((v - (10.25 + 41.0)).abs() < 1e-12);
+        assert!((gx - 1.0).abs() < 1e-12 && (gy - 2.0).abs() < 1e-12);
+        assert!(image.template(5, 5).is_some());
+        assert!(image.template(4, 5).is_none());
+        assert!(image.template(634, 474).is_some());
+        assert!(image.template(635, 474).is_none());
+        assert_eq!(Image::new(&img[1..]).err(), Some(VoError::WrongImageSize));
+    }
+
+    #[test]
+    fn vo_11_ncc_is_one_on_itself() {
+        let img = ramp();
+        let image = Image::new(&img).unwrap();
+        let t = image.template(100, 100).unwrap();
+        let stats = template_stats(&t);
+        let c = ncc(&image, &t, stats, 100, 100).unwrap();
+        assert!((c - 1.0).abs() < 1e-6);
+        assert!(ncc(&image, &t, stats, 2, 100).is_none());
+    }
+
+    #[test]
+    fn vo_11_ncc_scan_equals_ncc() {
+        let mut img = ramp();
+        for (k, p) in img.iter_mut().enumerate() {
+            *p = p.wrapping_mul(37).wrapping_add((k / 7 % 13) as u8);
+        }
+        let image = Image::new(&img).unwrap();
+        let t = image.template(300, 200).unwrap();
+        let stats = template_stats(&t);
+        for (y, x_first, step) in [(200, 250, 1usize), (203, -3, 2), (470, 600, 2), (4, 10, 1)] {
+            let mut out = [0f32; 60];
+            ncc_scan(&image, &t, stats, y, x_first, step, &mut out);
+            for (k, &v) in out.iter().enumerate() {
+                let x = x_first + (k * step) as i32;
+                let expected = ncc(&image, &t, stats, x, y).unwrap_or(f32::NEG_INFINITY);
+                assert_eq!(v, expected, "y {y} x {x}");
+            }
+        }
+    }
+}

@@ -1,0 +1,545 @@
+//! The resumable visual odometry pipeline: [`VisualOdometry`] owns every buffer (capacity `N`
+//! features) and advances one update by a bounded number of work items per
+//! [`VisualOdometry::step`], so the executive can run it in the slack of its minor frames.
+//!
+//! Work items (each bounded, see `docs/vo.md`): image check (1), track and stereo match one
+//! previous feature (1 each), one least-median-of-squares hypothesis (1 each), one
+//! maximum-likelihood iteration (1 each), one image row of the Forstner operator (1 each, 464
+//! rows), sort and select the features (1), stereo match one new feature (1 each), finish (1).
+//! The sequence of items depends only on the input, so the number of steps is deterministic.
+
+use super::features::{select_with_min_distance, ForstnerDetector, END_ROW, FIRST_ROW};
+use super::image::{Image, Template};
+use super::motion::{
+    finish_estimate, inlier_gate, mark_inliers, ml_iteration, relative_pose, CameraMount,
+    Correspondence, Lmeds, MotionEstimate, RigidMotion, ML_ROUNDS,
+};
+use super::stereo::{match_and_triangulate, triangulate, PinholeStereo};
+use super::track::{refine_warp, search_window, Affine2, WarpModel};
+use super::{VoConfig, VoError, VoOutput, VoQuality, TEMPLATE_PIXELS};
+use crate::types::{Mat3, RelativePose, Vec3};
+use rover_hal::{StereoCalibration, StereoFrame};
+
+/// Iterations of the maximum-likelihood rounds are capped at this many per round.
+const MAX_ML_ITERATIONS: u8 = 50;
+
+/// A keyframe feature: its stereo pixels and its left template.
+#[derive(Debug, Clone, Copy)]
+struct KeyFeature {
+    pixels: [f32; 4],
+    template: Template,
+}
+
+impl Default for KeyFeature {
+    fn default() -> Self {
+        Self {
+            pixels: [0.0; 4],
+            template: [0; TEMPLATE_PIXELS],
+        }
+    }
+}
+
+/// Where an update is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    Idle,
+    Check,
+    Track { next: usize },
+    Hypotheses { done: u16 },
+    Refine { round: u8, iteration: u8 },
+    Detect { row: usize },
+    Select,
+    StereoNew { next: usize },
+    Finish,
+}
+
+/// What [`VisualOdometry::step`] reports.
+// The result is returned by value: there is no heap to box it on.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Progress {
+    /// The update is not finished; call `step` again with the same frame.
+    Working {
+        /// Work items done so far in this update.
+        items: u32,
+    },
+    /// The update is finished (the pipeline is idle again).
+    Finished(Result<VoOutput, VoError>),
+}
+
+/// Stereo visual odometry with all buffers preallocated for up to `N` features (H04 sec. 2).
+///
+/// Use: [`Self::start`] with a stereo frame and the motion prior from vehicle odometry, then
+/// [`Self::step`] with the same frame until it reports [`Progress::Finished`] (or
+/// [`Self::run_to_completion`]). The first frame (or the first after a failure) only builds the
+/// keyframe and reports no pose.
+#[derive(Debug, Clone)]
+pub struct VisualOdometry<const N: usize> {
+    config: VoConfig,
+    camera: PinholeStereo,
+    mount: CameraMount,
+    key: [KeyFeature; N],
+    key_count: usize,
+    key_valid: bool,
+    key_t_us: u64,
+    key_checksum: u64,
+    pairs: [Correspondence; N],
+    pair_count: usize,
+    inliers: [bool; N],
+    scratch: [f64; N],
+    selected: [(u16, u16); N],
+    selected_count: usize,
+    detector: ForstnerDetector,
+    lmeds: Lmeds,
+    motion: RigidMotion,
+    estimate: Option<MotionEstimate>,
+    pending: Option<VoError>,
+    phase: Phase,
+    frame_t_us: u64,
+    frame_sequence: u32,
+    frame_checksum: u64,
+    quality: VoQuality,
+}
+
+fn zero_correspondence() -> Correspondence {
+    Correspondence {
+        q_p: Vec3::zeros(),
+        cov_p: Mat3::zeros(),
+        q_c: Vec3::zeros(),
+        cov_c: Mat3::zeros(),
+        info_prior: Mat3::zeros(),
+    }
+}
+
+fn rotation_and_translation_finite(prior: &RelativePose) -> bool {
+    prior.rot_0_1.coords.iter().all(|v| v.is_finite())
+        && prior.trans_0_1_m.iter().all(|v| v.is_finite())
+        && (prior.rot_0_1.coords.norm() - 1.0).abs() < 1e-6
+}
+
+impl<const N: usize> VisualOdometry<N> {
+    /// A pipeline for `calibration` with `config`; [`VoError::InvalidConfig`] or
+    /// [`VoError::InvalidCalibration`] when they are out of range, [`VoError::InvalidConfig`]
+    /// when `N` is below 3 or above `u16::MAX`.
+    pub fn new(config: VoConfig, calibration: &StereoCalibration) -> Result<Self, VoError> {
+        if !config.is_valid() || N < 3 || N > usize::from(u16::MAX) {
+            return Err(VoError::InvalidConfig);
+        }
+        Ok(Self {
+            config,
+            camera: PinholeStereo::from_calibration(calibration)?,
+            mount: CameraMount::from_calibration(calibration)?,
+            key: [KeyFeature::default(); N],
+            key_count: 0,
+            key_valid: false,
+            key_t_us: 0,
+            key_checksum: 0,
+            pairs: [zero_correspondence(); N],
+            pair_count: 0,
+            inliers: [false; N],
+            scratch: [0.0; N],
+            selected: [(0, 0); N],
+            selected_count: 0,
+            detector: ForstnerDetector::default(),
+            lmeds: Lmeds::new(config.lmeds_seed),
+            motion: RigidMotion::identity(),
+            estimate: None,
+            pending: None,
+            phase: Phase::Idle,
+            frame_t_us: 0,
+            frame_sequence: 0,
+            frame_checksum: 0,
+            quality: VoQuality::default(),
+        })
+    }
+
+    /// True while an update is running.
+    pub fn is_busy(&self) -> bool {
+        self.phase != Phase::Idle
+    }
+
+    /// Number of features in the keyframe (0 without a keyframe).
+    pub fn keyframe_features(&self) -> usize {
+        if self.key_valid {
+            self.key_count
+        } else {
+            0
+        }
+    }
+
+    /// Forgets the keyframe and abandons a running update.
+    pub fn reset(&mut self) {
+        self.key_valid = false;
+        self.key_count = 0;
+        self.phase = Phase::Idle;
+    }
+
+    /// Starts an update with `frame` and the rover motion `prior` since the keyframe (from
+    /// vehicle odometry; `None` means no motion). Errors: [`VoError::Busy`],
+    /// [`VoError::WrongImageSize`], [`VoError::TimeNotIncreasing`], [`VoError::InvalidPrior`]
+    /// (non-finite or non-unit rotation, non-finite translation, `t1_us < t0_us`).
+    pub fn start(
+        &mut self,
+        frame: &StereoFrame,
+        prior: Option<&RelativePose>,
+    ) -> Result<(), VoError> {
+        if self.is_busy() {
+            return Err(VoError::Busy);
+        }
+        Image::new(frame.left)?;
+        Image::new(frame.right)?;
+        if self.key_valid && frame.capture_t_us <= self.key_t_us {
+            return Err(VoError::TimeNotIncreasing);
+        }
+        self.motion = match prior {
+            Some(p) => {
+                if !rotation_and_translation_finite(p) || p.t1_us < p.t0_us {
+                    return Err(VoError::InvalidPrior);
+                }
+                let rot = p.rot_0_1.to_rotation_matrix().into_inner();
+                self.mount.camera_motion(&rot, &p.trans_0_1_m)
+            }
+            None => RigidMotion::identity(),
+        };
+        self.frame_t_us = frame.capture_t_us;
+        self.frame_sequence = frame.sequence;
+        self.quality = VoQuality::default();
+        self.pair_count = 0;
+        self.selected_count = 0;
+        self.estimate = None;
+        self.pending = None;
+        self.lmeds = Lmeds::new(self.config.lmeds_seed);
+        self.phase = Phase::Check;
+        Ok(())
+    }
+
+    /// Advances the running update by at most `quantum` work items (at least one). `frame`
+    /// must be the frame given to [`Self::start`] ([`VoError::FrameChanged`] otherwise, which
+    /// abandons the update).
+    pub fn step(&mut self, frame: &StereoFrame, quantum: u32) -> Progress {
+        if self.phase == Phase::Idle {
+            return Progress::Finished(Err(VoError::NotStarted));
+        }
+        let images = (Image::new(frame.left), Image::new(frame.right));
+        let (Ok(left), Ok(right)) = images else {
+            self.phase = Phase::Idle;
+            return Progress::Finished(Err(VoError::FrameChanged));
+        };
+        if frame.capture_t_us != self.frame_t_us || frame.sequence != self.frame_sequence {
+            self.phase = Phase::Idle;
+            return Progress::Finished(Err(VoError::FrameChanged));
+        }
+        for _ in 0..quantum.max(1) {
+            self.quality.work_items = self.quality.work_items.saturating_add(1);
+            if let Some(result) = self.work_item(&left, &right) {
+                self.phase = Phase::Idle;
+                return Progress::Finished(result);
+            }
+        }
+        Progress::Working {
+            items: self.quality.work_items,
+        }
+    }
+
+    /// Runs a whole update ([`Self::start`], then [`Self::step`] until finished). For tests and
+    /// for callers without a time budget.
+    pub fn run_to_completion(
+        &mut self,
+        frame: &StereoFrame,
+        prior: Option<&RelativePose>,
+    ) -> Result<VoOutput, VoError> {
+        self.start(frame, prior)?;
+        // Every update finishes within this many items (see the module doc).
+        let bound = 4 * N
+            + usize::from(super::MAX_HYPOTHESES)
+            + (usize::from(ML_ROUNDS) + 1) * usize::from(MAX_ML_ITERATIONS)
+            + END_ROW
+            + 8;
+        for _ in 0..bound {
+            if let Progress::Finished(result) = self.step(frame, 64) {
+                return result;
+            }
+        }
+        self.phase = Phase::Idle;
+        Err(VoError::NonFinite)
+    }
+
+    /// Records a failure of the motion stage and goes on to build the new keyframe.
+    fn fail_motion(&mut self, error: VoError) {
+        self.pending = Some(error);
+        self.phase = Phase::Detect { row: FIRST_ROW };
+    }
+
+    /// One work item. Returns the result when the update is finished.
+    fn work_item(&mut self, left: &Image, right: &Image) -> Option<Result<VoOutput, VoError>> {
+        match self.phase {
+            Phase::Idle => return Some(Err(VoError::NotStarted)),
+            Phase::Check => {
+                let checks = left.check(&self.config).and_then(|sum| {
+                    right.check(&self.config)?;
+                    Ok(sum)
+                });
+                match checks {
+                    Ok(sum) if self.key_valid && sum == self.key_checksum => {
+                        self.key_valid = false;
+                        return Some(Err(VoError::RepeatedFrame));
+                    }
+                    Ok(sum) => {
+                        self.frame_checksum = sum;
+                        self.phase = if self.key_valid {
+                            Phase::Track { next: 0 }
+                        } else {
+                            Phase::Detect { row: FIRST_ROW }
+                        };
+                    }
+                    Err(e) => {
+                        self.key_valid = false;
+                        return Some(Err(e));
+                    }
+                }
+            }
+            Phase::Track { next } => {
+                if next < self.key_count.min(N) {
+                    self.track_feature(next, left, right);
+                    self.phase = Phase::Track { next: next + 1 };
+                } else {
+                    self.quality.tracked = self.pair_count as u16;
+                    if self.pair_count < usize::from(self.config.min_tracked) {
+                        self.fail_motion(VoError::TooFewTracked {
+                            found: self.pair_count as u16,
+                        });
+                    } else {
+                        self.phase = Phase::Hypotheses { done: 0 };
+                    }
+                }
+            }
+            Phase::Hypotheses { done } => {
+                if done < self.config.lmeds_hypotheses {
+                    let n = self.pair_count.min(N);
+                    let pairs = self.pairs.get(..n).unwrap_or(&[]);
+                    self.lmeds.hypothesis(pairs, &mut self.scratch);
+                    self.phase = Phase::Hypotheses { done: done + 1 };
+                } else {
+                    self.after_hypotheses();
+                }
+            }
+            Phase::Refine { round, iteration } => self.refine_item(round, iteration),
+            Phase::Detect { row } => {
+                if row < END_ROW {
+                    self.detector.process_row(left, row, &self.config);
+                    self.phase = Phase::Detect { row: row + 1 };
+                } else {
+                    self.phase = Phase::Select;
+                }
+            }
+            Phase::Select => {
+                self.detector.sort_candidates();
+                let count = select_with_min_distance(
+                    self.detector.candidates(),
+                    self.config.min_distance_px,
+                    &mut self.selected,
+                );
+                self.selected_count = count;
+                self.quality.features = count as u16;
+                self.key_valid = false;
+                self.key_count = 0;
+                if count < usize::from(self.config.min_features) {
+                    let e = VoError::TooFewFeatures {
+                        found: count as u16,
+                    };
+                    return Some(Err(self.pending.unwrap_or(e)));
+                }
+                self.phase = Phase::StereoNew { next: 0 };
+            }
+            Phase::StereoNew { next } => {
+                if next < self.selected_count.min(N) {
+                    self.stereo_new_feature(next, left, right);
+                    self.phase = Phase::StereoNew { next: next + 1 };
+                } else {
+                    self.phase = Phase::Finish;
+                }
+            }
+            Phase::Finish => return Some(self.finish()),
+        }
+        None
+    }
+
+    /// Tracks keyframe feature `index` into the new pair and stores the correspondence.
+    fn track_feature(&mut self, index: usize, left: &Image, right: &Image) {
+        let Some(feature) = self.key.get(index).copied() else {
+            return;
+        };
+        let [xl, yl, xr, yr] = feature.pixels.map(f64::from);
+        let Ok(previous) = triangulate(&self.camera, [xl, yl, xr, yr], self.config.sigma_px) else {
+            return;
+        };
+        // Projection with the motion prior (eq. 11 without noise).
+        let predicted = self.motion.rotation * previous.position_m + self.motion.translation_m;
+        let Some((xp, yp)) = self.camera.project_left(&predicted) else {
+            return;
+        };
+        if !(xp.abs() < 1e5 && yp.abs() < 1e5) {
+            return;
+        }
+        let radius = i32::from(self.config.search_radius_px);
+        let (x0, y0) = (libm::round(xp) as i32, libm::round(yp) as i32);
+        let Some((xs, ys, score)) = search_window(&feature.template, left, x0, y0, radius) else {
+            return;
+        };
+        if score < self.config.min_correlation {
+            return;
+        }
+        let template_f = feature.template.map(f32::from);
+        let init = Affine2::translation(f64::from(xs), f64::from(ys));
+        let Some(refined) = refine_warp(&template_f, left, init, WarpModel::Affine, 10) else {
+            return;
+        };
+        let (xt, yt) = (refined.warp.c, refined.warp.f);
+        let shift = libm::hypot(xt - f64::from(xs), yt - f64::from(ys));
+        if !(shift <= self.config.max_refine_shift_px) {
+            return;
+        }
+        let Ok((current, _)) =
+            match_and_triangulate(&self.camera, left, right, xt, yt, &self.config)
+        else {
+            return;
+        };
+        let pair = Correspondence::new(
+            previous.position_m,
+            previous.covariance,
+            current.position_m,
+            current.covariance,
+            &self.motion.rotation,
+        );
+        if let (Some(pair), Some(slot)) = (pair, self.pairs.get_mut(self.pair_count)) {
+            *slot = pair;
+            self.pair_count += 1;
+        }
+    }
+
+    /// Ends the least-median-of-squares search: best hypothesis, inlier gate.
+    fn after_hypotheses(&mut self) {
+        let Some((motion, median)) = self.lmeds.best() else {
+            self.fail_motion(VoError::DegenerateGeometry);
+            return;
+        };
+        self.motion = motion;
+        let gate = inlier_gate(self.config.inlier_gate_chi2, median);
+        let n = self.pair_count.min(N);
+        let pairs = self.pairs.get(..n).unwrap_or(&[]);
+        let count = mark_inliers(pairs, &self.motion, gate, &mut self.inliers);
+        self.quality.inliers = count;
+        if count < self.config.min_inliers {
+            self.fail_motion(VoError::TooFewInliers { found: count });
+        } else {
+            self.phase = Phase::Refine {
+                round: 0,
+                iteration: 0,
+            };
+        }
+    }
+
+    /// One maximum-likelihood iteration (eq. 11); `ML_ROUNDS` rounds with re-gating between; the
+    /// last item evaluates the covariance at the converged motion.
+    fn refine_item(&mut self, round: u8, iteration: u8) {
+        let n = self.pair_count.min(N);
+        let pairs = self.pairs.get(..n).unwrap_or(&[]);
+        let inliers = self.inliers.get(..n).unwrap_or(&[]);
+        let it = match ml_iteration(pairs, inliers, &self.motion) {
+            Ok(it) => it,
+            Err(e) => return self.fail_motion(e),
+        };
+        let max_iterations = self.config.ml_iterations.min(MAX_ML_ITERATIONS);
+        if round >= ML_ROUNDS {
+            // Covariance and quality at the converged motion (the update is not applied).
+            match finish_estimate(self.motion, &it) {
+                Ok(estimate) => {
+                    self.quality.inliers = estimate.inliers;
+                    self.quality.residual_rms_m = estimate.residual_rms_m;
+                    self.quality.chi2_per_dof = estimate.chi2_per_dof;
+                    self.estimate = Some(estimate);
+                    self.phase = Phase::Detect { row: FIRST_ROW };
+                }
+                Err(e) => self.fail_motion(e),
+            }
+            return;
+        }
+        self.motion = it.motion;
+        let next = iteration.saturating_add(1);
+        if it.step >= 1e-12 && next < max_iterations {
+            self.phase = Phase::Refine {
+                round,
+                iteration: next,
+            };
+            return;
+        }
+        if round + 1 < ML_ROUNDS {
+            let gate = self.config.inlier_gate_chi2;
+            let count = mark_inliers(pairs, &self.motion, gate, &mut self.inliers);
+            self.quality.inliers = count;
+            if count < self.config.min_inliers {
+                return self.fail_motion(VoError::TooFewInliers { found: count });
+            }
+        }
+        self.phase = Phase::Refine {
+            round: round + 1,
+            iteration: 0,
+        };
+    }
+
+    /// Stereo matches selected feature `index` of the new left image into the keyframe.
+    fn stereo_new_feature(&mut self, index: usize, left: &Image, right: &Image) {
+        let Some(&(x, y)) = self.selected.get(index) else {
+            return;
+        };
+        let (xl, yl) = (f64::from(x), f64::from(y));
+        let Ok((_, (xr, yr))) =
+            match_and_triangulate(&self.camera, left, right, xl, yl, &self.config)
+        else {
+            return;
+        };
+        let Some(template) = left.template(i32::from(x), i32::from(y)) else {
+            return;
+        };
+        if let Some(slot) = self.key.get_mut(self.key_count) {
+            *slot = KeyFeature {
+                pixels: [xl as f32, yl as f32, xr as f32, yr as f32],
+                template,
+            };
+            self.key_count += 1;
+        }
+    }
+
+    /// Commits the new keyframe and builds the output.
+    fn finish(&mut self) -> Result<VoOutput, VoError> {
+        self.quality.stereo_matches = self.key_count as u16;
+        let t0_us = self.key_t_us;
+        let had_keyframe_motion = self.estimate;
+        if self.key_count < usize::from(self.config.min_matches) {
+            self.key_valid = false;
+            let e = VoError::TooFewMatches {
+                found: self.key_count as u16,
+            };
+            return Err(self.pending.unwrap_or(e));
+        }
+        self.key_valid = true;
+        self.key_t_us = self.frame_t_us;
+        self.key_checksum = self.frame_checksum;
+        if let Some(e) = self.pending {
+            return Err(e);
+        }
+        let pose = match had_keyframe_motion {
+            Some(estimate) => Some(relative_pose(
+                &self.mount,
+                &estimate,
+                t0_us,
+                self.frame_t_us,
+            )?),
+            None => None,
+        };
+        Ok(VoOutput {
+            pose,
+            quality: self.quality,
+        })
+    }
+}

@@ -1,0 +1,404 @@
+//! Stereo matching and ray-gap triangulation with covariance (H04 sec. 2 "Feature Gap Analysis
+//! and Covariance Computation", eq. 1-8; H05 sec. II.B).
+//!
+//! All geometry is in the left camera frame `K` (x right, y down, z optical axis); the left
+//! camera centre is `C1 = 0` and the right one `C2 = (baseline, 0, 0)`.
+
+use super::image::{ncc_scan, template_stats, Image};
+use super::track::{refine_warp, Affine2, WarpModel};
+use super::{VoConfig, VoError, MAX_DISPARITY_PX};
+use crate::types::{Mat3, Vec3};
+use nalgebra::{Matrix3x4, Vector3};
+use rover_hal::StereoCalibration;
+
+/// Intrinsics of a rectified pair (both cameras identical), pixels and metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PinholeStereo {
+    /// Focal length along x, pixels.
+    pub fx_px: f64,
+    /// Focal length along y, pixels.
+    pub fy_px: f64,
+    /// Principal point x, pixels.
+    pub cx_px: f64,
+    /// Principal point y, pixels.
+    pub cy_px: f64,
+    /// Baseline, m (right camera at `+baseline_m` along `K`'s x).
+    pub baseline_m: f64,
+}
+
+impl PinholeStereo {
+    /// The intrinsics of a calibration; [`VoError::InvalidCalibration`] for non-finite or
+    /// non-positive focal lengths or baseline.
+    pub fn from_calibration(c: &StereoCalibration) -> Result<Self, VoError> {
+        let s = Self {
+            fx_px: c.fx_px,
+            fy_px: c.fy_px,
+            cx_px: c.cx_px,
+            cy_px: c.cy_px,
+            baseline_m: c.baseline_m,
+        };
+        let finite = [s.fx_px, s.fy_px, s.cx_px, s.cy_px, s.baseline_m]
+            .iter()
+            .all(|v| v.is_finite());
+        if finite && s.fx_px > 0.0 && s.fy_px > 0.0 && s.baseline_m > 0.0 {
+            Ok(s)
+        } else {
+            Err(VoError::InvalidCalibration)
+        }
+    }
+
+    /// Pinhole projection of a point in `K` into the left image `(x, y)` pixels, `None` behind
+    /// the camera (`z <= 1e-6 m`).
+    pub fn project_left(&self, p: &Vec3) -> Option<(f64, f64)> {
+        if !(p.z > 1e-6) {
+            return None;
+        }
+        Some((
+            self.cx_px + self.fx_px * p.x / p.z,
+            self.cy_px + self.fy_px * p.y / p.z,
+        ))
+    }
+
+    /// Unit ray through pixel `(x, y)` and its derivatives with respect to `x` and `y`.
+    fn ray(&self, x: f64, y: f64) -> (Vec3, Vec3, Vec3) {
+        let v = Vec3::new(
+            (x - self.cx_px) / self.fx_px,
+            (y - self.cy_px) / self.fy_px,
+            1.0,
+        );
+        let norm = v.norm();
+        let r = v / norm;
+        // d(v/|v|) = (dv - r (r . dv)) / |v|
+        let dvx = Vec3::new(1.0 / self.fx_px, 0.0, 0.0);
+        let dvy = Vec3::new(0.0, 1.0 / self.fy_px, 0.0);
+        let drx = (dvx - r * r.dot(&dvx)) / norm;
+        let dry = (dvy - r * r.dot(&dvy)) / norm;
+        (r, drx, dry)
+    }
+}
+
+/// A triangulated feature in the left camera frame `K`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StereoPoint {
+    /// Position `P` (eq. 4), m.
+    pub position_m: Vec3,
+    /// Covariance of `P` (eq. 8 plus the gap term), m^2.
+    pub covariance: Mat3,
+    /// Gap: shortest distance between the two rays, m.
+    pub gap_m: f64,
+}
+
+/// Why a feature was not stereo matched or triangulated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StereoReject {
+    /// The template or the search leaves the image.
+    OutOfImage,
+    /// The best correlation is below the threshold.
+    WeakCorrelation,
+    /// Another disparity correlates almost as well.
+    Ambiguous,
+    /// The sub-pixel refinement failed or moved too far (or off the row).
+    RefinementFailed,
+    /// The rays are (nearly) parallel or meet behind the cameras.
+    Degenerate,
+    /// The ray gap is too large.
+    LargeGap,
+    /// The point is outside the configured range.
+    OutOfRange,
+    /// A non-finite number.
+    NonFinite,
+}
+
+/// Eq. 1-8 (H04): triangulates the left pixel `(xl, yl)` and right pixel `(xr, yr)` as the
+/// midpoint of the closest points of the two rays (eq. 1-4) and propagates the pixel
+/// covariance `sigma_px^2 I` of both images through the Jacobian `P'` of eq. 5-7 (eq. 8). The
+/// gap enters the error model as an isotropic variance `(gap / 2)^2`.
+pub fn triangulate(
+    cam: &PinholeStereo,
+    pixels: [f64; 4],
+    sigma_px: f64,
+) -> Result<StereoPoint, StereoReject> {
+    let [xl, yl, xr, yr] = pixels;
+    let b = Vec3::new(cam.baseline_m, 0.0, 0.0); // B = C2 - C1
+    let (r1, dr1x, dr1y) = cam.ray(xl, yl);
+    let (r2, dr2x, dr2y) = cam.ray(xr, yr);
+    let g = r1.dot(&r2); // G
+    let denominator = 1.0 - g * g;
+    if !(denominator > 1e-12) {
+        return Err(StereoReject::Degenerate);
+    }
+    let b_r1 = b.dot(&r1);
+    let b_r2 = b.dot(&r2);
+    let numerator = b_r1 - b_r2 * g;
+    let m1 = numerator / denominator; // eq. 3
+    let m2 = g * m1 - b_r2; // eq. 3
+    if !(m1 > 0.0 && m2 > 0.0) {
+        return Err(StereoReject::Degenerate);
+    }
+    let p1 = r1 * m1; // eq. 1, C1 = 0
+    let p2 = b + r2 * m2; // eq. 1
+    let position = (p1 + p2) * 0.5; // eq. 4
+    let gap = (p2 - p1).norm();
+    // Jacobian P' with respect to (xl, yl, xr, yr), eq. 5-7.
+    let zero = Vec3::zeros();
+    let d_r1 = [dr1x, dr1y, zero, zero];
+    let d_r2 = [zero, zero, dr2x, dr2y];
+    let mut jacobian = Matrix3x4::<f64>::zeros();
+    for (k, (dr1, dr2)) in d_r1.iter().zip(d_r2.iter()).enumerate() {
+        let f = dr1.dot(&r2) + r1.dot(dr2); // F
+        let d_numerator = b.dot(dr1) - b.dot(dr2) * g - b_r2 * f;
+        let m1_d =
+            (d_numerator * denominator + 2.0 * numerator * g * f) / (denominator * denominator); // eq. 5
+        let m2_d = g * m1_d + f * m1 - b.dot(dr2); // eq. 6
+        let p_d = (dr1 * m1 + r1 * m1_d + dr2 * m2 + r2 * m2_d) * 0.5; // eq. 7
+        jacobian.set_column(k, &p_d);
+    }
+    let variance = sigma_px * sigma_px;
+    // eq. 8 with Sigma_l = Sigma_r = sigma^2 I.
+    let covariance =
+        jacobian * jacobian.transpose() * variance + Mat3::identity() * (0.25 * gap * gap);
+    let finite = position.iter().all(|v| v.is_finite())
+        && covariance.iter().all(|v| v.is_finite())
+        && gap.is_finite();
+    if !finite {
+        return Err(StereoReject::NonFinite);
+    }
+    Ok(StereoPoint {
+        position_m: position,
+        covariance,
+        gap_m: gap,
+    })
+}
+
+/// Checks a triangulated point against the gap and range limits of `config` (H04: "features
+/// with large gaps are eliminated").
+pub fn accept_point(
+    cam: &PinholeStereo,
+    point: &StereoPoint,
+    config: &VoConfig,
+) -> Result<(), StereoReject> {
+    let range = point.position_m.norm();
+    if !(range >= config.min_range_m && range <= config.max_range_m) {
+        return Err(StereoReject::OutOfRange);
+    }
+    if point.gap_m > config.max_gap_px * range / cam.fy_px.min(cam.fx_px) {
+        return Err(StereoReject::LargeGap);
+    }
+    Ok(())
+}
+
+/// Stereo matching of the left feature at sub-pixel `(xl, yl)` along its epipolar line (the same
+/// row of the rectified right image): normalised cross-correlation of the template over the
+/// disparities `min_disparity_px..=max_disparity_px`, a uniqueness check, then sub-pixel
+/// refinement of the right position (translation with gain and bias, eq. 10 with a translation
+/// warp) that also measures a residual vertical offset. Returns `(xr, yr)` pixels.
+pub fn match_along_row(
+    left: &Image,
+    right: &Image,
+    xl: f64,
+    yl: f64,
+    config: &VoConfig,
+) -> Result<(f64, f64), StereoReject> {
+    if !(xl.is_finite() && yl.is_finite()) {
+        return Err(StereoReject::NonFinite);
+    }
+    let xi = libm::round(xl) as i32;
+    let yi = libm::round(yl) as i32;
+    let template = left.template(xi, yi).ok_or(StereoReject::OutOfImage)?;
+    let stats = template_stats(&template);
+    let mut scores = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
+    let d_min = usize::from(config.min_disparity_px);
+    let d_max = usize::from(config.max_disparity_px).min(MAX_DISPARITY_PX);
+    // Scan the right row from x = xi - d_max up to xi - d_min; scan[k] is disparity d_max - k.
+    let mut scan = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
+    let count = d_max.saturating_sub(d_min) + 1;
+    if let Some(window) = scan.get_mut(..count) {
+        ncc_scan(right, &template, stats, yi, xi - d_max as i32, 1, window);
+    }
+    let mut best = (f32::NEG_INFINITY, 0usize);
+    for (k, &score) in scan.iter().take(count).enumerate() {
+        let d = d_max - k;
+        if let Some(slot) = scores.get_mut(d) {
+            *slot = score;
+        }
+        if score > best.0 {
+            best = (score, d);
+        }
+    }
+    let (best_score, best_d) = best;
+    if !(best_score >= config.min_correlation) {
+        return Err(StereoReject::WeakCorrelation);
+    }
+    let rival = scores
+        .iter()
+        .enumerate()
+        .filter(|(d, _)| d.abs_diff(best_d) > 2)
+        .map(|(_, &s)| s)
+        .fold(f32::NEG_INFINITY, f32::max);
+    if rival > best_score - config.uniqueness_margin {
+        return Err(StereoReject::Ambiguous);
+    }
+    let template_f = left.template_f(xl, yl).ok_or(StereoReject::OutOfImage)?;
+    let x0 = xl - best_d as f64;
+    let init = Affine2::translation(x0, yl);
+    let refined = refine_warp(&template_f, right, init, WarpModel::Translation, 8)
+        .ok_or(StereoReject::RefinementFailed)?;
+    let (xr, yr) = (refined.warp.c, refined.warp.f);
+    if !((xr - x0).abs() <= 1.5 && (yr - yl).abs() <= config.max_row_offset_px) {
+        return Err(StereoReject::RefinementFailed);
+    }
+    if !(xl - xr >= f64::from(config.min_disparity_px) - 1.0) {
+        return Err(StereoReject::Degenerate);
+    }
+    Ok((xr, yr))
+}
+
+/// Matches and triangulates one left feature: [`match_along_row`], [`triangulate`],
+/// [`accept_point`]. Returns the point and the right pixel.
+pub fn match_and_triangulate(
+    cam: &PinholeStereo,
+    left: &Image,
+    right: &Image,
+    xl: f64,
+    yl: f64,
+    config: &VoConfig,
+) -> Result<(StereoPoint, (f64, f64)), StereoReject> {
+    let (xr, yr) = match_along_row(left, right, xl, yl, config)?;
+    let point = triangulate(cam, [xl, yl, xr, yr], config.sigma_px)?;
+    accept_point(cam, &point, config)?;
+    Ok((point, (xr, yr)))
+}
+
+/// A 3-vector helper for tests and callers: the point `p` in `K` seen in the right camera
+/// (pixels), `None` behind the camera.
+pub fn project_right(cam: &PinholeStereo, p: &Vec3) -> Option<(f64, f64)> {
+    cam.project_left(&Vector3::new(p.x - cam.baseline_m, p.y, p.z))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hazcam() -> PinholeStereo {
+        PinholeStereo {
+            fx_px: 384.8,
+            fy_px: 384.0,
+            cx_px: 319.5,
+            cy_px: 239.5,
+            baseline_m: 0.084,
+        }
+    }
+
+    fn pixels_of(cam: &PinholeStereo, p: &Vec3) -> [f64; 4] {
+        let (xl, yl) = cam.project_left(p).unwrap();
+        let (xr, yr) = project_right(cam, p).unwrap();
+        [xl, yl, xr, yr]
+    }
+
+    #[test]
+    fn vo_2_triangulation_recovers_points_exactly() {
+        let cam = hazcam();
+        for p in [
+            Vec3::new(0.3, -0.2, 0.6),
+            Vec3::new(-1.0, 0.5, 3.0),
+            Vec3::new(0.0, 0.0, 5.0),
+        ] {
+            let s = triangulate(&cam, pixels_of(&cam, &p), 0.3).unwrap();
+            assert!(
+                (s.position_m - p).norm() < 1e-9,
+                "{p:?} -> {:?}",
+                s.position_m
+            );
+            assert!(s.gap_m < 1e-9);
+        }
+    }
+
+    #[test]
+    fn vo_3_jacobian_matches_finite_differences() {
+        // Covariance of eq. 8 equals J J^T sigma^2 with J from central differences.
+        let cam = hazcam();
+        let mut px = pixels_of(&cam, &Vec3::new(0.4, 0.3, 2.0));
+        px[3] += 0.4; // a ray gap, so that every term of eq. 5-7 is exercised
+        let sigma = 0.5;
+        let s = triangulate(&cam, px, sigma).unwrap();
+        let h = 1e-5;
+        let mut j = Matrix3x4::<f64>::zeros();
+        for k in 0..4 {
+            let mut a = px;
+            let mut b = px;
+            a[k] += h;
+            b[k] -= h;
+            let pa = triangulate(&cam, a, sigma).unwrap().position_m;
+            let pb = triangulate(&cam, b, sigma).unwrap().position_m;
+            j.set_column(k, &((pa - pb) / (2.0 * h)));
+        }
+        let expected =
+            j * j.transpose() * sigma * sigma + Mat3::identity() * (0.25 * s.gap_m * s.gap_m);
+        let scale = expected.norm();
+        assert!((s.covariance - expected).norm() < 1e-6 * scale);
+        assert!(s.gap_m > 0.0);
+    }
+
+    #[test]
+    fn vo_3_covariance_matches_monte_carlo() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let cam = hazcam();
+        let p = Vec3::new(-0.3, 0.2, 2.5);
+        let px = pixels_of(&cam, &p);
+        let sigma = 0.3;
+        let nominal = triangulate(&cam, px, sigma).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let noise = Normal::new(0.0, sigma).unwrap();
+        let n = 20000;
+        let mut mean = Vec3::zeros();
+        let mut samples = std::vec::Vec::with_capacity(n);
+        for _ in 0..n {
+            let mut q = px;
+            for v in q.iter_mut() {
+                *v += noise.sample(&mut rng);
+            }
+            let s = triangulate(&cam, q, sigma).unwrap().position_m;
+            mean += s;
+            samples.push(s);
+        }
+        mean /= n as f64;
+        let mut cov = Mat3::zeros();
+        for s in &samples {
+            cov += (s - mean) * (s - mean).transpose();
+        }
+        cov /= (n - 1) as f64;
+        // The gap term adds (gap/2)^2 per sample, so compare against the first-order part.
+        let first_order = nominal.covariance;
+        let zz = (cov[(2, 2)] / first_order[(2, 2)]).sqrt();
+        let xx = (cov[(0, 0)] / first_order[(0, 0)]).sqrt();
+        assert!((zz - 1.0).abs() < 0.1, "depth sigma ratio {zz}");
+        assert!((xx - 1.0).abs() < 0.1, "lateral sigma ratio {xx}");
+    }
+
+    #[test]
+    fn vo_2_degenerate_and_far_points_are_rejected() {
+        let cam = hazcam();
+        // Zero disparity: parallel rays.
+        assert_eq!(
+            triangulate(&cam, [300.0, 200.0, 300.0, 200.0], 0.3).err(),
+            Some(StereoReject::Degenerate)
+        );
+        // Negative disparity: the rays meet behind the cameras.
+        assert_eq!(
+            triangulate(&cam, [300.0, 200.0, 305.0, 200.0], 0.3).err(),
+            Some(StereoReject::Degenerate)
+        );
+        assert_eq!(
+            triangulate(&cam, [f64::NAN, 200.0, 290.0, 200.0], 0.3).err(),
+            Some(StereoReject::Degenerate)
+        );
+        // A large vertical offset is a large gap.
+        let config = VoConfig::default();
+        let s = triangulate(&cam, [300.0, 200.0, 280.0, 204.0], 0.3).unwrap();
+        assert_eq!(
+            accept_point(&cam, &s, &config).err(),
+            Some(StereoReject::LargeGap)
+        );
+    }
+}

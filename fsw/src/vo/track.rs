@@ -1,0 +1,317 @@
+//! Feature tracking (H04 sec. 2 "Feature Tracking", eq. 9-10; H05 sec. II.C): correlation
+//! search around the position predicted by the motion prior, then affine template refinement by
+//! iterative minimisation of the grey-level differences.
+//!
+//! Template coordinates `(u, v)` are pixels relative to the template centre in the previous
+//! image; eq. 9 maps them into the new image, `x2 = a u + b v + c`, `y2 = d u + e v + f` (eq. 9
+//! with `x1, y1` taken relative to the feature, so `(c, f)` is the tracked feature position).
+
+use super::image::{ncc, ncc_scan, template_stats, Image, Template, TemplateF};
+use super::{MAX_SEARCH_RADIUS_PX, TEMPLATE_HALF, TEMPLATE_SIDE};
+use nalgebra::{SMatrix, SVector};
+
+/// Eq. 9 (H04): the affine map of template coordinates into the new image, pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Affine2 {
+    /// `dx2/du`.
+    pub a: f64,
+    /// `dx2/dv`.
+    pub b: f64,
+    /// Column of the template centre in the new image, pixels.
+    pub c: f64,
+    /// `dy2/du`.
+    pub d: f64,
+    /// `dy2/dv`.
+    pub e: f64,
+    /// Row of the template centre in the new image, pixels.
+    pub f: f64,
+}
+
+impl Affine2 {
+    /// A pure translation to `(x, y)`.
+    pub const fn translation(x: f64, y: f64) -> Self {
+        Self {
+            a: 1.0,
+            b: 0.0,
+            c: x,
+            d: 0.0,
+            e: 1.0,
+            f: y,
+        }
+    }
+
+    /// The image position of template coordinates `(u, v)` (eq. 9).
+    pub fn apply(&self, u: f64, v: f64) -> (f64, f64) {
+        (
+            self.a * u + self.b * v + self.c,
+            self.d * u + self.e * v + self.f,
+        )
+    }
+}
+
+/// Which parameters of the warp the refinement estimates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WarpModel {
+    /// Translation `(c, f)` only (stereo sub-pixel refinement).
+    Translation,
+    /// All six affine parameters (eq. 9).
+    Affine,
+}
+
+/// Result of [`refine_warp`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Refined {
+    /// The estimated warp.
+    pub warp: Affine2,
+    /// Root mean square of the grey-level residual after gain and bias, grey levels.
+    pub residual_rms: f64,
+    /// Photometric gain between the images.
+    pub gain: f64,
+}
+
+/// Eq. 10 (H04): minimises `M = sum [I1(x1, y1) - (gain * I2(x2, y2) + bias)]^2` over the
+/// template by Gauss-Newton, with `(x2, y2)` from the warp of eq. 9 and bilinear sampling of the
+/// new image (gain and bias absorb exposure differences). At most `iterations` iterations;
+/// `None` when the template leaves the image, the normal matrix is singular, the numbers are not
+/// finite, or the warp degenerates (scale outside 0.5..2, shear above 0.5, gain outside
+/// 0.5..2).
+pub fn refine_warp(
+    template: &TemplateF,
+    image: &Image,
+    init: Affine2,
+    model: WarpModel,
+    iterations: u8,
+) -> Option<Refined> {
+    let mut warp = init;
+    let mut gain = 1.0f64;
+    let mut bias = 0.0f64;
+    let half = TEMPLATE_HALF as f64;
+    let mut residual_rms = f64::INFINITY;
+    for _ in 0..iterations.max(1) {
+        // Parameters: [a, b, c, d, e, f, gain, bias]; the translation model uses only
+        // [c, f, gain, bias] and accumulates a 4x4 system.
+        let mut upper = [0.0f64; 36];
+        let mut g8 = SVector::<f64, 8>::zeros();
+        let mut h4 = SMatrix::<f64, 4, 4>::zeros();
+        let mut g4 = SVector::<f64, 4>::zeros();
+        let mut sum_sq = 0.0;
+        for (k, &t) in template.iter().enumerate() {
+            let u = (k % TEMPLATE_SIDE) as f64 - half;
+            let v = (k / TEMPLATE_SIDE) as f64 - half;
+            let (x2, y2) = warp.apply(u, v);
+            let (value, gx, gy) = image.bilinear(x2, y2)?;
+            let residual = gain * value + bias - f64::from(t);
+            sum_sq += residual * residual;
+            let (jx, jy) = (gain * gx, gain * gy);
+            match model {
+                WarpModel::Affine => {
+                    let j = SVector::<f64, 8>::from([
+                        jx * u,
+                        jx * v,
+                        jx,
+                        jy * u,
+                        jy * v,
+                        jy,
+                        value,
+                        1.0,
+                    ]);
+                    // Upper triangle only (36 of 64 products).
+                    let mut k = 0;
+                    for r in 0..8 {
+                        for c in r..8 {
+                            upper[k] += j[r] * j[c];
+                            k += 1;
+                        }
+                    }
+                    g8 += j * residual;
+                }
+                WarpModel::Translation => {
+                    let j = SVector::<f64, 4>::from([jx, jy, value, 1.0]);
+                    h4.ger(1.0, &j, &j, 1.0);
+                    g4 += j * residual;
+                }
+            }
+        }
+        residual_rms = libm::sqrt(sum_sq / template.len() as f64);
+        let delta = match model {
+            WarpModel::Affine => {
+                let mut h8 = SMatrix::<f64, 8, 8>::zeros();
+                let mut k = 0;
+                for r in 0..8 {
+                    for c in r..8 {
+                        h8[(r, c)] = upper[k];
+                        h8[(c, r)] = upper[k];
+                        k += 1;
+                    }
+                }
+                h8.cholesky()?.solve(&(-g8))
+            }
+            WarpModel::Translation => {
+                let ds = h4.cholesky()?.solve(&(-g4));
+                SVector::<f64, 8>::from([0.0, 0.0, ds[0], 0.0, 0.0, ds[1], ds[2], ds[3]])
+            }
+        };
+        if !delta.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        warp.a += delta[0];
+        warp.b += delta[1];
+        warp.c += delta[2];
+        warp.d += delta[3];
+        warp.e += delta[4];
+        warp.f += delta[5];
+        gain += delta[6];
+        bias += delta[7];
+        let shape_ok = (0.5..2.0).contains(&warp.a)
+            && (0.5..2.0).contains(&warp.e)
+            && warp.b.abs() < 0.5
+            && warp.d.abs() < 0.5
+            && (0.5..2.0).contains(&gain);
+        if !shape_ok {
+            return None;
+        }
+        if delta[2].abs() < 5e-3 && delta[5].abs() < 5e-3 {
+            break;
+        }
+    }
+    Some(Refined {
+        warp,
+        residual_rms,
+        gain,
+    })
+}
+
+/// Correlation search: the integer position within `radius` pixels of `(x0, y0)` where the
+/// template correlates best, with its normalised cross-correlation; `None` if no window fits in
+/// the image. Coarse to fine: every second position first, then the 8 neighbours of the best
+/// (a quarter of the cost of the full search; the affine refinement then converges from within
+/// one pixel).
+pub fn search_window(
+    template: &Template,
+    image: &Image,
+    x0: i32,
+    y0: i32,
+    radius: i32,
+) -> Option<(i32, i32, f32)> {
+    let stats = template_stats(template);
+    let mut best: Option<(i32, i32, f32)> = None;
+    let consider = |x: i32, y: i32, best: &mut Option<(i32, i32, f32)>| {
+        if let Some(score) = ncc(image, template, stats, x, y) {
+            if best.is_none_or(|(_, _, s)| score > s) {
+                *best = Some((x, y, score));
+            }
+        }
+    };
+    let (y_lo, y_hi) = (y0.saturating_sub(radius), y0.saturating_add(radius));
+    let (x_lo, x_hi) = (x0.saturating_sub(radius), x0.saturating_add(radius));
+    let columns = (x_hi - x_lo) as usize / 2 + 1;
+    let mut scan = [f32::NEG_INFINITY; MAX_SEARCH_RADIUS_PX + 1];
+    let window = scan.get_mut(..columns).unwrap_or(&mut []);
+    for y in (y_lo..=y_hi).step_by(2) {
+        ncc_scan(image, template, stats, y, x_lo, 2, window);
+        for (k, &score) in window.iter().enumerate() {
+            if score > f32::NEG_INFINITY && best.is_none_or(|(_, _, s)| score > s) {
+                best = Some((x_lo + 2 * k as i32, y, score));
+            }
+        }
+    }
+    let (xc, yc, _) = best?;
+    for (dx, dy) in [
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+        (-1, 0),
+        (1, 0),
+        (-1, 1),
+        (0, 1),
+        (1, 1),
+    ] {
+        consider(xc.saturating_add(dx), yc.saturating_add(dy), &mut best);
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rover_hal::{IMAGE_HEIGHT_PX, IMAGE_PIXELS, IMAGE_WIDTH_PX};
+    use std::vec::Vec;
+
+    /// A smooth texture sampled at continuous positions.
+    fn texture(x: f64, y: f64) -> f64 {
+        128.0
+            + 40.0 * libm::sin(0.31 * x + 0.17 * y)
+            + 30.0 * libm::cos(0.23 * y - 0.11 * x)
+            + 20.0 * libm::sin(0.05 * x * 0.7 + 0.45 * y)
+    }
+
+    fn render(map: impl Fn(f64, f64) -> (f64, f64)) -> Vec<u8> {
+        let mut img = vec![0u8; IMAGE_PIXELS];
+        for y in 0..IMAGE_HEIGHT_PX {
+            for x in 0..IMAGE_WIDTH_PX {
+                let (sx, sy) = map(x as f64, y as f64);
+                img[y * IMAGE_WIDTH_PX + x] = texture(sx, sy).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        img
+    }
+
+    #[test]
+    fn vo_5_affine_refinement_recovers_rotation_and_scale() {
+        // Image 2 is image 1 rotated by 10 deg and scaled by 1.1 about (300, 200), brighter.
+        let img1 = render(|x, y| (x, y));
+        let (s, c) = libm::sincos(10f64.to_radians());
+        let k = 1.1;
+        // p2 = centre + k R (p1 - centre)  <=>  p1 = centre + R^T (p2 - centre) / k
+        let img2: Vec<u8> = render(|x, y| {
+            let (dx, dy) = (x - 300.0, y - 200.0);
+            (
+                300.0 + (c * dx + s * dy) / k,
+                200.0 + (-s * dx + c * dy) / k,
+            )
+        })
+        .iter()
+        .map(|&p| (p as f64 * 0.9 + 10.0) as u8)
+        .collect();
+        let i1 = Image::new(&img1).unwrap();
+        let i2 = Image::new(&img2).unwrap();
+        let (x1, y1) = (320.0, 215.0);
+        let t = i1.template_f(x1, y1).unwrap();
+        let truth = (
+            300.0 + k * (c * 20.0 - s * 15.0),
+            200.0 + k * (s * 20.0 + c * 15.0),
+        );
+        let tu8 = i1.template(320, 215).unwrap();
+        let (xs, ys, score) =
+            search_window(&tu8, &i2, truth.0 as i32 + 3, truth.1 as i32 - 2, 8).unwrap();
+        assert!(score > 0.8);
+        let init = Affine2::translation(xs as f64, ys as f64);
+        let r = refine_warp(&t, &i2, init, WarpModel::Affine, 20).unwrap();
+        let err = ((r.warp.c - truth.0).powi(2) + (r.warp.f - truth.1).powi(2)).sqrt();
+        assert!(err < 0.1, "position error {err} px ({r:?})");
+        assert!((r.warp.a - k * c).abs() < 0.05 && (r.warp.b + k * s).abs() < 0.05);
+        assert!((r.warp.d - k * s).abs() < 0.05 && (r.warp.e - k * c).abs() < 0.05);
+        // Translation-only refinement is worse under rotation and scale.
+        let rt = refine_warp(&t, &i2, init, WarpModel::Translation, 20);
+        if let Some(rt) = rt {
+            assert!(rt.residual_rms > r.residual_rms);
+        }
+    }
+
+    #[test]
+    fn vo_5_refinement_fails_cleanly_at_the_border() {
+        let img = render(|x, y| (x, y));
+        let i = Image::new(&img).unwrap();
+        let t = i.template_f(100.0, 100.0).unwrap();
+        let r = refine_warp(&t, &i, Affine2::translation(2.0, 2.0), WarpModel::Affine, 5);
+        assert!(r.is_none());
+        let r = refine_warp(
+            &t,
+            &i,
+            Affine2::translation(f64::NAN, 2.0),
+            WarpModel::Affine,
+            5,
+        );
+        assert!(r.is_none());
+    }
+}
