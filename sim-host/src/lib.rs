@@ -8,5 +8,6 @@
 //! the executive's schedule and timing can be checked on the host.
 
 pub mod devices;
+pub mod render;
 pub mod run;
 pub mod surface;

@@ -1,0 +1,399 @@
+//! Procedural albedo of sandy ground with pebbles, and a surface wrapper that adds it to a bare
+//! height function.
+//!
+//! The albedo is the product of two seamless, periodic tiles laid on the world `x, y` plane:
+//!
+//! - a **fine tile** (default 2048 x 2048 texels of 4 mm, period 8.19 m): six octaves of gradient
+//!   noise with wavelengths 16 mm ... 0.51 m, plus about 60 pebbles per square metre (ellipses of
+//!   6 mm ... 40 mm radius, darker basalt-like or lighter, with a soft one-texel rim). This is the
+//!   structure a hazcam resolves between 0.5 and 5 m: a pixel covers 1.5 mm of ground at 0.6 m
+//!   and 1-7 cm (foreshortened) at 2.5-5 m, so pebbles and the short noise octaves give corners
+//!   near the rover and the pebble clusters and long octaves give corners far away;
+//! - a **coarse tile** (512 x 512 texels of 64 mm, period 32.8 m): four octaves of wavelengths
+//!   0.5 ... 4.1 m modulating the brightness by about +-25 %, so the 8 m fine period never shows
+//!   as a repeat.
+//!
+//! The fine tile keeps a box-filtered mip pyramid; [`AlbedoTexture::albedo_filtered`] blends the
+//! two levels around a requested footprint (trilinear), which removes the aliasing a point
+//! sample would give on distant, foreshortened ground.
+
+use super::noise::{floor_i64, gradient_noise, hash3, unit_f64};
+use super::FilteredAlbedo;
+use crate::surface::TerrainSurface;
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Parameters of the procedural albedo.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TextureParams {
+    /// Seed of every random choice (noise lattices, pebbles).
+    pub seed: u64,
+    /// Fine-tile texel size, m.
+    pub texel_m: f64,
+    /// Fine-tile side, texels, as a power of two (`1 << size_log2`).
+    pub size_log2: u32,
+    /// Mean albedo of the sand (Mars soil is about 0.25).
+    pub mean_albedo: f64,
+    /// Relative contrast of the sand noise (standard deviation of the noise factor, about).
+    pub sand_contrast: f64,
+    /// Pebbles per square metre.
+    pub pebbles_per_m2: f64,
+    /// Relative amplitude of the coarse (0.5-4 m) brightness modulation.
+    pub coarse_contrast: f64,
+}
+
+impl Default for TextureParams {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            texel_m: 0.004,
+            size_log2: 11,
+            mean_albedo: 0.25,
+            sand_contrast: 0.22,
+            pebbles_per_m2: 60.0,
+            coarse_contrast: 0.25,
+        }
+    }
+}
+
+/// One periodic square tile of albedo values (`u16`, 65535 = albedo 1), stored in 8x8 blocks
+/// so that a bilinear lookup touches one or two cache lines whatever the viewing direction.
+#[derive(Debug, Clone)]
+struct Tile {
+    size: usize,
+    /// log2 of the number of blocks per row.
+    blocks_log2: u32,
+    data: Vec<u16>,
+}
+
+/// Block side, texels.
+const BLOCK: usize = 8;
+
+impl Tile {
+    /// A tile from row-major values (`size` a power of two, at least 8).
+    fn from_row_major(size: usize, rows: &[u16]) -> Tile {
+        let blocks_log2 = (size / BLOCK).trailing_zeros();
+        let mut tile = Tile {
+            size,
+            blocks_log2,
+            data: vec![0; size * size],
+        };
+        for j in 0..size {
+            for i in 0..size {
+                let idx = tile.index(i, j);
+                tile.data[idx] = rows[j * size + i];
+            }
+        }
+        tile
+    }
+
+    /// Storage index of texel `(i, j)` (both below `size`).
+    #[inline]
+    fn index(&self, i: usize, j: usize) -> usize {
+        (((j >> 3) << self.blocks_log2) + (i >> 3)) * (BLOCK * BLOCK) + ((j & 7) << 3) + (i & 7)
+    }
+
+    /// Texel `(i, j)`, indices wrapped.
+    #[inline]
+    fn at(&self, i: usize, j: usize) -> u16 {
+        let mask = self.size - 1;
+        self.data[self.index(i & mask, j & mask)]
+    }
+
+    /// Bilinear sample at texel coordinates (texel centres at integers), wrapping.
+    #[inline]
+    fn bilinear(&self, u: f64, v: f64) -> f64 {
+        let u0 = floor_i64(u);
+        let v0 = floor_i64(v);
+        let fu = u - u0 as f64;
+        let fv = v - v0 as f64;
+        // Two's-complement wrap then the mask in `at` keeps indices in range.
+        let (i0, j0) = (u0 as usize, v0 as usize);
+        let (i1, j1) = (i0.wrapping_add(1), j0.wrapping_add(1));
+        let a = f64::from(self.at(i0, j0));
+        let b = f64::from(self.at(i1, j0));
+        let c = f64::from(self.at(i0, j1));
+        let d = f64::from(self.at(i1, j1));
+        let top = a + fu * (b - a);
+        let bottom = c + fu * (d - c);
+        (top + fv * (bottom - top)) * (1.0 / 65535.0)
+    }
+
+    /// The next mip level: 2x2 box average.
+    fn halve(&self) -> Tile {
+        let n = self.size / 2;
+        let mut rows = vec![0u16; n * n];
+        for j in 0..n {
+            for i in 0..n {
+                let s = |a: usize, b: usize| u32::from(self.at(a, b));
+                let sum = s(2 * i, 2 * j)
+                    + s(2 * i + 1, 2 * j)
+                    + s(2 * i, 2 * j + 1)
+                    + s(2 * i + 1, 2 * j + 1);
+                rows[j * n + i] = ((sum + 2) / 4) as u16;
+            }
+        }
+        Tile::from_row_major(n, &rows)
+    }
+}
+
+/// Procedural albedo texture of sandy ground with pebbles (see the module documentation).
+///
+/// Indexed by world `x, y` (frame `W`, m); deterministic from [`TextureParams::seed`]
+/// (generation is parallel, but every texel is a pure function of the seed and its index).
+#[derive(Debug, Clone)]
+pub struct AlbedoTexture {
+    params: TextureParams,
+    /// Fine-tile mip pyramid, level 0 first.
+    fine: Vec<Tile>,
+    coarse: Tile,
+    coarse_texel_m: f64,
+}
+
+/// Coarse tile side, texels.
+const COARSE_SIZE: usize = 512;
+
+impl AlbedoTexture {
+    /// Generate the texture (about 0.3 s on one core for the default 2048^2 tile).
+    pub fn new(params: TextureParams) -> Self {
+        let size_log2 = params.size_log2.clamp(6, 13);
+        let size = 1usize << size_log2;
+        let fine0 = fine_tile(&params, size);
+        let mut fine = vec![fine0];
+        while let Some(last) = fine.last() {
+            if last.size <= 8 {
+                break;
+            }
+            let next = last.halve();
+            fine.push(next);
+        }
+        let coarse_texel_m = params.texel_m * size as f64 * 4.0 / COARSE_SIZE as f64;
+        let coarse = coarse_tile(&params, COARSE_SIZE);
+        Self {
+            params,
+            fine,
+            coarse,
+            coarse_texel_m,
+        }
+    }
+
+    /// The parameters this texture was made from.
+    pub fn params(&self) -> &TextureParams {
+        &self.params
+    }
+
+    /// Period of the fine tile, m (the coarse tile repeats every four fine periods).
+    pub fn period_m(&self) -> f64 {
+        self.params.texel_m * self.fine[0].size as f64
+    }
+
+    /// Point-sampled albedo at world `(x_m, y_m)` (finest level, bilinear), in `[0, 1]`.
+    pub fn albedo(&self, x_m: f64, y_m: f64) -> f64 {
+        self.albedo_filtered(x_m, y_m, 0.0)
+    }
+
+    /// Albedo at world `(x_m, y_m)` averaged over a footprint of about `footprint_m` (m): the
+    /// fine pyramid is sampled trilinearly at level `log2(footprint / texel)`.
+    pub fn albedo_filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        let inv_texel = 1.0 / self.params.texel_m;
+        let ratio = footprint_m * inv_texel;
+        let top = (self.fine.len() - 1) as f64;
+        let level = if ratio > 1.0 {
+            fast_log2(ratio).min(top)
+        } else {
+            0.0
+        };
+        let i0 = level as usize;
+        let t = level - i0 as f64;
+        let sample = |i: usize| {
+            let scale = inv_texel / (1u64 << i) as f64;
+            self.fine[i].bilinear(x_m * scale - 0.5, y_m * scale - 0.5)
+        };
+        let mut fine = sample(i0);
+        if t > 1e-3 && i0 + 1 < self.fine.len() {
+            fine += t * (sample(i0 + 1) - fine);
+        }
+        let cs = 1.0 / self.coarse_texel_m;
+        let coarse = self.coarse.bilinear(x_m * cs - 0.5, y_m * cs - 0.5);
+        // The coarse tile stores 0.5 * factor so that factors up to 2 fit in u16.
+        (fine * 2.0 * coarse).clamp(0.0, 1.0)
+    }
+}
+
+/// `log2(x)` for `x >= 1` to within 0.09 (exponent plus linear mantissa), enough to choose
+/// and blend mip levels.
+#[inline]
+fn fast_log2(x: f64) -> f64 {
+    let bits = x.to_bits();
+    let exponent = ((bits >> 52) & 0x7ff) as f64 - 1023.0;
+    let mantissa = f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000);
+    exponent + (mantissa - 1.0)
+}
+
+/// Fine tile: sand noise plus pebbles.
+fn fine_tile(p: &TextureParams, size: usize) -> Tile {
+    let seed = p.seed;
+    // Octaves: wavelength in texels 128, 64, ..., 4 (0.51 m ... 16 mm at 4 mm texels).
+    let octaves: [(f64, f64); 6] = [
+        (128.0, 1.0),
+        (64.0, 0.85),
+        (32.0, 0.75),
+        (16.0, 0.7),
+        (8.0, 0.6),
+        (4.0, 0.45),
+    ];
+    let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
+    let mut field = vec![0f32; size * size];
+    field.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
+        for (i, out) in row.iter_mut().enumerate() {
+            let mut s = 0.0;
+            for (k, (wavelength, amp)) in octaves.iter().enumerate() {
+                let period = (size as f64 / wavelength) as u64;
+                s += amp
+                    * gradient_noise(
+                        i as f64 / wavelength,
+                        j as f64 / wavelength,
+                        period,
+                        seed.wrapping_add(k as u64 * 0x1000),
+                    );
+            }
+            // Gradient noise has a standard deviation near 0.2 per octave.
+            *out = (s * norm * 5.0) as f32;
+        }
+    });
+    let mut albedo: Vec<f32> = field
+        .iter()
+        .map(|&n| (p.mean_albedo * (1.0 + p.sand_contrast * f64::from(n))) as f32)
+        .collect();
+    stamp_pebbles(p, size, &mut albedo);
+    let rows: Vec<u16> = albedo
+        .iter()
+        .map(|&a| (f64::from(a).clamp(0.0, 1.0) * 65535.0).round() as u16)
+        .collect();
+    Tile::from_row_major(size, &rows)
+}
+
+/// Pebbles: soft-edged ellipses blended over the sand, wrapping around the tile edges.
+fn stamp_pebbles(p: &TextureParams, size: usize, albedo: &mut [f32]) {
+    let texel = p.texel_m;
+    let area_m2 = (size as f64 * texel).powi(2);
+    let count = (p.pebbles_per_m2.max(0.0) * area_m2).round() as u64;
+    let mask = size - 1;
+    for k in 0..count {
+        let h = |n: u64| unit_f64(hash3(p.seed ^ 0x005e_b1e5, k, n));
+        let cx = h(0) * size as f64;
+        let cy = h(1) * size as f64;
+        // Radius: mostly small, a few large (power law), 6 mm ... 40 mm.
+        let radius_m = 0.006 * (40.0f64 / 6.0).powf(h(2).powi(2));
+        let a = radius_m / texel;
+        let b = a * (0.55 + 0.45 * h(3));
+        let theta = h(4) * std::f64::consts::PI;
+        let (st, ct) = theta.sin_cos();
+        // Half dark basalt-like (0.35-0.7 of the mean), half light (1.3-1.9 of the mean).
+        let tone = if h(5) < 0.5 {
+            0.35 + 0.35 * h(6)
+        } else {
+            1.3 + 0.6 * h(6)
+        };
+        let pebble_albedo = (p.mean_albedo * tone) as f32;
+        let reach = a.ceil() as i64 + 1;
+        let (ci, cj) = (cx.floor() as i64, cy.floor() as i64);
+        for dj in -reach..=reach {
+            for di in -reach..=reach {
+                let x = (ci + di) as f64 + 0.5 - cx;
+                let y = (cj + dj) as f64 + 0.5 - cy;
+                let xr = ct * x + st * y;
+                let yr = -st * x + ct * y;
+                // Signed distance to the ellipse rim, texels (approximate).
+                let r = ((xr / a).powi(2) + (yr / b).powi(2)).sqrt();
+                let d = (r - 1.0) * b;
+                let w = (0.5 - d).clamp(0.0, 1.0) as f32;
+                if w > 0.0 {
+                    // Slight darkening towards the rim reads as relief.
+                    let rim = (1.0 - 0.25 * r.min(1.0).powi(4)) as f32;
+                    let idx = (((cj + dj) as usize) & mask) * size + (((ci + di) as usize) & mask);
+                    let cell = &mut albedo[idx];
+                    *cell += w * (pebble_albedo * rim - *cell);
+                }
+            }
+        }
+    }
+}
+
+/// Coarse tile: stores `0.5 * (1 + contrast * noise)`.
+fn coarse_tile(p: &TextureParams, size: usize) -> Tile {
+    let octaves: [(f64, f64); 4] = [(64.0, 1.0), (32.0, 0.7), (16.0, 0.5), (8.0, 0.35)];
+    let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
+    let seed = p.seed ^ 0xc0a7_5e00;
+    let rows: Vec<u16> = (0..size * size)
+        .into_par_iter()
+        .map(|idx| {
+            let (i, j) = (idx % size, idx / size);
+            let mut s = 0.0;
+            for (k, (wavelength, amp)) in octaves.iter().enumerate() {
+                let period = (size as f64 / wavelength) as u64;
+                s += amp
+                    * gradient_noise(
+                        i as f64 / wavelength,
+                        j as f64 / wavelength,
+                        period,
+                        seed.wrapping_add(k as u64),
+                    );
+            }
+            let factor = (1.0 + p.coarse_contrast * s * norm * 5.0).clamp(0.2, 1.99);
+            (0.5 * factor * 65535.0).round() as u16
+        })
+        .collect();
+    Tile::from_row_major(size, &rows)
+}
+
+/// A terrain whose heights and normals come from `inner` and whose albedo is the procedural
+/// texture (the inner surface's own albedo is ignored).
+#[derive(Debug, Clone)]
+pub struct TexturedSurface<H> {
+    /// The surface giving the heights.
+    pub inner: H,
+    /// The albedo texture (shared: it is several megabytes).
+    pub texture: Arc<AlbedoTexture>,
+}
+
+impl<H> TexturedSurface<H> {
+    /// Wrap `inner` with `texture`.
+    pub fn new(inner: H, texture: Arc<AlbedoTexture>) -> Self {
+        Self { inner, texture }
+    }
+}
+
+impl<H: TerrainSurface> TerrainSurface for TexturedSurface<H> {
+    fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+        self.inner.height_m(x_m, y_m)
+    }
+    fn albedo(&self, x_m: f64, y_m: f64) -> f64 {
+        self.texture.albedo(x_m, y_m)
+    }
+    fn normal_up(&self, x_m: f64, y_m: f64) -> [f64; 3] {
+        self.inner.normal_up(x_m, y_m)
+    }
+}
+
+impl<H: TerrainSurface> FilteredAlbedo for TexturedSurface<H> {
+    fn albedo_filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        self.texture.albedo_filtered(x_m, y_m, footprint_m)
+    }
+}
+
+/// A bare height function `(x_m, y_m) -> height_m` (positive up) as a [`TerrainSurface`] with a
+/// uniform albedo of 0.5; wrap it in [`TexturedSurface`] to give it texture.
+#[derive(Debug, Clone, Copy)]
+pub struct HeightFn<F>(pub F);
+
+impl<F: Fn(f64, f64) -> f64 + Sync> TerrainSurface for HeightFn<F> {
+    fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+        (self.0)(x_m, y_m)
+    }
+    fn albedo(&self, _x_m: f64, _y_m: f64) -> f64 {
+        0.5
+    }
+}
+
+impl<F: Fn(f64, f64) -> f64 + Sync> FilteredAlbedo for HeightFn<F> {}
