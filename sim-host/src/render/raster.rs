@@ -200,6 +200,7 @@ impl Frame {
         let table_mask = (gauss.len() - 1) as u64;
         let bits = table_mask.count_ones();
         let sigma = settings.noise_sigma_dn;
+        let inv_fx = 1.0 / view.fx;
         let key = hash3(noise_key.0, noise_key.1, 0x006e_6f69_7365);
         out.par_chunks_mut(width)
             .enumerate()
@@ -214,9 +215,11 @@ impl Frame {
                         let ray = view.ray_w(i as f64, v);
                         let x = view.center_w[0] + z * ray[0];
                         let y = view.center_w[1] + z * ray[1];
+                        // Footprint across the ray z / f_x, stretched by 1 / sqrt(cos i) for
+                        // the foreshortening on level ground (geometric mean of the two axes).
                         let len = (ray[0] * ray[0] + ray[1] * ray[1] + ray[2] * ray[2]).sqrt();
-                        let cos_inc = (ray[2].abs() / len).max(0.05);
-                        let footprint = z / view.fx / cos_inc.sqrt();
+                        let stretch = (len / ray[2].abs().max(0.05 * len)).sqrt();
+                        let footprint = z * inv_fx * stretch;
                         settings.exposure_dn * albedo(x, y, footprint) * f64::from(self.shade[idx])
                     } else {
                         sky += 1;

@@ -1,7 +1,7 @@
 //! Procedural albedo of sandy ground with pebbles, and a surface wrapper that adds it to a bare
 //! height function.
 //!
-//! The albedo is the product of two seamless, periodic tiles laid on the world `x, y` plane:
+//! The albedo is the product of seamless, periodic layers laid on the world `x, y` plane:
 //!
 //! - a **fine tile** (default 2048 x 2048 texels of 4 mm, period 8.19 m): six octaves of gradient
 //!   noise with wavelengths 16 mm ... 0.51 m, plus about 60 pebbles per square metre (ellipses of
@@ -9,13 +9,15 @@
 //!   structure a hazcam resolves between 0.5 and 5 m: a pixel covers 1.5 mm of ground at 0.6 m
 //!   and 1-7 cm (foreshortened) at 2.5-5 m, so pebbles and the short noise octaves give corners
 //!   near the rover and the pebble clusters and long octaves give corners far away;
-//! - a **coarse tile** (512 x 512 texels of 64 mm, period 32.8 m): four octaves of wavelengths
-//!   0.5 ... 4.1 m modulating the brightness by about +-25 %, so the 8 m fine period never shows
-//!   as a repeat.
+//! - a **coarse layer** baked into the fine tile (same period): four octaves of wavelengths
+//!   0.5 ... 4.1 m modulating the brightness by about +-25 %;
+//! - a **detail tile** (512 x 512 texels of 1 mm, period 0.51 m, rotated 35 deg): sand grains of
+//!   2-16 mm wavelength, seen within about 1 m, faded out for footprints of 4-8 mm.
 //!
-//! The fine tile keeps a box-filtered mip pyramid; [`AlbedoTexture::albedo_filtered`] blends the
-//! two levels around a requested footprint (trilinear), which removes the aliasing a point
-//! sample would give on distant, foreshortened ground.
+//! The fine and detail tiles keep box-filtered mip pyramids; [`AlbedoTexture::albedo_filtered`]
+//! blends the two levels around a requested footprint (trilinear), which removes the aliasing a
+//! point sample would give on distant, foreshortened ground. The whole texture repeats every
+//! 8.19 m (default), more than a hazcam sees.
 
 use super::noise::{floor_i64, gradient_noise, hash3, unit_f64};
 use super::FilteredAlbedo;
@@ -97,14 +99,14 @@ impl Tile {
     }
 
     /// Texel `(i, j)`, indices wrapped.
-    #[inline]
+    #[inline(always)]
     fn at(&self, i: usize, j: usize) -> u16 {
         let mask = self.size - 1;
         self.data[self.index(i & mask, j & mask)]
     }
 
     /// Bilinear sample at texel coordinates (texel centres at integers), wrapping.
-    #[inline]
+    #[inline(always)]
     fn bilinear(&self, u: f64, v: f64) -> f64 {
         let u0 = floor_i64(u);
         let v0 = floor_i64(v);
@@ -145,6 +147,8 @@ impl Tile {
 struct Pyramid {
     levels: Vec<Tile>,
     inv_texel: f64,
+    /// Texels per metre of each level.
+    scales: Vec<f64>,
 }
 
 impl Pyramid {
@@ -157,16 +161,20 @@ impl Pyramid {
             let next = last.halve();
             levels.push(next);
         }
+        let scales = (0..levels.len())
+            .map(|i| 1.0 / (texel_m * (1u64 << i) as f64))
+            .collect();
         Self {
             levels,
             inv_texel: 1.0 / texel_m,
+            scales,
         }
     }
 
     /// Value at world `(x, y)` averaged over about `footprint_m`: level
-    /// `log2(footprint / texel)`, blended with the next level over the middle half of each
-    /// octave (one lookup for half of the pixels, no visible level seams).
-    #[inline]
+    /// `log2(footprint / texel)`, blended with the next level over the middle quarter of each
+    /// octave (one lookup for three quarters of the pixels, no sharp level seams).
+    #[inline(always)]
     fn sample(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
         let ratio = footprint_m * self.inv_texel;
         let top = (self.levels.len() - 1) as f64;
@@ -176,9 +184,9 @@ impl Pyramid {
             0.0
         };
         let i0 = level as usize;
-        let t = ((level - i0 as f64 - 0.25) * 2.0).clamp(0.0, 1.0);
+        let t = ((level - i0 as f64 - 0.375) * 4.0).clamp(0.0, 1.0);
         let at = |i: usize| {
-            let scale = self.inv_texel / (1u64 << i) as f64;
+            let scale = self.scales[i];
             self.levels[i].bilinear(x_m * scale - 0.5, y_m * scale - 0.5)
         };
         let a = at(i0);
@@ -199,12 +207,10 @@ pub struct AlbedoTexture {
     params: TextureParams,
     fine: Pyramid,
     detail: Pyramid,
-    coarse: Tile,
-    coarse_texel_m: f64,
+    /// `(sin, cos)` of the detail layer's rotation.
+    detail_rotation: (f64, f64),
 }
 
-/// Coarse tile side, texels.
-const COARSE_SIZE: usize = 512;
 /// Detail tile side, texels, and texel size, m.
 const DETAIL_SIZE: usize = 512;
 const DETAIL_TEXEL_M: f64 = 0.001;
@@ -219,14 +225,11 @@ impl AlbedoTexture {
         let size = 1usize << size_log2;
         let fine = Pyramid::new(fine_tile(&params, size), params.texel_m);
         let detail = Pyramid::new(detail_tile(&params, DETAIL_SIZE), DETAIL_TEXEL_M);
-        let coarse_texel_m = params.texel_m * size as f64 * 4.0 / COARSE_SIZE as f64;
-        let coarse = coarse_tile(&params, COARSE_SIZE);
         Self {
             params,
             fine,
             detail,
-            coarse,
-            coarse_texel_m,
+            detail_rotation: DETAIL_ANGLE_RAD.sin_cos(),
         }
     }
 
@@ -235,7 +238,7 @@ impl AlbedoTexture {
         &self.params
     }
 
-    /// Period of the fine tile, m (the coarse tile repeats every four fine periods).
+    /// Period of the texture, m.
     pub fn period_m(&self) -> f64 {
         self.params.texel_m * self.fine.levels[0].size as f64
     }
@@ -250,13 +253,11 @@ impl AlbedoTexture {
     /// detail layer fades out between footprints of one and two fine texels.
     pub fn albedo_filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
         let fine = self.fine.sample(x_m, y_m, footprint_m);
-        let cs = 1.0 / self.coarse_texel_m;
-        let coarse = self.coarse.bilinear(x_m * cs - 0.5, y_m * cs - 0.5);
-        // The coarse and detail tiles store 0.5 * factor so that factors up to 2 fit in u16.
-        let mut albedo = fine * 2.0 * coarse;
+        // The detail tile stores 0.5 * factor so that factors up to 2 fit in u16.
+        let mut albedo = fine;
         let weight = (2.0 - footprint_m / self.params.texel_m).min(1.0);
         if weight > 0.0 {
-            let (s, c) = (DETAIL_ANGLE_RAD.sin(), DETAIL_ANGLE_RAD.cos());
+            let (s, c) = self.detail_rotation;
             let (u, v) = (c * x_m - s * y_m, s * x_m + c * y_m);
             let detail = self.detail.sample(u, v, footprint_m);
             albedo *= 1.0 + weight * (2.0 * detail - 1.0);
@@ -292,7 +293,9 @@ fn fine_tile(p: &TextureParams, size: usize) -> Tile {
     field.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
         for (i, out) in row.iter_mut().enumerate() {
             let mut s = 0.0;
-            for (k, (wavelength, amp)) in octaves.iter().enumerate() {
+            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
+                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
+                let wavelength = wavelength.min(size as f64);
                 let period = (size as f64 / wavelength) as u64;
                 s += amp
                     * gradient_noise(
@@ -306,9 +309,16 @@ fn fine_tile(p: &TextureParams, size: usize) -> Tile {
             *out = (s * norm * 5.0) as f32;
         }
     });
+    // Coarse layer: a quarter-resolution tile of the same period, bilinear.
+    let coarse = coarse_tile(p, size / 4);
     let mut albedo: Vec<f32> = field
         .iter()
-        .map(|&n| (p.mean_albedo * (1.0 + p.sand_contrast * f64::from(n))) as f32)
+        .enumerate()
+        .map(|(idx, &n)| {
+            let (i, j) = ((idx % size) as f64, (idx / size) as f64);
+            let factor = 2.0 * coarse.bilinear((i + 0.5) / 4.0 - 0.5, (j + 0.5) / 4.0 - 0.5);
+            (factor * p.mean_albedo * (1.0 + p.sand_contrast * f64::from(n))) as f32
+        })
         .collect();
     stamp_pebbles(p, size, &mut albedo);
     let rows: Vec<u16> = albedo
@@ -365,9 +375,10 @@ fn stamp_pebbles(p: &TextureParams, size: usize, albedo: &mut [f32]) {
     }
 }
 
-/// Coarse tile: stores `0.5 * (1 + contrast * noise)`.
+/// Coarse tile (16 mm texels at the default size): wavelengths 0.5-4.1 m, stores
+/// `0.5 * (1 + contrast * noise)`.
 fn coarse_tile(p: &TextureParams, size: usize) -> Tile {
-    let octaves: [(f64, f64); 4] = [(64.0, 1.0), (32.0, 0.7), (16.0, 0.5), (8.0, 0.35)];
+    let octaves: [(f64, f64); 4] = [(256.0, 1.0), (128.0, 0.7), (64.0, 0.5), (32.0, 0.35)];
     let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
     let seed = p.seed ^ 0xc0a7_5e00;
     let rows: Vec<u16> = (0..size * size)
@@ -375,8 +386,10 @@ fn coarse_tile(p: &TextureParams, size: usize) -> Tile {
         .map(|idx| {
             let (i, j) = (idx % size, idx / size);
             let mut s = 0.0;
-            for (k, (wavelength, amp)) in octaves.iter().enumerate() {
-                let period = (size as f64 / wavelength) as u64;
+            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
+                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
+                let wavelength = wavelength.min(size as f64);
+                let period = ((size as f64 / wavelength) as u64).max(1);
                 s += amp
                     * gradient_noise(
                         i as f64 / wavelength,
@@ -403,7 +416,9 @@ fn detail_tile(p: &TextureParams, size: usize) -> Tile {
         .map(|idx| {
             let (i, j) = (idx % size, idx / size);
             let mut s = 0.0;
-            for (k, (wavelength, amp)) in octaves.iter().enumerate() {
+            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
+                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
+                let wavelength = wavelength.min(size as f64);
                 let period = (size as f64 / wavelength) as u64;
                 s += amp
                     * gradient_noise(
