@@ -42,7 +42,8 @@ pub struct TextureParams {
     pub pebbles_per_m2: f64,
     /// Relative amplitude of the coarse (0.5-4 m) brightness modulation.
     pub coarse_contrast: f64,
-    /// Relative amplitude of the millimetre detail (sand grains) seen within about 1 m.
+    /// Relative amplitude of the millimetre detail (sand grains) seen within about 1 m; 0 turns
+    /// the layer off (about 30 % faster rendering, less texture right in front of the rover).
     pub detail_contrast: f64,
 }
 
@@ -112,13 +113,24 @@ impl Tile {
         let v0 = floor_i64(v);
         let fu = u - u0 as f64;
         let fv = v - v0 as f64;
-        // Two's-complement wrap then the mask in `at` keeps indices in range.
-        let (i0, j0) = (u0 as usize, v0 as usize);
-        let (i1, j1) = (i0.wrapping_add(1), j0.wrapping_add(1));
-        let a = f64::from(self.at(i0, j0));
-        let b = f64::from(self.at(i1, j0));
-        let c = f64::from(self.at(i0, j1));
-        let d = f64::from(self.at(i1, j1));
+        // Two's-complement wrap then the mask keeps indices in range.
+        let mask = self.size - 1;
+        let (i0, j0) = (u0 as usize & mask, v0 as usize & mask);
+        let (a, b, c, d) = if (i0 & 7) != 7 && (j0 & 7) != 7 {
+            // All four taps in one 8x8 block: offsets 0, 1, 8, 9 from the first.
+            let base = self.index(i0, j0);
+            let q = &self.data[base..base + 10];
+            (q[0], q[1], q[8], q[9])
+        } else {
+            let (i1, j1) = (i0 + 1, j0 + 1);
+            (
+                self.at(i0, j0),
+                self.at(i1, j0),
+                self.at(i0, j1),
+                self.at(i1, j1),
+            )
+        };
+        let (a, b, c, d) = (f64::from(a), f64::from(b), f64::from(c), f64::from(d));
         let top = a + fu * (b - a);
         let bottom = c + fu * (d - c);
         (top + fv * (bottom - top)) * (1.0 / 65535.0)
@@ -169,6 +181,20 @@ impl Pyramid {
             inv_texel: 1.0 / texel_m,
             scales,
         }
+    }
+
+    /// As [`Self::sample`] without blending levels (one lookup; for low-contrast layers).
+    #[inline(always)]
+    fn sample_nearest_level(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        let ratio = footprint_m * self.inv_texel;
+        let top = self.levels.len() - 1;
+        let i = if ratio > 1.414 {
+            ((fast_log2(ratio) + 0.5) as usize).min(top)
+        } else {
+            0
+        };
+        let scale = self.scales[i];
+        self.levels[i].bilinear(x_m * scale - 0.5, y_m * scale - 0.5)
     }
 
     /// Value at world `(x, y)` averaged over about `footprint_m`: level
@@ -250,16 +276,16 @@ impl AlbedoTexture {
 
     /// Albedo at world `(x_m, y_m)` averaged over a footprint of about `footprint_m` (m): the
     /// fine pyramid is sampled trilinearly at level `log2(footprint / texel)`; the millimetre
-    /// detail layer fades out between footprints of one and two fine texels.
+    /// detail layer fades out between footprints of one and one and a half fine texels.
     pub fn albedo_filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
         let fine = self.fine.sample(x_m, y_m, footprint_m);
         // The detail tile stores 0.5 * factor so that factors up to 2 fit in u16.
         let mut albedo = fine;
-        let weight = (2.0 - footprint_m / self.params.texel_m).min(1.0);
-        if weight > 0.0 {
+        let weight = (3.0 - 2.0 * footprint_m / self.params.texel_m).min(1.0);
+        if weight > 0.0 && self.params.detail_contrast > 0.0 {
             let (s, c) = self.detail_rotation;
             let (u, v) = (c * x_m - s * y_m, s * x_m + c * y_m);
-            let detail = self.detail.sample(u, v, footprint_m);
+            let detail = self.detail.sample_nearest_level(u, v, footprint_m);
             albedo *= 1.0 + weight * (2.0 * detail - 1.0);
         }
         albedo.clamp(0.0, 1.0)
