@@ -8,7 +8,8 @@
 //! - [`vehicle`]: Rocky 8 geometry, placement on the terrain, motors.
 //! - [`slip`]: terramechanics-inspired slip model.
 //! - [`sensors`]: IMU, encoders, sun sensor, fault injection.
-//! - [`camera`]: the stereo renderer interface.
+//! - [`camera`]: the stereo renderer interface; [`render`]: the rasterising hazcam renderer and
+//!   the procedural albedo texture.
 //! - [`world`]: the truth state and its step; [`hal_devices`]: the HAL devices on it.
 //! - [`driver`]: the simulator's reference driver (not flight code).
 //! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
@@ -20,6 +21,7 @@ pub mod driver;
 pub mod hal_devices;
 pub mod output;
 pub mod report;
+pub mod render;
 pub mod run;
 pub mod scenario;
 pub mod sensors;

@@ -1,0 +1,513 @@
+//! Procedural albedo of sandy ground with pebbles, and a surface wrapper that adds it to a bare
+//! height function.
+//!
+//! The albedo is the product of seamless, periodic layers laid on the world `x, y` plane:
+//!
+//! - a **fine tile** (default 2048 x 2048 texels of 4 mm, period 8.19 m): six octaves of gradient
+//!   noise with wavelengths 16 mm ... 0.51 m, plus about 60 pebbles per square metre (ellipses of
+//!   6 mm ... 40 mm radius, darker basalt-like or lighter, with a soft one-texel rim). This is the
+//!   structure a hazcam resolves between 0.5 and 5 m: a pixel covers 1.5 mm of ground at 0.6 m
+//!   and 1-7 cm (foreshortened) at 2.5-5 m, so pebbles and the short noise octaves give corners
+//!   near the rover and the pebble clusters and long octaves give corners far away;
+//! - a **coarse layer** baked into the fine tile (same period): four octaves of wavelengths
+//!   0.5 ... 4.1 m modulating the brightness by about +-25 %;
+//! - a **detail tile** (512 x 512 texels of 1 mm, period 0.51 m, rotated 35 deg): sand grains of
+//!   2-16 mm wavelength, seen within about 1 m, faded out for footprints of 4-8 mm.
+//!
+//! The fine and detail tiles keep box-filtered mip pyramids; [`AlbedoTexture::albedo_filtered`]
+//! blends the two levels around a requested footprint (trilinear), which removes the aliasing a
+//! point sample would give on distant, foreshortened ground. The whole texture repeats every
+//! 8.19 m (default), more than a hazcam sees.
+
+use super::noise::{floor_i64, gradient_noise, hash3, unit_f64};
+use super::FilteredAlbedo;
+use crate::surface::TerrainSurface;
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Parameters of the procedural albedo.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TextureParams {
+    /// Seed of every random choice (noise lattices, pebbles).
+    pub seed: u64,
+    /// Fine-tile texel size, m.
+    pub texel_m: f64,
+    /// Fine-tile side, texels, as a power of two (`1 << size_log2`).
+    pub size_log2: u32,
+    /// Mean albedo of the sand (Mars soil is about 0.25).
+    pub mean_albedo: f64,
+    /// Relative contrast of the sand noise (standard deviation of the noise factor, about).
+    pub sand_contrast: f64,
+    /// Pebbles per square metre.
+    pub pebbles_per_m2: f64,
+    /// Relative amplitude of the coarse (0.5-4 m) brightness modulation.
+    pub coarse_contrast: f64,
+    /// Relative amplitude of the millimetre detail (sand grains) seen within about 1 m; 0 turns
+    /// the layer off (about 30 % faster rendering, less texture right in front of the rover).
+    pub detail_contrast: f64,
+}
+
+impl Default for TextureParams {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            texel_m: 0.004,
+            size_log2: 11,
+            mean_albedo: 0.25,
+            sand_contrast: 0.22,
+            pebbles_per_m2: 60.0,
+            coarse_contrast: 0.25,
+            detail_contrast: 0.3,
+        }
+    }
+}
+
+/// One periodic square tile of albedo values (`u16`, 65535 = albedo 1), stored in 8x8 blocks
+/// so that a bilinear lookup touches one or two cache lines whatever the viewing direction.
+#[derive(Debug, Clone)]
+struct Tile {
+    size: usize,
+    /// log2 of the number of blocks per row.
+    blocks_log2: u32,
+    data: Vec<u16>,
+}
+
+/// Block side, texels.
+const BLOCK: usize = 8;
+
+impl Tile {
+    /// A tile from row-major values (`size` a power of two, at least 8).
+    fn from_row_major(size: usize, rows: &[u16]) -> Tile {
+        let blocks_log2 = (size / BLOCK).trailing_zeros();
+        let mut tile = Tile {
+            size,
+            blocks_log2,
+            data: vec![0; size * size],
+        };
+        for j in 0..size {
+            for i in 0..size {
+                let idx = tile.index(i, j);
+                tile.data[idx] = rows[j * size + i];
+            }
+        }
+        tile
+    }
+
+    /// Storage index of texel `(i, j)` (both below `size`).
+    #[inline]
+    fn index(&self, i: usize, j: usize) -> usize {
+        (((j >> 3) << self.blocks_log2) + (i >> 3)) * (BLOCK * BLOCK) + ((j & 7) << 3) + (i & 7)
+    }
+
+    /// Texel `(i, j)`, indices wrapped.
+    #[inline(always)]
+    fn at(&self, i: usize, j: usize) -> u16 {
+        let mask = self.size - 1;
+        self.data[self.index(i & mask, j & mask)]
+    }
+
+    /// Bilinear sample at texel coordinates (texel centres at integers), wrapping.
+    #[inline(always)]
+    fn bilinear(&self, u: f64, v: f64) -> f64 {
+        let u0 = floor_i64(u);
+        let v0 = floor_i64(v);
+        let fu = u - u0 as f64;
+        let fv = v - v0 as f64;
+        // Two's-complement wrap then the mask keeps indices in range.
+        let mask = self.size - 1;
+        let (i0, j0) = (u0 as usize & mask, v0 as usize & mask);
+        let (a, b, c, d) = if (i0 & 7) != 7 && (j0 & 7) != 7 {
+            // All four taps in one 8x8 block: offsets 0, 1, 8, 9 from the first.
+            let base = self.index(i0, j0);
+            let q = &self.data[base..base + 10];
+            (q[0], q[1], q[8], q[9])
+        } else {
+            let (i1, j1) = (i0 + 1, j0 + 1);
+            (
+                self.at(i0, j0),
+                self.at(i1, j0),
+                self.at(i0, j1),
+                self.at(i1, j1),
+            )
+        };
+        let (a, b, c, d) = (f64::from(a), f64::from(b), f64::from(c), f64::from(d));
+        let top = a + fu * (b - a);
+        let bottom = c + fu * (d - c);
+        (top + fv * (bottom - top)) * (1.0 / 65535.0)
+    }
+
+    /// The next mip level: 2x2 box average.
+    fn halve(&self) -> Tile {
+        let n = self.size / 2;
+        let mut rows = vec![0u16; n * n];
+        for j in 0..n {
+            for i in 0..n {
+                let s = |a: usize, b: usize| u32::from(self.at(a, b));
+                let sum = s(2 * i, 2 * j)
+                    + s(2 * i + 1, 2 * j)
+                    + s(2 * i, 2 * j + 1)
+                    + s(2 * i + 1, 2 * j + 1);
+                rows[j * n + i] = ((sum + 2) / 4) as u16;
+            }
+        }
+        Tile::from_row_major(n, &rows)
+    }
+}
+
+/// A tile and its box-filtered mip pyramid, sampled trilinearly by footprint.
+#[derive(Debug, Clone)]
+struct Pyramid {
+    levels: Vec<Tile>,
+    inv_texel: f64,
+    /// Texels per metre of each level.
+    scales: Vec<f64>,
+}
+
+impl Pyramid {
+    fn new(base: Tile, texel_m: f64) -> Self {
+        let mut levels = vec![base];
+        while let Some(last) = levels.last() {
+            if last.size <= BLOCK {
+                break;
+            }
+            let next = last.halve();
+            levels.push(next);
+        }
+        let scales = (0..levels.len())
+            .map(|i| 1.0 / (texel_m * (1u64 << i) as f64))
+            .collect();
+        Self {
+            levels,
+            inv_texel: 1.0 / texel_m,
+            scales,
+        }
+    }
+
+    /// As [`Self::sample`] without blending levels (one lookup; for low-contrast layers).
+    #[inline(always)]
+    fn sample_nearest_level(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        let ratio = footprint_m * self.inv_texel;
+        let top = self.levels.len() - 1;
+        let i = if ratio > 1.414 {
+            ((fast_log2(ratio) + 0.5) as usize).min(top)
+        } else {
+            0
+        };
+        let scale = self.scales[i];
+        self.levels[i].bilinear(x_m * scale - 0.5, y_m * scale - 0.5)
+    }
+
+    /// Value at world `(x, y)` averaged over about `footprint_m`: level
+    /// `log2(footprint / texel)`, blended with the next level over the middle quarter of each
+    /// octave (one lookup for three quarters of the pixels, no sharp level seams).
+    #[inline(always)]
+    fn sample(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        let ratio = footprint_m * self.inv_texel;
+        let top = (self.levels.len() - 1) as f64;
+        let level = if ratio > 1.0 {
+            fast_log2(ratio).min(top)
+        } else {
+            0.0
+        };
+        let i0 = level as usize;
+        let t = ((level - i0 as f64 - 0.375) * 4.0).clamp(0.0, 1.0);
+        let at = |i: usize| {
+            let scale = self.scales[i];
+            self.levels[i].bilinear(x_m * scale - 0.5, y_m * scale - 0.5)
+        };
+        let a = at(i0);
+        if t > 0.0 && i0 + 1 < self.levels.len() {
+            a + t * (at(i0 + 1) - a)
+        } else {
+            a
+        }
+    }
+}
+
+/// Procedural albedo texture of sandy ground with pebbles (see the module documentation).
+///
+/// Indexed by world `x, y` (frame `W`, m); deterministic from [`TextureParams::seed`]
+/// (generation is parallel, but every texel is a pure function of the seed and its index).
+#[derive(Debug, Clone)]
+pub struct AlbedoTexture {
+    params: TextureParams,
+    fine: Pyramid,
+    detail: Pyramid,
+    /// `(sin, cos)` of the detail layer's rotation.
+    detail_rotation: (f64, f64),
+}
+
+/// Detail tile side, texels, and texel size, m.
+const DETAIL_SIZE: usize = 512;
+const DETAIL_TEXEL_M: f64 = 0.001;
+/// Rotation of the detail layer against the world axes, rad (so its 0.5 m period never lines up
+/// with the fine tile).
+const DETAIL_ANGLE_RAD: f64 = 0.61;
+
+impl AlbedoTexture {
+    /// Generate the texture (about 1 s on one core for the default 2048^2 tile).
+    pub fn new(params: TextureParams) -> Self {
+        let size_log2 = params.size_log2.clamp(6, 13);
+        let size = 1usize << size_log2;
+        let fine = Pyramid::new(fine_tile(&params, size), params.texel_m);
+        let detail = Pyramid::new(detail_tile(&params, DETAIL_SIZE), DETAIL_TEXEL_M);
+        Self {
+            params,
+            fine,
+            detail,
+            detail_rotation: DETAIL_ANGLE_RAD.sin_cos(),
+        }
+    }
+
+    /// The parameters this texture was made from.
+    pub fn params(&self) -> &TextureParams {
+        &self.params
+    }
+
+    /// Period of the texture, m.
+    pub fn period_m(&self) -> f64 {
+        self.params.texel_m * self.fine.levels[0].size as f64
+    }
+
+    /// Point-sampled albedo at world `(x_m, y_m)` (finest levels, bilinear), in `[0, 1]`.
+    pub fn albedo(&self, x_m: f64, y_m: f64) -> f64 {
+        self.albedo_filtered(x_m, y_m, 0.0)
+    }
+
+    /// Albedo at world `(x_m, y_m)` averaged over a footprint of about `footprint_m` (m): the
+    /// fine pyramid is sampled trilinearly at level `log2(footprint / texel)`; the millimetre
+    /// detail layer fades out between footprints of one and one and a half fine texels.
+    pub fn albedo_filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        let fine = self.fine.sample(x_m, y_m, footprint_m);
+        // The detail tile stores 0.5 * factor so that factors up to 2 fit in u16.
+        let mut albedo = fine;
+        let weight = (3.0 - 2.0 * footprint_m / self.params.texel_m).min(1.0);
+        if weight > 0.0 && self.params.detail_contrast > 0.0 {
+            let (s, c) = self.detail_rotation;
+            let (u, v) = (c * x_m - s * y_m, s * x_m + c * y_m);
+            let detail = self.detail.sample_nearest_level(u, v, footprint_m);
+            albedo *= 1.0 + weight * (2.0 * detail - 1.0);
+        }
+        albedo.clamp(0.0, 1.0)
+    }
+}
+
+/// `log2(x)` for `x >= 1` to within 0.09 (exponent plus linear mantissa), enough to choose
+/// and blend mip levels.
+#[inline]
+fn fast_log2(x: f64) -> f64 {
+    let bits = x.to_bits();
+    let exponent = ((bits >> 52) & 0x7ff) as f64 - 1023.0;
+    let mantissa = f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000);
+    exponent + (mantissa - 1.0)
+}
+
+/// Fine tile: sand noise plus pebbles.
+fn fine_tile(p: &TextureParams, size: usize) -> Tile {
+    let seed = p.seed;
+    // Octaves: wavelength in texels 128, 64, ..., 4 (0.51 m ... 16 mm at 4 mm texels).
+    let octaves: [(f64, f64); 6] = [
+        (128.0, 1.0),
+        (64.0, 0.85),
+        (32.0, 0.75),
+        (16.0, 0.7),
+        (8.0, 0.6),
+        (4.0, 0.45),
+    ];
+    let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
+    let mut field = vec![0f32; size * size];
+    field.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
+        for (i, out) in row.iter_mut().enumerate() {
+            let mut s = 0.0;
+            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
+                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
+                let wavelength = wavelength.min(size as f64);
+                let period = (size as f64 / wavelength) as u64;
+                s += amp
+                    * gradient_noise(
+                        i as f64 / wavelength,
+                        j as f64 / wavelength,
+                        period,
+                        seed.wrapping_add(k as u64 * 0x1000),
+                    );
+            }
+            // Gradient noise has a standard deviation near 0.2 per octave.
+            *out = (s * norm * 5.0) as f32;
+        }
+    });
+    // Coarse layer: a quarter-resolution tile of the same period, bilinear.
+    let coarse = coarse_tile(p, size / 4);
+    let mut albedo: Vec<f32> = field
+        .iter()
+        .enumerate()
+        .map(|(idx, &n)| {
+            let (i, j) = ((idx % size) as f64, (idx / size) as f64);
+            let factor = 2.0 * coarse.bilinear((i + 0.5) / 4.0 - 0.5, (j + 0.5) / 4.0 - 0.5);
+            (factor * p.mean_albedo * (1.0 + p.sand_contrast * f64::from(n))) as f32
+        })
+        .collect();
+    stamp_pebbles(p, size, &mut albedo);
+    let rows: Vec<u16> = albedo
+        .iter()
+        .map(|&a| (f64::from(a).clamp(0.0, 1.0) * 65535.0).round() as u16)
+        .collect();
+    Tile::from_row_major(size, &rows)
+}
+
+/// Pebbles: soft-edged ellipses blended over the sand, wrapping around the tile edges.
+fn stamp_pebbles(p: &TextureParams, size: usize, albedo: &mut [f32]) {
+    let texel = p.texel_m;
+    let area_m2 = (size as f64 * texel).powi(2);
+    let count = (p.pebbles_per_m2.max(0.0) * area_m2).round() as u64;
+    let mask = size - 1;
+    for k in 0..count {
+        let h = |n: u64| unit_f64(hash3(p.seed ^ 0x005e_b1e5, k, n));
+        let cx = h(0) * size as f64;
+        let cy = h(1) * size as f64;
+        // Radius: mostly small, a few large (power law), 6 mm ... 40 mm.
+        let radius_m = 0.006 * (40.0f64 / 6.0).powf(h(2).powi(2));
+        let a = radius_m / texel;
+        let b = a * (0.55 + 0.45 * h(3));
+        let theta = h(4) * std::f64::consts::PI;
+        let (st, ct) = theta.sin_cos();
+        // Half dark basalt-like (0.35-0.7 of the mean), half light (1.3-1.9 of the mean).
+        let tone = if h(5) < 0.5 {
+            0.35 + 0.35 * h(6)
+        } else {
+            1.3 + 0.6 * h(6)
+        };
+        let pebble_albedo = (p.mean_albedo * tone) as f32;
+        let reach = a.ceil() as i64 + 1;
+        let (ci, cj) = (cx.floor() as i64, cy.floor() as i64);
+        for dj in -reach..=reach {
+            for di in -reach..=reach {
+                let x = (ci + di) as f64 + 0.5 - cx;
+                let y = (cj + dj) as f64 + 0.5 - cy;
+                let xr = ct * x + st * y;
+                let yr = -st * x + ct * y;
+                // Signed distance to the ellipse rim, texels (approximate).
+                let r = ((xr / a).powi(2) + (yr / b).powi(2)).sqrt();
+                let d = (r - 1.0) * b;
+                let w = (0.5 - d).clamp(0.0, 1.0) as f32;
+                if w > 0.0 {
+                    // Slight darkening towards the rim reads as relief.
+                    let rim = (1.0 - 0.25 * r.min(1.0).powi(4)) as f32;
+                    let idx = (((cj + dj) as usize) & mask) * size + (((ci + di) as usize) & mask);
+                    let cell = &mut albedo[idx];
+                    *cell += w * (pebble_albedo * rim - *cell);
+                }
+            }
+        }
+    }
+}
+
+/// Coarse tile (16 mm texels at the default size): wavelengths 0.5-4.1 m, stores
+/// `0.5 * (1 + contrast * noise)`.
+fn coarse_tile(p: &TextureParams, size: usize) -> Tile {
+    let octaves: [(f64, f64); 4] = [(256.0, 1.0), (128.0, 0.7), (64.0, 0.5), (32.0, 0.35)];
+    let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
+    let seed = p.seed ^ 0xc0a7_5e00;
+    let rows: Vec<u16> = (0..size * size)
+        .into_par_iter()
+        .map(|idx| {
+            let (i, j) = (idx % size, idx / size);
+            let mut s = 0.0;
+            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
+                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
+                let wavelength = wavelength.min(size as f64);
+                let period = ((size as f64 / wavelength) as u64).max(1);
+                s += amp
+                    * gradient_noise(
+                        i as f64 / wavelength,
+                        j as f64 / wavelength,
+                        period,
+                        seed.wrapping_add(k as u64),
+                    );
+            }
+            let factor = (1.0 + p.coarse_contrast * s * norm * 5.0).clamp(0.2, 1.99);
+            (0.5 * factor * 65535.0).round() as u16
+        })
+        .collect();
+    Tile::from_row_major(size, &rows)
+}
+
+/// Detail tile (1 mm texels, period 0.51 m): sand grain noise of wavelengths 2-16 mm,
+/// stores `0.5 * (1 + contrast * noise)`.
+fn detail_tile(p: &TextureParams, size: usize) -> Tile {
+    let octaves: [(f64, f64); 4] = [(16.0, 1.0), (8.0, 0.9), (4.0, 0.8), (2.0, 0.6)];
+    let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
+    let seed = p.seed ^ 0xde7a_11ed;
+    let rows: Vec<u16> = (0..size * size)
+        .into_par_iter()
+        .map(|idx| {
+            let (i, j) = (idx % size, idx / size);
+            let mut s = 0.0;
+            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
+                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
+                let wavelength = wavelength.min(size as f64);
+                let period = (size as f64 / wavelength) as u64;
+                s += amp
+                    * gradient_noise(
+                        i as f64 / wavelength,
+                        j as f64 / wavelength,
+                        period,
+                        seed.wrapping_add(k as u64),
+                    );
+            }
+            let factor = (1.0 + p.detail_contrast * s * norm * 5.0).clamp(0.2, 1.99);
+            (0.5 * factor * 65535.0).round() as u16
+        })
+        .collect();
+    Tile::from_row_major(size, &rows)
+}
+
+/// A terrain whose heights and normals come from `inner` and whose albedo is the procedural
+/// texture (the inner surface's own albedo is ignored).
+#[derive(Debug, Clone)]
+pub struct TexturedSurface<H> {
+    /// The surface giving the heights.
+    pub inner: H,
+    /// The albedo texture (shared: it is several megabytes).
+    pub texture: Arc<AlbedoTexture>,
+}
+
+impl<H> TexturedSurface<H> {
+    /// Wrap `inner` with `texture`.
+    pub fn new(inner: H, texture: Arc<AlbedoTexture>) -> Self {
+        Self { inner, texture }
+    }
+}
+
+impl<H: TerrainSurface> TerrainSurface for TexturedSurface<H> {
+    fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+        self.inner.height_m(x_m, y_m)
+    }
+    fn albedo(&self, x_m: f64, y_m: f64) -> f64 {
+        self.texture.albedo(x_m, y_m)
+    }
+    fn normal_up(&self, x_m: f64, y_m: f64) -> [f64; 3] {
+        self.inner.normal_up(x_m, y_m)
+    }
+}
+
+impl<H: TerrainSurface> FilteredAlbedo for TexturedSurface<H> {
+    fn albedo_filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        self.texture.albedo_filtered(x_m, y_m, footprint_m)
+    }
+}
+
+/// A bare height function `(x_m, y_m) -> height_m` (positive up) as a [`TerrainSurface`] with a
+/// uniform albedo of 0.5; wrap it in [`TexturedSurface`] to give it texture.
+#[derive(Debug, Clone, Copy)]
+pub struct HeightFn<F>(pub F);
+
+impl<F: Fn(f64, f64) -> f64 + Sync> TerrainSurface for HeightFn<F> {
+    fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+        (self.0)(x_m, y_m)
+    }
+    fn albedo(&self, _x_m: f64, _y_m: f64) -> f64 {
+        0.5
+    }
+}
+
+impl<F: Fn(f64, f64) -> f64 + Sync> FilteredAlbedo for HeightFn<F> {}
