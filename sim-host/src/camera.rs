@@ -45,3 +45,92 @@ impl StereoRenderer for FlatGreyRenderer {
         right.fill(128);
     }
 }
+
+/// The rendered hazcams: [`crate::render::StereoRenderer`] over the terrain's heights with the
+/// procedural albedo texture of [`crate::render::AlbedoTexture`] and Lambertian sun shading.
+///
+/// A render error (which only a degenerate pose or calibration can cause) gives black images,
+/// which the flight software rejects as a blank frame, and is counted in [`Self::errors`].
+pub struct TexturedRenderer {
+    inner: std::cell::RefCell<crate::render::StereoRenderer>,
+    texture: std::sync::Arc<crate::render::AlbedoTexture>,
+    sun: crate::render::Sun,
+    errors: std::cell::Cell<u64>,
+}
+
+impl TexturedRenderer {
+    /// A renderer for `calib` with the texture of `texture_seed` and the sun at the given
+    /// azimuth (from north towards east) and elevation, degrees.
+    pub fn new(
+        calib: StereoCalibration,
+        texture_seed: u64,
+        sun_azimuth_deg: f64,
+        sun_elevation_deg: f64,
+    ) -> Self {
+        let params = crate::render::TextureParams {
+            seed: texture_seed,
+            ..crate::render::TextureParams::default()
+        };
+        Self {
+            inner: std::cell::RefCell::new(crate::render::StereoRenderer::new(
+                calib,
+                crate::render::RenderSettings::default(),
+            )),
+            texture: std::sync::Arc::new(crate::render::AlbedoTexture::new(params)),
+            sun: crate::render::Sun::from_azimuth_elevation(
+                sun_azimuth_deg.to_radians(),
+                sun_elevation_deg.to_radians(),
+            ),
+            errors: std::cell::Cell::new(0),
+        }
+    }
+
+    /// Frames that failed to render (delivered black).
+    pub fn errors(&self) -> u64 {
+        self.errors.get()
+    }
+}
+
+/// A borrowed terrain as an owned [`TerrainSurface`] for the texture wrapper.
+struct BorrowedSurface<'a>(&'a dyn TerrainSurface);
+
+impl TerrainSurface for BorrowedSurface<'_> {
+    fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+        self.0.height_m(x_m, y_m)
+    }
+    fn albedo(&self, x_m: f64, y_m: f64) -> f64 {
+        self.0.albedo(x_m, y_m)
+    }
+    fn normal_up(&self, x_m: f64, y_m: f64) -> [f64; 3] {
+        self.0.normal_up(x_m, y_m)
+    }
+}
+
+impl StereoRenderer for TexturedRenderer {
+    fn render(
+        &self,
+        surface: &dyn TerrainSurface,
+        left_cam_rot_w_from_k: [[f64; 3]; 3],
+        left_cam_pos_w: [f64; 3],
+        _calib: &StereoCalibration,
+        seed: u64,
+        left: &mut [u8],
+        right: &mut [u8],
+    ) {
+        let textured =
+            crate::render::TexturedSurface::new(BorrowedSurface(surface), self.texture.clone());
+        let pose = crate::render::CameraPose {
+            rot_world_from_camera: left_cam_rot_w_from_k,
+            pos_world_m: left_cam_pos_w,
+        };
+        let result = self
+            .inner
+            .borrow_mut()
+            .render(&textured, &pose, &self.sun, seed, left, right);
+        if result.is_err() {
+            self.errors.set(self.errors.get() + 1);
+            left.fill(0);
+            right.fill(0);
+        }
+    }
+}

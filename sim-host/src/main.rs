@@ -45,6 +45,10 @@ enum Command {
         /// file is byte-identical for the same scenario and seed (except wall_time_s).
         #[arg(long)]
         sim_counter: bool,
+        /// Skip rendering the stereo images (uniform grey frames): faster, but visual odometry
+        /// has nothing to track.
+        #[arg(long)]
+        no_render: bool,
     },
 }
 
@@ -78,9 +82,19 @@ fn run_scenario(
     no_slip_comp: bool,
     json: bool,
     sim_counter: bool,
+    no_render: bool,
 ) -> anyhow::Result<()> {
     let scenario = Scenario::load(&path)?;
     let seed_used = seed.unwrap_or(scenario.seed);
+    let renderer: Option<Box<dyn sim_host::camera::StereoRenderer>> = (!no_render).then(|| {
+        let sun = &scenario.sensors.sun;
+        Box::new(sim_host::camera::TexturedRenderer::new(
+            sim_host::devices::hazcam_calibration(),
+            seed_used,
+            sun.azimuth_deg,
+            sun.elevation_deg,
+        )) as Box<dyn sim_host::camera::StereoRenderer>
+    });
     let out = out.unwrap_or_else(|| PathBuf::from(format!("out/{}-{seed_used}", scenario.name)));
     let bar = (!json && scenario.duration_s > 30.0).then(|| {
         let bar = indicatif::ProgressBar::new(1000);
@@ -104,7 +118,7 @@ fn run_scenario(
             } else {
                 CounterMode::Host
             },
-            renderer: None,
+            renderer,
             progress,
         },
     )?;
@@ -193,6 +207,15 @@ fn main() -> anyhow::Result<()> {
             no_slip_comp,
             json,
             sim_counter,
-        }) => run_scenario(scenario, seed, out, no_slip_comp, json, sim_counter),
+            no_render,
+        }) => run_scenario(
+            scenario,
+            seed,
+            out,
+            no_slip_comp,
+            json,
+            sim_counter,
+            no_render,
+        ),
     }
 }
