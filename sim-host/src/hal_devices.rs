@@ -55,7 +55,10 @@ impl Clock for WorldClock {
     fn counter(&mut self) -> Result<u64, ErrorKind> {
         Ok(match self.mode {
             CounterMode::Host => {
-                u64::try_from(self.origin.elapsed().as_nanos()).unwrap_or(u64::MAX)
+                let elapsed = u64::try_from(self.origin.elapsed().as_nanos()).unwrap_or(u64::MAX);
+                // Time spent rendering images inside the camera device is the simulator's,
+                // not the flight software's.
+                elapsed.saturating_sub(self.world.borrow().sim_overhead_ns.get())
             }
             CounterMode::SimTime => self.world.borrow().truth.t_us.saturating_mul(1000),
         })
@@ -269,6 +272,7 @@ impl StereoCamera for WorldStereo {
             let pos = Vector3::from(w.truth.pose.pos_m)
                 + rot * Vector3::from(self.calib.pos_camera_in_rover_m);
             let rows = [0, 1, 2].map(|i| [r_wk[(i, 0)], r_wk[(i, 1)], r_wk[(i, 2)]]);
+            let render_start = Instant::now();
             self.renderer.render(
                 &w.terrain,
                 rows,
@@ -278,6 +282,9 @@ impl StereoCamera for WorldStereo {
                 &mut self.left,
                 &mut self.right,
             );
+            let spent = u64::try_from(render_start.elapsed().as_nanos()).unwrap_or(u64::MAX);
+            w.sim_overhead_ns
+                .set(w.sim_overhead_ns.get().saturating_add(spent));
             self.rendered += 1;
         }
         let stamp = w.faults.stamp(FaultDevice::Camera, t);

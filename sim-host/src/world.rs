@@ -120,6 +120,10 @@ pub struct World {
     pub sun: SunParams,
     /// Faults.
     pub faults: Faults,
+    /// Host nanoseconds spent inside simulated devices doing the simulator's own work (image
+    /// rendering), subtracted from the execution counter so that the flight software's timing
+    /// figures measure flight code, not the simulator.
+    pub sim_overhead_ns: std::cell::Cell<u64>,
     /// Random streams.
     pub streams: Streams,
     encoder_every: u64,
@@ -180,6 +184,7 @@ impl World {
             &limits,
         );
         let mut world = Self {
+            sim_overhead_ns: std::cell::Cell::new(0),
             terrain,
             geometry,
             limits,
