@@ -147,16 +147,85 @@ pub fn hazcam_calibration() -> StereoCalibration {
     }
 }
 
-/// A stereo pair that completes each capture `latency_frames` polls after its trigger, with a
-/// uniform grey image (the rendered cameras come with the full simulator).
-pub struct GreyStereo {
-    time: SimTime,
-    left: Vec<u8>,
-    right: Vec<u8>,
+/// The capture protocol of a simulated stereo camera (trigger, poll, frame, release): a capture
+/// completes `latency_polls` polls after its trigger and stays ready until released or
+/// retriggered. Shared by every simulated camera.
+#[derive(Debug, Clone)]
+pub struct CaptureProtocol {
     pending: Option<(u64, u32)>,
     ready: Option<u64>,
     sequence: u32,
     latency_polls: u32,
+}
+
+impl CaptureProtocol {
+    /// A protocol whose captures complete after `latency_polls` polls.
+    pub fn new(latency_polls: u32) -> Self {
+        Self {
+            pending: None,
+            ready: None,
+            sequence: 0,
+            latency_polls,
+        }
+    }
+
+    /// Start a capture stamped `t_us`; returns the new sequence number.
+    pub fn trigger(&mut self, t_us: u64) -> u32 {
+        self.pending = Some((t_us, self.latency_polls));
+        self.ready = None;
+        self.sequence = self.sequence.wrapping_add(1);
+        self.sequence
+    }
+
+    /// Advance the capture by one poll.
+    pub fn poll(&mut self) -> CaptureStatus {
+        if self.ready.is_some() {
+            return CaptureStatus::Ready;
+        }
+        match self.pending {
+            None => CaptureStatus::Idle,
+            Some((t, 0)) => {
+                self.ready = Some(t);
+                self.pending = None;
+                CaptureStatus::Ready
+            }
+            Some((t, n)) => {
+                self.pending = Some((t, n - 1));
+                CaptureStatus::InProgress
+            }
+        }
+    }
+
+    /// Borrow `left` and `right` as the completed frame.
+    pub fn frame<'a>(&self, left: &'a [u8], right: &'a [u8]) -> Result<StereoFrame<'a>, ErrorKind> {
+        let t = self.ready.ok_or(ErrorKind::NotReady)?;
+        Ok(StereoFrame {
+            left,
+            right,
+            capture_t_us: t,
+            sequence: self.sequence,
+        })
+    }
+
+    /// Give the buffers back.
+    pub fn release(&mut self) {
+        self.ready = None;
+        self.pending = None;
+    }
+
+    /// Sequence number of the last trigger.
+    pub fn sequence(&self) -> u32 {
+        self.sequence
+    }
+}
+
+/// A stereo pair that completes each capture `latency_polls` polls after its trigger, with a
+/// uniform grey image (the standing-still rover of the `still` command).
+pub struct GreyStereo {
+    time: SimTime,
+    left: Vec<u8>,
+    right: Vec<u8>,
+    capture: CaptureProtocol,
 }
 
 impl GreyStereo {
@@ -166,10 +235,7 @@ impl GreyStereo {
             time,
             left: vec![128; IMAGE_PIXELS],
             right: vec![128; IMAGE_PIXELS],
-            pending: None,
-            ready: None,
-            sequence: 0,
-            latency_polls,
+            capture: CaptureProtocol::new(latency_polls),
         }
     }
 }
@@ -181,40 +247,17 @@ impl StereoCamera for GreyStereo {
     }
     fn trigger(&mut self) -> Result<u64, ErrorKind> {
         let t = self.time.now_us();
-        self.pending = Some((t, self.latency_polls));
-        self.ready = None;
-        self.sequence = self.sequence.wrapping_add(1);
+        self.capture.trigger(t);
         Ok(t)
     }
     fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
-        if self.ready.is_some() {
-            return Ok(CaptureStatus::Ready);
-        }
-        match self.pending {
-            None => Ok(CaptureStatus::Idle),
-            Some((t, 0)) => {
-                self.ready = Some(t);
-                self.pending = None;
-                Ok(CaptureStatus::Ready)
-            }
-            Some((t, n)) => {
-                self.pending = Some((t, n - 1));
-                Ok(CaptureStatus::InProgress)
-            }
-        }
+        Ok(self.capture.poll())
     }
     fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
-        let t = self.ready.ok_or(ErrorKind::NotReady)?;
-        Ok(StereoFrame {
-            left: &self.left,
-            right: &self.right,
-            capture_t_us: t,
-            sequence: self.sequence,
-        })
+        self.capture.frame(&self.left, &self.right)
     }
     fn release(&mut self) -> Result<(), ErrorKind> {
-        self.ready = None;
-        self.pending = None;
+        self.capture.release();
         Ok(())
     }
 }

@@ -2,7 +2,7 @@
 //! the scenario's injected faults. The flight software sees only these readings.
 
 use crate::camera::StereoRenderer;
-use crate::devices::hazcam_calibration;
+use crate::devices::{hazcam_calibration, CaptureProtocol};
 use crate::sensors::faults::{FaultDevice, FaultKind};
 use crate::world::World;
 use nalgebra::Vector3;
@@ -207,10 +207,7 @@ pub struct WorldStereo {
     calib: StereoCalibration,
     left: Vec<u8>,
     right: Vec<u8>,
-    pending: Option<(u64, u32)>,
-    ready: Option<u64>,
-    sequence: u32,
-    latency_polls: u32,
+    capture: CaptureProtocol,
     seed: u64,
     /// Frames rendered.
     pub rendered: u32,
@@ -230,10 +227,7 @@ impl WorldStereo {
             calib: hazcam_calibration(),
             left: vec![0; IMAGE_PIXELS],
             right: vec![0; IMAGE_PIXELS],
-            pending: None,
-            ready: None,
-            sequence: 0,
-            latency_polls,
+            capture: CaptureProtocol::new(latency_polls),
             seed,
             rendered: 0,
         }
@@ -254,7 +248,8 @@ impl StereoCamera for WorldStereo {
         {
             return Err(ErrorKind::Timeout);
         }
-        self.sequence = self.sequence.wrapping_add(1);
+        // The sequence number this capture will get (the protocol assigns it at the end).
+        let sequence = self.capture.sequence().wrapping_add(1);
         let stuck = w
             .faults
             .active(FaultDevice::Camera, FaultKind::Stuck, t)
@@ -278,7 +273,7 @@ impl StereoCamera for WorldStereo {
                 rows,
                 [pos.x, pos.y, pos.z],
                 &self.calib,
-                self.seed ^ u64::from(self.sequence).wrapping_mul(0x9E37_79B9),
+                self.seed ^ u64::from(sequence).wrapping_mul(0x9E37_79B9),
                 &mut self.left,
                 &mut self.right,
             );
@@ -288,39 +283,17 @@ impl StereoCamera for WorldStereo {
             self.rendered += 1;
         }
         let stamp = w.faults.stamp(FaultDevice::Camera, t);
-        self.pending = Some((stamp, self.latency_polls));
-        self.ready = None;
+        self.capture.trigger(stamp);
         Ok(stamp)
     }
     fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
-        if self.ready.is_some() {
-            return Ok(CaptureStatus::Ready);
-        }
-        match self.pending {
-            None => Ok(CaptureStatus::Idle),
-            Some((t, 0)) => {
-                self.ready = Some(t);
-                self.pending = None;
-                Ok(CaptureStatus::Ready)
-            }
-            Some((t, n)) => {
-                self.pending = Some((t, n - 1));
-                Ok(CaptureStatus::InProgress)
-            }
-        }
+        Ok(self.capture.poll())
     }
     fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
-        let t = self.ready.ok_or(ErrorKind::NotReady)?;
-        Ok(StereoFrame {
-            left: &self.left,
-            right: &self.right,
-            capture_t_us: t,
-            sequence: self.sequence,
-        })
+        self.capture.frame(&self.left, &self.right)
     }
     fn release(&mut self) -> Result<(), ErrorKind> {
-        self.ready = None;
-        self.pending = None;
+        self.capture.release();
         Ok(())
     }
 }
