@@ -4,6 +4,7 @@
 //! and handed to the HAL [`rover_hal::Telemetry`] sink. Each record starts with a one-byte
 //! [`RecordKind`] tag so a ground tool can split a mixed stream.
 
+use crate::flight::nav::{NavCounters, NavMode, Navigator};
 use serde::{Deserialize, Serialize};
 
 /// Largest encoded record, bytes. Every record type is checked against it in the tests.
@@ -15,6 +16,8 @@ pub const MAX_RECORD_BYTES: usize = 256;
 pub enum RecordKind {
     /// [`FrameStatus`].
     FrameStatus = 1,
+    /// [`NavTelemetry`].
+    NavStatus = 2,
 }
 
 /// Device health counters (FDIR inputs), one set per device.
@@ -57,6 +60,88 @@ pub struct FrameStatus {
     pub stereo_frames: u32,
     /// Telemetry records the sink refused (counted, then dropped).
     pub telemetry_dropped: u32,
+}
+
+/// Navigation status, sent every RG2 cycle (single precision: telemetry, not state).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct NavTelemetry {
+    /// Minor-frame tick.
+    pub tick: u64,
+    /// Navigation mode.
+    pub mode: NavMode,
+    /// EKF position, m, `N` (north, east, down).
+    pub position_n_m: [f32; 3],
+    /// EKF roll, pitch, yaw (`R` to `N`, z-y-x), rad.
+    pub rpy_rad: [f32; 3],
+    /// EKF velocity, m/s, `N`.
+    pub velocity_n_m_s: [f32; 3],
+    /// 1-sigma of the position, m, per `N` axis.
+    pub position_sigma_m: [f32; 3],
+    /// 1-sigma of the heading, rad.
+    pub heading_sigma_rad: f32,
+    /// Slip vector `[x m, y m, yaw rad]` of the last RG2 cycle (EKF minus kinematics, `R`).
+    pub slip: [f32; 3],
+    /// Mahalanobis `d_m^2` of the last kinematic interval (eq. 46).
+    pub gate_d2: f32,
+    /// The gate accepted the last kinematic interval.
+    pub gate_accepted: bool,
+    /// Rover command `[x_dot m/s, y_dot m/s, yaw rate rad/s]`, `R`.
+    pub command: [f32; 3],
+    /// Distance from the path, m (estimated pose).
+    pub cross_track_m: f32,
+    /// Distance to the goal, m (estimated pose).
+    pub goal_distance_m: f32,
+    /// Navigation counters.
+    pub counters: NavCounters,
+}
+
+impl NavTelemetry {
+    /// The record for `nav` at `tick`.
+    pub fn from_navigator(tick: u64, nav: &Navigator) -> Self {
+        let pose = nav.pose();
+        let (roll, pitch, yaw) = pose.q_nr.euler_angles();
+        let (velocity, sigma, heading_sigma) = match nav.ekf() {
+            Some(e) => {
+                let p = e.covariance();
+                let i = crate::estimation::state::I_P;
+                let s = |k: usize| libm::sqrt(p[(i + k, i + k)].max(0.0)) as f32;
+                let v = e.state().v_n;
+                (
+                    [v.x as f32, v.y as f32, v.z as f32],
+                    [s(0), s(1), s(2)],
+                    e.heading_sigma_rad() as f32,
+                )
+            }
+            None => ([0.0; 3], [0.0; 3], 0.0),
+        };
+        let slip = nav.slip();
+        let gate = nav.gate();
+        let cmd = nav.command();
+        let (cross, goal) = match nav.guidance_output() {
+            Some(g) => (g.projection.cross_track_m as f32, g.goal_distance_m as f32),
+            None => (0.0, 0.0),
+        };
+        Self {
+            tick,
+            mode: nav.mode(),
+            position_n_m: [pose.p_n.x as f32, pose.p_n.y as f32, pose.p_n.z as f32],
+            rpy_rad: [roll as f32, pitch as f32, yaw as f32],
+            velocity_n_m_s: velocity,
+            position_sigma_m: sigma,
+            heading_sigma_rad: heading_sigma,
+            slip: [slip.x_m as f32, slip.y_m as f32, slip.phi_rad as f32],
+            gate_d2: gate.d2 as f32,
+            gate_accepted: gate.accepted,
+            command: [
+                cmd.x_dot_m_s as f32,
+                cmd.y_dot_m_s as f32,
+                cmd.yaw_rate_rad_s as f32,
+            ],
+            cross_track_m: cross,
+            goal_distance_m: goal,
+            counters: *nav.counters(),
+        }
+    }
 }
 
 /// Encoding failed: the buffer is too small for the record.

@@ -1,8 +1,10 @@
 //! `sim-host`: the product's main command. Runs the flight software on the simulated rover and
-//! prints a summary.
+//! prints a summary. With no arguments it runs `slope-10-cross` with and without slip
+//! compensation and prints the comparison.
 
 use clap::{Parser, Subcommand};
 use sim_host::hal_devices::CounterMode;
+use sim_host::output::summary::Summary;
 use sim_host::scenario::Scenario;
 use sim_host::sim::{run, RunOptions};
 use std::path::PathBuf;
@@ -19,6 +21,19 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a scenario (default: slope-10-cross) with and without slip compensation and compare.
+    Compare {
+        /// Scenario file (TOML).
+        #[arg(default_value_os_t = default_scenario())]
+        scenario: PathBuf,
+        /// Seed (default: the scenario's).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Output directory; the two runs go to `<out>/comp` and `<out>/no-comp`
+        /// (default: out/compare-<scenario>-<seed>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Run the flight executive on a rover standing still for N minor frames (200 Hz).
     Still {
         /// Number of 5 ms minor frames.
@@ -35,9 +50,14 @@ enum Command {
         /// Output directory (default: out/<scenario>-<seed>).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Drive without slip compensation (the reference driver holds heading open loop).
+        /// Drive without slip compensation: the flight software navigates on wheel and IMU
+        /// odometry only (with --reference-driver: the reference driver holds heading open loop).
         #[arg(long)]
         no_slip_comp: bool,
+        /// Let the simulator's reference driver (which sees the truth) command the motors
+        /// instead of the flight software.
+        #[arg(long)]
+        reference_driver: bool,
         /// Print summary.json to stdout instead of the table.
         #[arg(long)]
         json: bool,
@@ -75,15 +95,122 @@ fn still(frames: u64) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn run_scenario(
+/// `scenarios/slope-10-cross.toml` of the working directory, or of the source tree.
+fn default_scenario() -> PathBuf {
+    let local = PathBuf::from("scenarios/slope-10-cross.toml");
+    if local.exists() {
+        return local;
+    }
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios/slope-10-cross.toml")
+}
+
+/// What `run_scenario` needs.
+struct RunRequest {
     path: PathBuf,
     seed: Option<u64>,
     out: Option<PathBuf>,
     no_slip_comp: bool,
+    reference_driver: bool,
     json: bool,
     sim_counter: bool,
     no_render: bool,
-) -> anyhow::Result<()> {
+    quiet: bool,
+}
+
+fn fmt_opt(v: Option<f64>, unit: &str, digits: usize) -> String {
+    match v {
+        Some(x) => format!("{x:.digits$}{unit}"),
+        None => "-".to_string(),
+    }
+}
+
+fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Result<()> {
+    let scenario = Scenario::load(&path)?;
+    let seed_used = seed.unwrap_or(scenario.seed);
+    let out =
+        out.unwrap_or_else(|| PathBuf::from(format!("out/compare-{}-{seed_used}", scenario.name)));
+    println!(
+        "sim-host: {} (seed {seed_used}) with and without slip compensation; the flight software \
+         drives in both runs",
+        scenario.name
+    );
+    let mut results = Vec::new();
+    for (label, no_comp) in [("with compensation", false), ("without compensation", true)] {
+        let dir = out.join(if no_comp { "no-comp" } else { "comp" });
+        let summary = run_scenario(RunRequest {
+            path: path.clone(),
+            seed,
+            out: Some(dir.clone()),
+            no_slip_comp: no_comp,
+            reference_driver: false,
+            json: false,
+            sim_counter: false,
+            no_render: false,
+            quiet: true,
+        })?;
+        results.push((label, dir, summary));
+    }
+    println!();
+    println!("  {:<30} {:>20} {:>22}", "", results[0].0, results[1].0);
+    type Row = (&'static str, fn(&Summary) -> String);
+    let rows: [Row; 9] = [
+        ("goal", |s| {
+            format!(
+                "{} ({:.3} m)",
+                if s.goal_reached { "reached" } else { "missed" },
+                s.goal_miss_m
+            )
+        }),
+        ("cross-track max (truth)", |s| {
+            format!("{:.3} m", s.cross_track_m.max)
+        }),
+        ("cross-track rms (truth)", |s| {
+            format!("{:.3} m", s.cross_track_m.rms)
+        }),
+        ("distance driven", |s| format!("{:.2} m", s.distance_m)),
+        ("EKF final error", |s| fmt_opt(s.final_error_m.ekf, " m", 3)),
+        ("VO final error", |s| fmt_opt(s.final_error_m.vo, " m", 3)),
+        ("kinematic 3D final error", |s| {
+            fmt_opt(s.final_error_m.kin3d, " m", 3)
+        }),
+        ("gate rejections (slip)", |s| {
+            fmt_opt(s.slip.gate_reject_fraction.map(|f| 100.0 * f), " %", 1)
+        }),
+        ("VO updates / failures", |s| {
+            format!(
+                "{} / {}",
+                s.vo.updates.unwrap_or(0),
+                s.vo.failures.unwrap_or(0)
+            )
+        }),
+    ];
+    for (name, f) in rows {
+        println!(
+            "  {:<30} {:>20} {:>22}",
+            name,
+            f(&results[0].2),
+            f(&results[1].2)
+        );
+    }
+    println!();
+    for (label, dir, _) in &results {
+        println!("  {label}: outputs and report.html in {}", dir.display());
+    }
+    Ok(())
+}
+
+fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
+    let RunRequest {
+        path,
+        seed,
+        out,
+        no_slip_comp,
+        reference_driver,
+        json,
+        sim_counter,
+        no_render,
+        quiet,
+    } = req;
     let scenario = Scenario::load(&path)?;
     let seed_used = seed.unwrap_or(scenario.seed);
     let renderer: Option<Box<dyn sim_host::camera::StereoRenderer>> = (!no_render).then(|| {
@@ -102,7 +229,11 @@ fn run_scenario(
             indicatif::ProgressStyle::with_template("{msg} [{bar:40}] {percent}% {elapsed}")
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
-        bar.set_message(scenario.name.clone());
+        bar.set_message(format!(
+            "{}{}",
+            scenario.name,
+            if no_slip_comp { " (no slip comp)" } else { "" }
+        ));
         bar
     });
     let progress: Option<Box<dyn FnMut(f64)>> = bar.clone().map(|b| {
@@ -113,6 +244,7 @@ fn run_scenario(
         RunOptions {
             seed,
             no_slip_comp,
+            reference_driver,
             counter: if sim_counter {
                 CounterMode::SimTime
             } else {
@@ -128,7 +260,10 @@ fn run_scenario(
     let summary = sim_host::output::write_all(&out, &result)?;
     if json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
-        return Ok(());
+        return Ok(summary);
+    }
+    if quiet {
+        return Ok(summary);
     }
     let speedup = result.sim_time_s / result.wall_time_s.max(1e-9);
     println!(
@@ -171,8 +306,52 @@ fn run_scenario(
             ),
         ),
         (
-            "flight estimates",
-            "EKF, VO, kin3d, kin2d: none yet (null)".to_string(),
+            "driver",
+            format!(
+                "{}, slip compensation {}, final mode {}",
+                summary.driver,
+                if summary.slip_compensation {
+                    "on"
+                } else {
+                    "off"
+                },
+                summary.nav_mode
+            ),
+        ),
+        (
+            "final error",
+            format!(
+                "EKF {} VO {} kin3d {} kin2d {}",
+                fmt_opt(summary.error_pct.ekf, " %", 2),
+                fmt_opt(summary.error_pct.vo, " %", 2),
+                fmt_opt(summary.error_pct.kin3d, " %", 2),
+                fmt_opt(summary.error_pct.kin2d, " %", 2)
+            ),
+        ),
+        (
+            "attitude error max",
+            format!(
+                "EKF {} VO {}",
+                fmt_opt(summary.max_attitude_error_deg.ekf, " deg", 2),
+                fmt_opt(summary.max_attitude_error_deg.vo, " deg", 2)
+            ),
+        ),
+        (
+            "slip gate",
+            format!(
+                "{} of {} kinematic intervals rejected",
+                summary.nav.kin_rejected, summary.nav.kin_tested
+            ),
+        ),
+        (
+            "VO",
+            format!(
+                "{} updates, {} failures, {} fused, mean inliers {}",
+                summary.nav.vo_updates,
+                summary.nav.vo_failures,
+                summary.nav.vo_fused,
+                fmt_opt(summary.vo.mean_inliers, "", 1)
+            ),
         ),
         (
             "device faults",
@@ -192,30 +371,39 @@ fn run_scenario(
             g.name, g.runs, g.max_us, g.mean_us, g.overruns
         );
     }
-    Ok(())
+    Ok(summary)
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Some(Command::Still { frames }) => still(frames),
-        None => still(2000),
+        None => compare(default_scenario(), None, None),
+        Some(Command::Compare {
+            scenario,
+            seed,
+            out,
+        }) => compare(scenario, seed, out),
         Some(Command::Run {
             scenario,
             seed,
             out,
             no_slip_comp,
+            reference_driver,
             json,
             sim_counter,
             no_render,
-        }) => run_scenario(
-            scenario,
+        }) => run_scenario(RunRequest {
+            path: scenario,
             seed,
             out,
             no_slip_comp,
+            reference_driver,
             json,
             sim_counter,
             no_render,
-        ),
+            quiet: false,
+        })
+        .map(|_| ()),
     }
 }

@@ -4,7 +4,7 @@ use crate::devices::{
     CountingTelemetry, FixedSun, GreyStereo, SimClock, SimTime, StillImu, StillMobility,
 };
 use fsw::exec::ExecConfig;
-use fsw::flight::{Devices, Fsw, Platform};
+use fsw::flight::{Devices, Fsw, FswConfig, Platform};
 
 /// The simulated platform's device types.
 pub struct SimPlatform;
@@ -62,8 +62,10 @@ pub fn run_still(frames: u64) -> anyhow::Result<RunSummary> {
         sun: FixedSun::new(time.clone()),
         telemetry: CountingTelemetry::default(),
     };
-    let mut fsw =
-        Fsw::new(devices, config).map_err(|e| anyhow::anyhow!("flight schedule refused: {e:?}"))?;
+    // The still rover cannot move: the path only gives guidance something to command.
+    let fsw_config = FswConfig::rocky8([0.0; 3], 0.0);
+    let mut fsw = Fsw::new(devices, &fsw_config, &[[0.0, 0.0], [1.0, 0.0]])
+        .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
     for _ in 0..frames {
         fsw.tick();
         time.advance(u64::from(config.frame_period_us));

@@ -60,9 +60,9 @@ impl Default for SensorSpec {
         Self {
             imu: ImuParams::default(),
             encoders: EncoderParams::default(),
-            encoder_hz: 20,
+            encoder_hz: 200,
             sun: SunParams::default(),
-            sun_hz: 1,
+            sun_hz: 200,
             camera_latency_polls: 3,
             dimension_error_m: 0.002,
         }

@@ -1,5 +1,11 @@
 //! One closed-loop run of a scenario: the world, the flight software on the simulated devices,
-//! and the command source (the reference driver until the flight software drives).
+//! and the command source (the flight software; the simulator's reference driver on request).
+//!
+//! The flight software is configured as the ground would configure it: the start pose (from
+//! the world's truth at the start, as a localisation before the drive would give it), the
+//! path, the IMU noise densities from the IMU data sheet (the scenario's sensor parameters) and
+//! the sun direction from the ephemeris (the scenario's sun). It sees the world only through
+//! the HAL devices.
 
 use crate::camera::{FlatGreyRenderer, StereoRenderer};
 use crate::devices::CountingTelemetry;
@@ -8,9 +14,12 @@ use crate::hal_devices::{
     CounterMode, SharedWorld, WorldClock, WorldImu, WorldMobility, WorldStereo, WorldSun,
 };
 use crate::scenario::{DriverMode, Scenario};
+use crate::vehicle::placement::BodyPose;
 use crate::world::{World, FRAME_US};
-use fsw::exec::ExecConfig;
-use fsw::flight::{Devices, Fsw, Platform};
+use fsw::estimation::ImuNoise;
+use fsw::flight::nav::{NavCounters, NavMode};
+use fsw::flight::{Devices, Fsw, FswConfig, Platform};
+use fsw::types::Vec3;
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -30,8 +39,11 @@ impl Platform for WorldPlatform {
 pub struct RunOptions {
     /// Seed (overrides the scenario's).
     pub seed: Option<u64>,
-    /// Force the reference driver to open loop (no slip compensation).
+    /// Run without slip compensation: the flight software navigates on wheel and IMU odometry
+    /// (or, with `reference_driver`, the reference driver runs open loop).
     pub no_slip_comp: bool,
+    /// Let the simulator's reference driver command the motors instead of the flight software.
+    pub reference_driver: bool,
     /// Execution counter of the flight clock.
     pub counter: CounterMode,
     /// Stereo renderer (default: [`FlatGreyRenderer`]).
@@ -45,6 +57,7 @@ impl Default for RunOptions {
         Self {
             seed: None,
             no_slip_comp: false,
+            reference_driver: false,
             counter: CounterMode::Host,
             renderer: None,
             progress: None,
@@ -73,6 +86,52 @@ pub struct Record {
     pub cross_track_m: f64,
     /// Distance travelled, m.
     pub distance_m: f64,
+    /// Flight estimates at this time (`None` before the flight software is aligned).
+    pub est: Option<Estimates>,
+}
+
+/// The flight software's estimates at one record time, `N` (= the simulator's `W`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimates {
+    /// EKF position, m.
+    pub ekf_pos_m: [f64; 3],
+    /// EKF attitude `[x, y, z, w]`.
+    pub ekf_quat_xyzw: [f64; 4],
+    /// EKF 1-sigma position, m, per axis.
+    pub ekf_pos_sigma_m: [f64; 3],
+    /// EKF 1-sigma heading, rad.
+    pub ekf_heading_sigma_rad: f64,
+    /// VO-only pose (position, attitude), once VO has delivered.
+    pub vo: Option<([f64; 3], [f64; 4])>,
+    /// 3D kinematic dead reckoning (position, attitude).
+    pub kin3d: ([f64; 3], [f64; 4]),
+    /// Planar wheel odometry `[north, east, yaw]`.
+    pub kin2d: [f64; 3],
+    /// Slip vector of the last RG2 cycle `[x m, y m, yaw rad]` (EKF minus kinematics).
+    pub slip: [f64; 3],
+    /// The gate accepted the last kinematic interval.
+    pub gate_accepted: bool,
+}
+
+/// One flight VO relative pose checked against the truth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VoCheck {
+    /// Capture time of the second frame, s.
+    pub t_s: f64,
+    /// True translation between the captures, m.
+    pub step_m: f64,
+    /// Translation error, m (rover frame at the first capture).
+    pub trans_err_m: [f64; 3],
+    /// Rotation error (rotation vector of `rot_meas * rot_true'`), rad.
+    pub rot_err_rad: [f64; 3],
+    /// Reported 1-sigma of the translation, m.
+    pub trans_sigma_m: [f64; 3],
+    /// Reported 1-sigma of the rotation, rad.
+    pub rot_sigma_rad: [f64; 3],
+    /// The VO-only pose after this update (position m, quaternion `[x, y, z, w]`), `W`.
+    pub vo_pose: Option<([f64; 3], [f64; 4])>,
+    /// The true pose at the capture time `t_s`.
+    pub truth_pose: ([f64; 3], [f64; 4]),
 }
 
 /// Per-rate-group timing of the flight executive.
@@ -115,6 +174,20 @@ pub struct RunResult {
     pub device_faults: u32,
     /// Stereo frames the flight software completed.
     pub stereo_frames: u32,
+    /// Navigation counters of the flight software at the end.
+    pub nav: NavCounters,
+    /// Final navigation mode.
+    pub nav_mode: NavMode,
+    /// Who drove: `"flight"` or `"reference"`.
+    pub driver: String,
+    /// Slip compensation on.
+    pub slip_compensation: bool,
+    /// Mean features and inliers of the VO updates that delivered a pose.
+    pub vo_mean_features: Option<f64>,
+    /// Mean inliers of the VO updates that delivered a pose.
+    pub vo_mean_inliers: Option<f64>,
+    /// Every VO relative pose checked against the truth.
+    pub vo_checks: Vec<VoCheck>,
     /// Rocks of the terrain `[north, east, radius]` for the top view.
     pub rocks: Vec<[f64; 3]>,
     /// Wall-clock seconds of the run.
@@ -143,18 +216,28 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
         sun: WorldSun::new(world.clone()),
         telemetry: CountingTelemetry::default(),
     };
-    let mut fsw = Fsw::new(devices, ExecConfig::default())
-        .map_err(|e| anyhow::anyhow!("flight schedule refused: {e:?}"))?;
-    let mode = if options.no_slip_comp {
-        DriverMode::OpenLoop
+    let config = flight_config(scenario, &world.borrow(), !options.no_slip_comp);
+    let mut fsw = Fsw::new(devices, &config, &scenario.waypoints)
+        .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
+    let mut source = if options.reference_driver {
+        let mode = if options.no_slip_comp {
+            DriverMode::OpenLoop
+        } else {
+            scenario.driver
+        };
+        CommandSource::Reference(ReferenceDriver::new(scenario, mode))
     } else {
-        scenario.driver
+        CommandSource::Flight
     };
-    let mut source = CommandSource::Reference(ReferenceDriver::new(scenario, mode));
     let max_steps = (scenario.duration_s * 1e6 / FRAME_US as f64).ceil() as u64;
     let mut records = Vec::new();
     let mut stop_countdown: Option<u32> = None;
     let mut steps = 0;
+    let mut vo_seen = 0u32;
+    let (mut vo_features, mut vo_inliers) = (0.0, 0.0);
+    let mut vo_checks = Vec::new();
+    // Truth poses of the last 10 s, to check VO relative poses against.
+    let mut history: std::collections::VecDeque<(u64, BodyPose)> = Default::default();
     while steps < max_steps {
         {
             let mut w = world.borrow_mut();
@@ -170,11 +253,38 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
             };
             w.command = command;
             w.step();
-            if w.steps % 10 == 0 {
-                records.push(record(&w, &scenario.waypoints));
+            history.push_back((w.truth.t_us, w.truth.pose));
+            if history.len() > 2000 {
+                history.pop_front();
             }
         }
         fsw.tick();
+        let nav = fsw.nav();
+        if nav.counters().vo_updates > vo_seen {
+            vo_seen = nav.counters().vo_updates;
+            if let Some(out) = nav.vo_output() {
+                vo_features += f64::from(out.quality.features);
+                vo_inliers += f64::from(out.quality.inliers);
+                if let Some(mut check) = out.pose.as_ref().and_then(|rp| vo_check(rp, &history)) {
+                    check.vo_pose = nav
+                        .vo_pose()
+                        .map(|v| ([v.p_n.x, v.p_n.y, v.p_n.z], quat_xyzw(&v.q_nr)));
+                    vo_checks.push(check);
+                }
+            }
+        }
+        if matches!(source, CommandSource::Flight)
+            && matches!(nav.mode(), NavMode::Arrived | NavMode::Safed)
+            && stop_countdown.is_none()
+        {
+            stop_countdown = Some(200);
+        }
+        {
+            let w = world.borrow();
+            if w.steps % 10 == 0 {
+                records.push(record(&w, &scenario.waypoints, &fsw));
+            }
+        }
         steps += 1;
         if steps % 200 == 0 {
             if let Some(p) = options.progress.as_mut() {
@@ -223,6 +333,16 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
         timing,
         device_faults: state.health.iter().map(|h| h.faults()).sum(),
         stereo_frames: state.stereo_frames,
+        nav: *fsw.nav().counters(),
+        nav_mode: fsw.nav().mode(),
+        driver: match source {
+            CommandSource::Flight => "flight".to_string(),
+            CommandSource::Reference(_) => "reference".to_string(),
+        },
+        slip_compensation: !options.no_slip_comp,
+        vo_mean_features: (vo_seen > 0).then(|| vo_features / f64::from(vo_seen)),
+        vo_mean_inliers: (vo_seen > 0).then(|| vo_inliers / f64::from(vo_seen)),
+        vo_checks,
         rocks: w
             .terrain
             .rocks()
@@ -233,7 +353,89 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
     })
 }
 
-fn record(w: &World, path: &[[f64; 2]]) -> Record {
+/// The flight software's configuration for `scenario`, with the start pose of `world`.
+pub fn flight_config(scenario: &Scenario, world: &World, slip_compensation: bool) -> FswConfig {
+    let pose = world.truth.pose;
+    let mut config = FswConfig::rocky8(pose.pos_m, pose.yaw_rad);
+    let imu = &scenario.sensors.imu;
+    // Per-sample standard deviations at 200 Hz to densities: sigma * sqrt(dt).
+    let sqrt_dt = (FRAME_US as f64 * 1e-6).sqrt();
+    let nav = &mut config.nav;
+    nav.ekf.imu_noise = ImuNoise {
+        gyro_rad_s_sqrt_hz: imu.gyro_noise_rad_s * sqrt_dt,
+        gyro_bias_rad_s2_sqrt_hz: imu.gyro_bias_walk_rad_s_sqrt_s,
+        accel_m_s2_sqrt_hz: imu.accel_noise_m_s2 * sqrt_dt,
+        accel_bias_m_s3_sqrt_hz: imu.accel_bias_walk_m_s2_sqrt_s,
+    };
+    nav.gyro_bias_sigma_rad_s = imu.gyro_bias_rad_s.max(1e-6);
+    nav.accel_bias_sigma_m_s2 = imu.accel_bias_m_s2.max(1e-4);
+    let sun = scenario.sensors.sun.sun_w();
+    nav.ekf.sun_dir_n = Some(Vec3::new(sun.x, sun.y, sun.z));
+    nav.ekf.sun_sigma_rad = scenario.sensors.sun.noise_rad.max(1e-4);
+    nav.guidance.cruise_speed_m_s = scenario.speed_m_s.min(nav.guidance.max_wheel_speed_m_s);
+    nav.slip_compensation = slip_compensation;
+    config
+}
+
+fn vo_check(
+    rp: &fsw::types::RelativePose,
+    history: &std::collections::VecDeque<(u64, BodyPose)>,
+) -> Option<VoCheck> {
+    let find = |t: u64| history.iter().find(|(ht, _)| *ht == t).map(|(_, p)| *p);
+    let (p0, p1) = (find(rp.t0_us)?, find(rp.t1_us)?);
+    let (r0, r1) = (p0.rot_w_from_r(), p1.rot_w_from_r());
+    let d = nalgebra::Vector3::from(p1.pos_m) - nalgebra::Vector3::from(p0.pos_m);
+    let trans_true = r0.inverse() * d;
+    let rot_true = r0.inverse() * r1;
+    let rot_meas = rp.rot_0_1.to_rotation_matrix();
+    let rot_err = (rot_meas * rot_true.inverse()).scaled_axis();
+    let e = rp.trans_0_1_m - trans_true;
+    let sigma = |k: usize| rp.covariance[(k, k)].max(0.0).sqrt();
+    let q1 = nalgebra::UnitQuaternion::from_rotation_matrix(&r1);
+    Some(VoCheck {
+        vo_pose: None,
+        truth_pose: (p1.pos_m, [q1.i, q1.j, q1.k, q1.w]),
+        t_s: rp.t1_us as f64 * 1e-6,
+        step_m: trans_true.norm(),
+        trans_err_m: [e.x, e.y, e.z],
+        rot_err_rad: [rot_err.x, rot_err.y, rot_err.z],
+        trans_sigma_m: [sigma(3), sigma(4), sigma(5)],
+        rot_sigma_rad: [sigma(0), sigma(1), sigma(2)],
+    })
+}
+
+fn quat_xyzw(q: &fsw::types::Quat) -> [f64; 4] {
+    [q.i, q.j, q.k, q.w]
+}
+
+fn estimates(fsw: &Fsw<WorldPlatform>) -> Option<Estimates> {
+    let nav = fsw.nav();
+    let ekf = nav.ekf()?;
+    let x = ekf.state();
+    let p = ekf.covariance();
+    let i = fsw::estimation::state::I_P;
+    let sigma = |k: usize| p[(i + k, i + k)].max(0.0).sqrt();
+    let kin3d = nav.kin3d();
+    let slip = nav.slip();
+    Some(Estimates {
+        ekf_pos_m: [x.p_n.x, x.p_n.y, x.p_n.z],
+        ekf_quat_xyzw: quat_xyzw(&x.q_nr),
+        ekf_pos_sigma_m: [sigma(0), sigma(1), sigma(2)],
+        ekf_heading_sigma_rad: ekf.heading_sigma_rad(),
+        vo: nav
+            .vo_pose()
+            .map(|v| ([v.p_n.x, v.p_n.y, v.p_n.z], quat_xyzw(&v.q_nr))),
+        kin3d: (
+            [kin3d.p_n.x, kin3d.p_n.y, kin3d.p_n.z],
+            quat_xyzw(&kin3d.q_nr),
+        ),
+        kin2d: nav.kin2d(),
+        slip: [slip.x_m, slip.y_m, slip.phi_rad],
+        gate_accepted: nav.gate().accepted,
+    })
+}
+
+fn record(w: &World, path: &[[f64; 2]], fsw: &Fsw<WorldPlatform>) -> Record {
     let t = &w.truth;
     let q = nalgebra::UnitQuaternion::from_rotation_matrix(&t.pose.rot_w_from_r());
     let (_, cross) = closest_arc(path, [t.pose.pos_m[0], t.pose.pos_m[1]]);
@@ -251,5 +453,6 @@ fn record(w: &World, path: &[[f64; 2]]) -> Record {
         slip_angle_rad: t.slip.slip_angle_rad,
         cross_track_m: cross,
         distance_m: t.distance_m,
+        est: estimates(fsw),
     }
 }

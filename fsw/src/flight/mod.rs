@@ -6,20 +6,26 @@
 //!
 //! | group | rate (default) | tasks |
 //! |---|---|---|
-//! | RG1 | 200 Hz | IMU read and checks |
-//! | RG2 | 20 Hz | joint read and checks, status telemetry |
-//! | RG3 | 1 Hz | stereo capture trigger |
-//! | RG4 | 0.2 Hz | sun sensor read |
-//! | background | every frame | stereo capture polling and release |
+//! | RG1 | 200 Hz | `imu`: IMU read and checks; `propagate`: EKF propagation (eq. 26-27) |
+//! | RG2 | 20 Hz | `joints`: joint read and checks; `odometry`: kinematic interval, gate (eq. 46), EKF update or slip vector; `guidance`: carrot and slip loops (eq. 47-49), inverse kinematics, motor command; `telemetry`: status and navigation records |
+//! | RG3 | 1 Hz | `stereo`: capture trigger and clone (eq. 41) |
+//! | RG4 | 0.2 Hz | `sun`: sun read and heading update (RB sec. 5.1) |
+//! | background | every frame | stereo polling, visual odometry work items, VO fusion at the capture clones |
 //!
 //! Every device reading is checked (error, device-flagged invalid, non-finite, time stamp not
 //! advancing, time going backwards) and counted in [`DeviceHealth`]; only checked readings are
-//! kept.
+//! kept and handed to the [`nav::Navigator`].
+
+pub mod nav;
 
 use crate::exec::{
     ExecConfig, ExecError, Executive, FrameReport, GroupConfig, TaskConfig, TaskSet,
 };
-use crate::telemetry::{self, DeviceHealth, FrameStatus, RecordKind, MAX_RECORD_BYTES};
+use crate::guidance::Point2;
+use crate::telemetry::{
+    self, DeviceHealth, FrameStatus, NavTelemetry, RecordKind, MAX_RECORD_BYTES,
+};
+use nav::{NavConfig, NavError, Navigator};
 use rover_hal::{
     CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, StereoCamera,
     SunReading, SunSensor, Telemetry,
@@ -60,7 +66,7 @@ pub struct Devices<P: Platform> {
 /// Number of rate groups in the flight schedule.
 pub const GROUP_COUNT: usize = 4;
 /// Number of tasks in the flight schedule.
-pub const TASK_COUNT: usize = 5;
+pub const TASK_COUNT: usize = 8;
 
 /// Rate-group table (ARCHITECTURE.md sec. 4). Divisors are relative to the 200 Hz minor frame.
 pub const SCHEDULE_GROUPS: [GroupConfig; GROUP_COUNT] = [
@@ -90,15 +96,31 @@ pub const SCHEDULE_GROUPS: [GroupConfig; GROUP_COUNT] = [
     },
 ];
 
-/// Task table in call order, with budgets in microseconds.
+/// Task table in call order, with budgets in microseconds of the rover CPU (300 MHz class;
+/// `docs/timing.md` measures them).
 pub const SCHEDULE_TASKS: [TaskConfig; TASK_COUNT] = [
     TaskConfig {
         name: "imu",
         group: 0,
-        budget_us: 500,
+        budget_us: 100,
+    },
+    TaskConfig {
+        name: "propagate",
+        group: 0,
+        budget_us: 400,
     },
     TaskConfig {
         name: "joints",
+        group: 1,
+        budget_us: 100,
+    },
+    TaskConfig {
+        name: "odometry",
+        group: 1,
+        budget_us: 1_500,
+    },
+    TaskConfig {
+        name: "guidance",
         group: 1,
         budget_us: 500,
     },
@@ -115,9 +137,41 @@ pub const SCHEDULE_TASKS: [TaskConfig; TASK_COUNT] = [
     TaskConfig {
         name: "sun",
         group: 3,
-        budget_us: 200,
+        budget_us: 300,
     },
 ];
+
+/// Everything the flight software is configured with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FswConfig {
+    /// Executive settings; `background_quantum` is the number of VO work items per frame.
+    pub exec: ExecConfig,
+    /// Navigation settings.
+    pub nav: NavConfig,
+}
+
+impl FswConfig {
+    /// Defaults for Rocky 8 starting at `position` (m, `N`) heading `yaw_rad` (from north): the
+    /// default executive with 8 VO work items per minor frame (a 25 cm VO update in about 0.5 s).
+    pub fn rocky8(position: [f64; 3], yaw_rad: f64) -> Self {
+        Self {
+            exec: ExecConfig {
+                background_quantum: 8,
+                ..ExecConfig::default()
+            },
+            nav: NavConfig::rocky8(position, yaw_rad),
+        }
+    }
+}
+
+/// Why the flight software could not be built.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FswError {
+    /// The executive refused the schedule.
+    Schedule(ExecError),
+    /// The navigator refused the path or its settings.
+    Nav(NavError),
+}
 
 /// Index of each device in [`FrameStatus::health`].
 #[derive(Debug, Clone, Copy)]
@@ -154,6 +208,19 @@ pub struct FlightState {
     pub telemetry_dropped: u32,
     /// Status copied from the executive at the end of each frame, for telemetry.
     pub exec_status: (u64, bool),
+    /// Motor commands sent (and refused by the device).
+    pub commands_sent: u32,
+    /// Motor commands or stops the device refused.
+    pub commands_refused: u32,
+    /// The last motor command sent (`None`: stopped).
+    pub last_command: Option<rover_hal::MobilityCommand>,
+}
+
+/// Readings checked in this frame and not yet used by the navigator.
+#[derive(Debug, Clone, Copy, Default)]
+struct Fresh {
+    imu: Option<ImuSample>,
+    joints: Option<JointState>,
 }
 
 /// The flight software: devices, executive and state.
@@ -162,6 +229,8 @@ pub struct Fsw<P: Platform> {
     clock: P::Clock,
     exec: Executive<GROUP_COUNT, TASK_COUNT>,
     state: FlightState,
+    nav: Navigator,
+    fresh: Fresh,
 }
 
 struct DevicesNoClock<P: Platform> {
@@ -173,9 +242,13 @@ struct DevicesNoClock<P: Platform> {
 }
 
 impl<P: Platform> Fsw<P> {
-    /// Build the flight software around its devices with the default schedule.
-    pub fn new(devices: Devices<P>, config: ExecConfig) -> Result<Self, ExecError> {
-        let exec = Executive::new(config, SCHEDULE_GROUPS, SCHEDULE_TASKS)?;
+    /// Build the flight software around its devices with the default schedule, to follow
+    /// `path` (waypoints north, east in `N`, m).
+    pub fn new(devices: Devices<P>, config: &FswConfig, path: &[Point2]) -> Result<Self, FswError> {
+        let exec = Executive::new(config.exec, SCHEDULE_GROUPS, SCHEDULE_TASKS)
+            .map_err(FswError::Schedule)?;
+        let nav = Navigator::new(config.nav, path, &devices.camera.calibration())
+            .map_err(FswError::Nav)?;
         let Devices {
             clock,
             imu,
@@ -195,6 +268,8 @@ impl<P: Platform> Fsw<P> {
             clock,
             exec,
             state: FlightState::default(),
+            nav,
+            fresh: Fresh::default(),
         })
     }
 
@@ -203,6 +278,8 @@ impl<P: Platform> Fsw<P> {
         let mut work = Work {
             devices: &mut self.devices,
             state: &mut self.state,
+            nav: &mut self.nav,
+            fresh: &mut self.fresh,
         };
         let report = self.exec.run_frame(&mut self.clock, &mut work);
         self.state.exec_status = (self.exec.cycle_slips(), self.exec.timing_fault());
@@ -219,6 +296,11 @@ impl<P: Platform> Fsw<P> {
         &self.state
     }
 
+    /// The navigator (estimates, slip, guidance output).
+    pub fn nav(&self) -> &Navigator {
+        &self.nav
+    }
+
     /// The clock (for drivers that need the time base).
     pub fn clock_mut(&mut self) -> &mut P::Clock {
         &mut self.clock
@@ -228,6 +310,8 @@ impl<P: Platform> Fsw<P> {
 struct Work<'a, P: Platform> {
     devices: &'a mut DevicesNoClock<P>,
     state: &'a mut FlightState,
+    nav: &'a mut Navigator,
+    fresh: &'a mut Fresh,
 }
 
 /// Check a time stamp against the previous one: stale or backwards are faults.
@@ -275,6 +359,7 @@ impl<P: Platform> Work<'_, P> {
                 }
                 health.good = health.good.saturating_add(1);
                 self.state.imu = Some(s);
+                self.fresh.imu = Some(s);
             }
         }
     }
@@ -298,7 +383,19 @@ impl<P: Platform> Work<'_, P> {
                 }
                 health.good = health.good.saturating_add(1);
                 self.state.joints = Some(j);
+                self.fresh.joints = Some(j);
             }
+        }
+    }
+
+    fn send(&mut self, kind: RecordKind, record: &impl serde::Serialize) {
+        let mut buffer = [0u8; MAX_RECORD_BYTES];
+        let sent = match telemetry::encode(kind, record, &mut buffer) {
+            Ok(bytes) => self.devices.telemetry.send(bytes).is_ok(),
+            Err(_) => false,
+        };
+        if !sent {
+            self.state.telemetry_dropped = self.state.telemetry_dropped.saturating_add(1);
         }
     }
 
@@ -311,17 +408,38 @@ impl<P: Platform> Work<'_, P> {
             stereo_frames: self.state.stereo_frames,
             telemetry_dropped: self.state.telemetry_dropped,
         };
-        let mut buffer = [0u8; MAX_RECORD_BYTES];
-        let sent = match telemetry::encode(RecordKind::FrameStatus, &record, &mut buffer) {
-            Ok(bytes) => self.devices.telemetry.send(bytes).is_ok(),
-            Err(_) => false,
+        self.send(RecordKind::FrameStatus, &record);
+        let nav = NavTelemetry::from_navigator(tick, self.nav);
+        self.send(RecordKind::NavStatus, &nav);
+    }
+
+    fn command_motors(&mut self) {
+        let result = match self.nav.guidance_cycle() {
+            Some(command) => {
+                self.state.last_command = Some(command);
+                self.devices.mobility.command(&command)
+            }
+            None => {
+                self.state.last_command = None;
+                self.devices.mobility.stop()
+            }
         };
-        if !sent {
-            self.state.telemetry_dropped = self.state.telemetry_dropped.saturating_add(1);
+        match result {
+            Ok(()) => self.state.commands_sent = self.state.commands_sent.saturating_add(1),
+            Err(_) => {
+                self.state.commands_refused = self.state.commands_refused.saturating_add(1);
+                // A refused command must not leave the rover moving: stop (best effort).
+                let _ = self.devices.mobility.stop();
+            }
         }
     }
 
     fn trigger_stereo(&mut self) {
+        if self.nav.vo_busy() {
+            // VO still works on the last frame: this capture is skipped (the frame is held).
+            self.nav.capture_skipped();
+            return;
+        }
         let health = &mut self.state.health[DeviceId::Camera as usize];
         if self.state.capture_pending_t_us.is_some() {
             // The previous capture has not completed in a whole RG3 period: count and retry.
@@ -330,20 +448,50 @@ impl<P: Platform> Work<'_, P> {
                 count_error(health, ErrorKind::Hardware);
             }
             self.state.capture_pending_t_us = None;
+            self.nav.capture_lost();
         }
         match self.devices.camera.trigger() {
-            Ok(t_us) => self.state.capture_pending_t_us = Some(t_us),
+            Ok(t_us) => {
+                self.state.capture_pending_t_us = Some(t_us);
+                if self.nav.wants_capture() {
+                    self.nav.capture_started(t_us);
+                }
+            }
             Err(e) => count_error(health, rover_hal::Error::kind(&e)),
         }
     }
 
-    fn poll_stereo(&mut self) -> u32 {
+    fn release_frame(&mut self) {
+        if self.devices.camera.release().is_err() {
+            let health = &mut self.state.health[DeviceId::Camera as usize];
+            count_error(health, ErrorKind::Hardware);
+        }
+    }
+
+    fn poll_stereo(&mut self, quantum: u32) -> u32 {
+        if self.nav.vo_busy() {
+            let (used, done) = match self.devices.camera.frame() {
+                Ok(frame) => self.nav.vo_step(&frame, quantum),
+                Err(e) => {
+                    let health = &mut self.state.health[DeviceId::Camera as usize];
+                    count_error(health, rover_hal::Error::kind(&e));
+                    self.nav.capture_lost();
+                    (1, true)
+                }
+            };
+            if done {
+                self.release_frame();
+            }
+            return used;
+        }
         let Some(t_us) = self.state.capture_pending_t_us else {
             return 0;
         };
         let health = &mut self.state.health[DeviceId::Camera as usize];
         match self.devices.camera.poll() {
             Ok(CaptureStatus::Ready) => {
+                self.state.capture_pending_t_us = None;
+                let mut vo_started = false;
                 match self.devices.camera.frame() {
                     Ok(frame) if frame.capture_t_us == t_us => {
                         let size_ok = frame.left.len() == rover_hal::IMAGE_PIXELS
@@ -352,6 +500,9 @@ impl<P: Platform> Work<'_, P> {
                             health.good = health.good.saturating_add(1);
                             self.state.stereo_frames = self.state.stereo_frames.saturating_add(1);
                             self.state.last_capture_t_us = Some(t_us);
+                            if self.nav.capture_pending() {
+                                vo_started = self.nav.vo_start(&frame);
+                            }
                         } else if !size_ok {
                             count_invalid(health);
                         }
@@ -359,10 +510,10 @@ impl<P: Platform> Work<'_, P> {
                     Ok(_) => count_invalid(health),
                     Err(e) => count_error(health, rover_hal::Error::kind(&e)),
                 }
-                if self.devices.camera.release().is_err() {
-                    count_error(health, ErrorKind::Hardware);
+                if !vo_started {
+                    self.nav.capture_lost();
+                    self.release_frame();
                 }
-                self.state.capture_pending_t_us = None;
                 1
             }
             Ok(CaptureStatus::InProgress) => 1,
@@ -370,6 +521,7 @@ impl<P: Platform> Work<'_, P> {
                 // The camera lost the capture.
                 count_error(health, ErrorKind::Other);
                 self.state.capture_pending_t_us = None;
+                self.nav.capture_lost();
                 1
             }
             Err(e) => {
@@ -397,6 +549,7 @@ impl<P: Platform> Work<'_, P> {
                 }
                 health.good = health.good.saturating_add(1);
                 self.state.sun = Some(r);
+                self.nav.sun(&r);
             }
         }
     }
@@ -406,10 +559,13 @@ impl<P: Platform> TaskSet for Work<'_, P> {
     fn run_task(&mut self, task: usize, tick: u64) {
         match task {
             0 => self.read_imu(),
-            1 => self.read_joints(),
-            2 => self.send_status(tick),
-            3 => self.trigger_stereo(),
-            4 => self.read_sun(),
+            1 => self.nav.propagate(self.fresh.imu.take().as_ref()),
+            2 => self.read_joints(),
+            3 => self.nav.kinematic_cycle(self.fresh.joints.take().as_ref()),
+            4 => self.command_motors(),
+            5 => self.send_status(tick),
+            6 => self.trigger_stereo(),
+            7 => self.read_sun(),
             _ => {}
         }
     }
@@ -418,7 +574,7 @@ impl<P: Platform> TaskSet for Work<'_, P> {
         if quantum == 0 {
             return 0;
         }
-        self.poll_stereo()
+        self.poll_stereo(quantum)
     }
 }
 

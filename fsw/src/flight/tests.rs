@@ -176,7 +176,8 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
         sun: TestSun(sun_script),
         telemetry: RefusingTelemetry,
     };
-    let mut fsw = match Fsw::new(devices, ExecConfig::default()) {
+    let config = FswConfig::rocky8([0.0; 3], 0.0);
+    let mut fsw = match Fsw::new(devices, &config, &[[0.0, 0.0], [1.0, 0.0]]) {
         Ok(f) => f,
         Err(e) => panic!("schedule refused: {e:?}"),
     };

@@ -1,6 +1,9 @@
-//! `summary.json`: the figures of a run, with `null` for flight estimates that do not exist
-//! yet (EKF, VO, 3D and 2D kinematics).
+//! `summary.json`: the figures of a run. Estimate errors are horizontal (north, east) position
+//! errors at the last record where the estimate exists; `null` when it never existed (VO with
+//! `--no-render`, for example). Attitude errors are the largest rotation angle between the
+//! estimate and the truth over the run.
 
+use super::tum::Trajectory;
 use crate::sim::RunResult;
 use serde::Serialize;
 
@@ -38,7 +41,7 @@ pub struct CrossTrack {
 /// Slip figures.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct SlipSummary {
-    /// Fraction of kinematic updates the flight slip gate rejected (`null` until the gate exists).
+    /// Fraction of kinematic intervals the flight slip gate rejected (`null`: none tested).
     pub gate_reject_fraction: Option<f64>,
     /// Mean true longitudinal slip ratio while driving.
     pub mean_slip_ratio: f64,
@@ -46,7 +49,7 @@ pub struct SlipSummary {
     pub mean_slip_angle_deg: f64,
 }
 
-/// Visual-odometry figures (`null` until flight VO exists).
+/// Visual-odometry figures of the flight software (means `null` when VO never delivered).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct VoSummary {
     /// Relative poses delivered.
@@ -103,17 +106,71 @@ pub struct Summary {
     pub device_faults: u32,
     /// Stereo frames completed by the flight software.
     pub stereo_frames: u32,
+    /// Who drove (`flight` or `reference`).
+    pub driver: String,
+    /// Slip compensation on.
+    pub slip_compensation: bool,
+    /// Final navigation mode of the flight software.
+    pub nav_mode: String,
+    /// Navigation counters of the flight software.
+    pub nav: fsw::flight::nav::NavCounters,
     /// Wall-clock time of the run, s (the only field that differs between identical runs when
     /// the counter is simulated time).
     pub wall_time_s: f64,
 }
 
-const NONE4: PerEstimate = PerEstimate {
-    ekf: None,
-    vo: None,
-    kin3d: None,
-    kin2d: None,
-};
+/// The VO-only poses at their capture times with the truth there.
+fn vo_pairs(
+    run: &RunResult,
+) -> impl Iterator<Item = (([f64; 3], [f64; 4]), ([f64; 3], [f64; 4]))> + '_ {
+    run.vo_checks
+        .iter()
+        .filter_map(|c| c.vo_pose.map(|v| (v, c.truth_pose)))
+}
+
+/// Final horizontal error of `which`, m.
+fn final_error(run: &RunResult, which: Trajectory) -> Option<f64> {
+    if which == Trajectory::Vo {
+        return vo_pairs(run)
+            .last()
+            .map(|((p, _), (t, _))| (p[0] - t[0]).hypot(p[1] - t[1]));
+    }
+    let start_z = run.records.first().map_or(0.0, |r| r.pos_m[2]);
+    run.records.iter().rev().find_map(|r| {
+        which
+            .pose(r, start_z)
+            .map(|(p, _)| (p[0] - r.pos_m[0]).hypot(p[1] - r.pos_m[1]))
+    })
+}
+
+/// Largest attitude error of `which` over the run, deg.
+fn max_attitude_error(run: &RunResult, which: Trajectory) -> Option<f64> {
+    let q = |v: [f64; 4]| {
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(v[3], v[0], v[1], v[2]))
+    };
+    if which == Trajectory::Vo {
+        return vo_pairs(run)
+            .map(|((_, e), (_, t))| q(e).angle_to(&q(t)).to_degrees())
+            .reduce(f64::max);
+    }
+    run.records
+        .iter()
+        .filter_map(|r| {
+            which
+                .pose(r, 0.0)
+                .map(|(_, e)| q(e).angle_to(&q(r.quat_xyzw)).to_degrees())
+        })
+        .reduce(f64::max)
+}
+
+fn per_estimate(f: impl Fn(Trajectory) -> Option<f64>) -> PerEstimate {
+    PerEstimate {
+        ekf: f(Trajectory::Ekf),
+        vo: f(Trajectory::Vo),
+        kin3d: f(Trajectory::Kin3d),
+        kin2d: f(Trajectory::Kin2d),
+    }
+}
 
 /// Build the summary of `run`.
 pub fn summarise(run: &RunResult) -> Summary {
@@ -152,17 +209,20 @@ pub fn summarise(run: &RunResult) -> Summary {
         seed: run.seed,
         sim_time_s: run.sim_time_s,
         distance_m: run.distance_m,
-        final_error_m: NONE4,
-        error_pct: NONE4,
+        final_error_m: per_estimate(|w| final_error(run, w)),
+        error_pct: per_estimate(|w| {
+            final_error(run, w).map(|e| 100.0 * e / run.distance_m.max(1e-9))
+        }),
         max_attitude_error_deg: AttitudeErrors {
-            ekf: None,
-            vo: None,
+            ekf: max_attitude_error(run, Trajectory::Ekf),
+            vo: max_attitude_error(run, Trajectory::Vo),
         },
         cross_track_m: CrossTrack { rms, max },
         goal_reached: run.goal_reached,
         goal_miss_m: run.goal_miss_m,
         slip: SlipSummary {
-            gate_reject_fraction: None,
+            gate_reject_fraction: (run.nav.kin_tested > 0)
+                .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
             mean_slip_ratio: moving.iter().map(|r| r.slip_ratio).sum::<f64>() / m,
             mean_slip_angle_deg: moving
                 .iter()
@@ -171,14 +231,18 @@ pub fn summarise(run: &RunResult) -> Summary {
                 / m,
         },
         vo: VoSummary {
-            updates: None,
-            failures: None,
-            mean_features: None,
-            mean_inliers: None,
+            updates: Some(u64::from(run.nav.vo_updates)),
+            failures: Some(u64::from(run.nav.vo_failures)),
+            mean_features: run.vo_mean_features,
+            mean_inliers: run.vo_mean_inliers,
         },
         timing,
         device_faults: run.device_faults,
         stereo_frames: run.stereo_frames,
+        driver: run.driver.clone(),
+        slip_compensation: run.slip_compensation,
+        nav_mode: format!("{:?}", run.nav_mode),
+        nav: run.nav,
         wall_time_s: run.wall_time_s,
     }
 }
