@@ -172,6 +172,8 @@ pub struct RunResult {
     pub timing: Vec<GroupTiming>,
     /// Device faults the flight software counted.
     pub device_faults: u32,
+    /// Per-device health counters of the flight software: IMU, joints, camera, sun.
+    pub device_health: [fsw::telemetry::DeviceHealth; 4],
     /// Stereo frames the flight software completed.
     pub stereo_frames: u32,
     /// Navigation counters of the flight software at the end.
@@ -332,6 +334,7 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
         goal_miss_m,
         timing,
         device_faults: state.health.iter().map(|h| h.faults()).sum(),
+        device_health: state.health,
         stereo_frames: state.stereo_frames,
         nav: *fsw.nav().counters(),
         nav_mode: fsw.nav().mode(),

@@ -20,8 +20,10 @@
 //!
 //! Fallbacks: no IMU for [`NavConfig::imu_timeout_frames`] or no joints for
 //! [`NavConfig::joints_timeout_cycles`] stops the rover until the sensor returns; a VO failure
-//! leaves the EKF on kinematics and IMU and restarts VO at the next capture; an EKF covariance
-//! fault latches [`NavMode::Safed`] (rover stopped, ground action needed).
+//! restarts VO at the next capture, and when no VO update was fused for
+//! [`NavConfig::vo_timeout_cycles`] the kinematic intervals are fused without the gate (wheel
+//! and IMU odometry: slip is then unobservable and not compensated); an EKF covariance fault
+//! latches [`NavMode::Safed`] (rover stopped, ground action needed).
 //!
 //! With [`NavConfig::slip_compensation`] off the rover navigates as one without slip
 //! compensation (H05 Fig. 9, "without compensation"): guidance steers on the kinematic dead
@@ -88,6 +90,10 @@ pub struct NavConfig {
     /// intervals whose slip is within the noise; fusing them would teach the filter the crab
     /// angle as a heading error). The slip vector still comes from their residual.
     pub slip_hold_cycles: u32,
+    /// VO fallback: when no VO update was fused for this many RG2 cycles (VO failing, camera
+    /// lost, or VO off), kinematic intervals are fused without the gate, since without VO the
+    /// slip cannot be measured and the EKF would otherwise run on the IMU alone.
+    pub vo_timeout_cycles: u32,
     /// Guidance settings.
     pub guidance: GuidanceConfig,
     /// Minor frames without a checked IMU sample after which the rover is stopped.
@@ -122,6 +128,7 @@ impl NavConfig {
             vo_max_d2: 1.0e4,
             slip_compensation: true,
             slip_hold_cycles: 20,
+            vo_timeout_cycles: 60,
             guidance: GuidanceConfig::rocky8(xy),
             imu_timeout_frames: 20,
             joints_timeout_cycles: 10,
@@ -171,6 +178,8 @@ pub struct NavCounters {
     pub kin_rejected: u32,
     /// Accepted by the gate but not fused because slip was detected within the hold time.
     pub kin_held: u32,
+    /// Fused without the gate because VO had not updated for the VO timeout (fallback).
+    pub kin_ungated: u32,
     /// Kinematic intervals that could not be formed (odometry or clone error).
     pub kin_errors: u32,
     /// Zero-velocity updates applied.
@@ -255,6 +264,7 @@ pub struct Navigator {
     frames_without_imu: u32,
     cycles_without_joints: u32,
     cycles_since_reject: u32,
+    cycles_since_vo: u32,
 }
 
 /// Why the navigator could not be built.
@@ -332,6 +342,7 @@ impl Navigator {
             frames_without_imu: 0,
             cycles_without_joints: 0,
             cycles_since_reject: u32::MAX,
+            cycles_since_vo: 0,
         })
     }
 
@@ -557,8 +568,21 @@ impl Navigator {
             self.kin3d.p_n += q0.to_rotation_matrix() * rp.trans_0_1_m;
             self.kin3d.q_nr = ekf.state().q_nr;
         }
+        self.cycles_since_vo = self.cycles_since_vo.saturating_add(1);
+        let vo_lost = self.cycles_since_vo > self.config.vo_timeout_cycles;
         let holding = self.cycles_since_reject < self.config.slip_hold_cycles;
-        let result = if holding {
+        let result = if vo_lost {
+            self.counters.kin_ungated = self.counters.kin_ungated.saturating_add(1);
+            // Without VO nothing observes the vertical: add the ground vehicle's constraint
+            // that it does not move along its own z axis, with a 1-sigma of 20 % of the step
+            // plus 0.5 mm (the kinematics' unobserved component, H04 sec. 3).
+            let sigma_z = 0.2 * rp.trans_0_1_m.norm() + 5.0e-4;
+            if let Some(o) = rp.observed.get_mut(5) {
+                *o = true;
+            }
+            rp.covariance[(5, 5)] += sigma_z * sigma_z;
+            ekf.update_relative_pose(&rp, false)
+        } else if holding {
             ekf.gate_relative_pose(&rp)
         } else {
             ekf.update_relative_pose(&rp, true)
@@ -891,7 +915,10 @@ impl Navigator {
         }
         match ekf.gate_relative_pose(rp) {
             Ok(d) if d.d2 <= self.config.vo_max_d2 => match ekf.update_relative_pose(rp, false) {
-                Ok(_) => self.counters.vo_fused = self.counters.vo_fused.saturating_add(1),
+                Ok(_) => {
+                    self.counters.vo_fused = self.counters.vo_fused.saturating_add(1);
+                    self.cycles_since_vo = 0;
+                }
                 Err(e) => self.ekf_error(e),
             },
             Ok(_) => self.counters.vo_refused = self.counters.vo_refused.saturating_add(1),

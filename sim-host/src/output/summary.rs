@@ -104,6 +104,8 @@ pub struct Summary {
     pub timing: serde_json::Map<String, serde_json::Value>,
     /// Device faults counted by the flight software.
     pub device_faults: u32,
+    /// Per-device health counters of the flight software.
+    pub device_health: serde_json::Map<String, serde_json::Value>,
     /// Stereo frames completed by the flight software.
     pub stereo_frames: u32,
     /// Who drove (`flight` or `reference`).
@@ -238,6 +240,16 @@ pub fn summarise(run: &RunResult) -> Summary {
         },
         timing,
         device_faults: run.device_faults,
+        device_health: ["imu", "joints", "camera", "sun"]
+            .iter()
+            .zip(run.device_health.iter())
+            .map(|(k, h)| {
+                (
+                    k.to_string(),
+                    serde_json::to_value(h).unwrap_or(serde_json::Value::Null),
+                )
+            })
+            .collect(),
         stereo_frames: run.stereo_frames,
         driver: run.driver.clone(),
         slip_compensation: run.slip_compensation,

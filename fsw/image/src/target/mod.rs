@@ -8,8 +8,7 @@ use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hio};
 use devices::{ExtramStereo, SystickClock, TargetPlatform};
-use fsw::exec::ExecConfig;
-use fsw::flight::{Devices, Fsw, SCHEDULE_GROUPS};
+use fsw::flight::{Devices, Fsw, FswConfig, SCHEDULE_GROUPS};
 
 /// Core clock of the mps2-an500 model, Hz.
 pub const CORE_CLOCK_HZ: u32 = 25_000_000;
@@ -32,7 +31,10 @@ fn report(args: core::fmt::Arguments<'_>) {
 
 #[entry]
 fn main() -> ! {
-    let config = ExecConfig::default();
+    // A still rover at the origin of N with a 1 m path north: guidance commands, the still
+    // devices do not move.
+    let fsw_config = FswConfig::rocky8([0.0; 3], 0.0);
+    let config = fsw_config.exec;
     let reload = CORE_CLOCK_HZ / 1_000_000 * config.frame_period_us;
     let Some(mut core) = cortex_m::Peripherals::take() else {
         report(format_args!("fsw-image: core peripherals unavailable\n"));
@@ -50,10 +52,12 @@ fn main() -> ! {
         sun: devices::FixedSun::new(&SYSTICKS),
         telemetry: devices::CountingTelemetry::default(),
     };
-    let mut fsw = match Fsw::new(devices, config) {
+    let mut fsw = match Fsw::new(devices, &fsw_config, &[[0.0, 0.0], [1.0, 0.0]]) {
         Ok(f) => f,
         Err(e) => {
-            report(format_args!("fsw-image: schedule refused: {e:?}\n"));
+            report(format_args!(
+                "fsw-image: flight software refused its configuration: {e:?}\n"
+            ));
             exit(debug::EXIT_FAILURE)
         }
     };
