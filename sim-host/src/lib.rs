@@ -13,6 +13,7 @@
 //! - [`world`]: the truth state and its step; [`hal_devices`]: the HAL devices on it.
 //! - [`driver`]: the simulator's reference driver (not flight code).
 //! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
+//! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
 //! - [`devices`], [`run`]: the standing-still devices of the `still` command.
 
 pub mod camera;
@@ -25,6 +26,7 @@ pub mod report;
 pub mod run;
 pub mod scenario;
 pub mod sensors;
+pub mod sil;
 pub mod sim;
 pub mod slip;
 pub mod surface;

@@ -40,6 +40,15 @@ enum Command {
         #[arg(long, default_value_t = 2000)]
         frames: u64,
     },
+    /// Run the SIL acceptance cases (in parallel) and write the results page.
+    Sil {
+        /// Results page to write.
+        #[arg(long, default_value = "docs/sil-results.md")]
+        out: PathBuf,
+        /// Directory of the scenario files.
+        #[arg(long, default_value = "scenarios")]
+        scenarios: PathBuf,
+    },
     /// Run a scenario file in closed loop and write the outputs.
     Run {
         /// Scenario file (TOML), e.g. scenarios/slope-10-cross.toml.
@@ -374,6 +383,27 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
     Ok(summary)
 }
 
+fn sil(out: PathBuf, scenarios: PathBuf) -> anyhow::Result<()> {
+    use rayon::prelude::*;
+    println!(
+        "sim-host sil: {} cases with rendered stereo, in parallel",
+        sim_host::sil::CASES.len()
+    );
+    let results: Vec<_> = sim_host::sil::CASES
+        .par_iter()
+        .map(|c| sim_host::sil::run_case(*c, &scenarios))
+        .collect::<anyhow::Result<_>>()?;
+    let page = sim_host::sil::markdown(&results);
+    std::fs::write(&out, &page)?;
+    print!("{page}");
+    println!("written to {}", out.display());
+    if results.iter().all(|r| r.passed()) {
+        Ok(())
+    } else {
+        anyhow::bail!("a SIL requirement failed")
+    }
+}
+
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
@@ -384,6 +414,7 @@ fn main() -> anyhow::Result<()> {
             seed,
             out,
         }) => compare(scenario, seed, out),
+        Some(Command::Sil { out, scenarios }) => sil(out, scenarios),
         Some(Command::Run {
             scenario,
             seed,

@@ -199,9 +199,10 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
     let h = s.health[DeviceId::Sun as usize];
     assert_eq!((h.good, h.invalid), (0, 1));
     assert!(s.sun.is_none());
-    // The capture is still pending (stuck camera), and telemetry refused the one record.
+    // The capture is still pending (stuck camera), and telemetry refused the two records
+    // (status and navigation) of the one RG2 cycle.
     assert!(s.capture_pending_t_us.is_some());
-    assert_eq!(s.telemetry_dropped, 1);
+    assert_eq!(s.telemetry_dropped, 2);
     // Run to the next RG2 and RG3 releases: joints go backwards, then the camera timeout.
     for _ in 8..210 {
         fsw.tick();
@@ -212,4 +213,55 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
     assert!(h.errors >= 1);
     assert_eq!(s.health[DeviceId::Camera as usize].errors, 1);
     assert_eq!(s.stereo_frames, 0);
+}
+
+/// NAV-1: the navigator aligns on 400 samples at rest (tilt from gravity, heading from the
+/// ground), then commands forward motion along the path; losing the IMU stops the rover; an
+/// invalid path is refused with an error value.
+#[test]
+fn nav_1_alignment_drive_command_and_sensor_loss_hold() {
+    use nav::{NavConfig, NavError, NavMode, Navigator};
+    let calib = StuckCamera.calibration();
+    let path = [[0.0, 0.0], [5.0, 0.0]];
+    // A 2 deg roll (right side down) seen by the accelerometer at rest.
+    let roll = 2.0_f64.to_radians();
+    let g = 3.711;
+    let mut nav = match Navigator::new(NavConfig::rocky8([0.0; 3], 0.0), &path, &calib) {
+        Ok(n) => n,
+        Err(e) => panic!("navigator refused: {e:?}"),
+    };
+    assert_eq!(nav.mode(), NavMode::Aligning);
+    for k in 0..400u64 {
+        let s = ImuSample {
+            t_us: 5_000 * (k + 1),
+            gyro_rad_s: [1e-4, 0.0, 0.0],
+            accel_m_s2: [0.0, -g * roll.sin(), -g * roll.cos()],
+            valid: true,
+        };
+        nav.propagate(Some(&s));
+        assert!(nav.guidance_cycle().is_none(), "no motion while aligning");
+    }
+    assert_eq!(nav.mode(), NavMode::Driving);
+    let (r, p, y) = nav.pose().q_nr.euler_angles();
+    assert!((r - roll).abs() < 1e-9 && p.abs() < 1e-9 && y.abs() < 1e-12);
+    let bias = nav.ekf().map(|e| e.state().b_g.x);
+    assert!(bias.is_some_and(|b| (b - 1e-4).abs() < 1e-12));
+    nav.kinematic_cycle(Some(&joints(2_000_000)));
+    let Some(cmd) = nav.guidance_cycle() else {
+        panic!("no command after alignment");
+    };
+    // Path straight ahead: wheels straight, all turning forward.
+    assert!(cmd.wheel_rate_rad_s.iter().all(|w| *w > 0.0));
+    assert!(cmd.steer_angle_rad.iter().all(|s| s.abs() < 0.05));
+    // No IMU for the timeout: the rover is held.
+    for _ in 0..20 {
+        nav.propagate(None);
+    }
+    assert!(nav.guidance_cycle().is_none());
+    assert_eq!(nav.counters().sensor_holds, 1);
+    // Bad paths are refused.
+    let bad = Navigator::new(NavConfig::rocky8([0.0; 3], 0.0), &[[0.0, 0.0]], &calib);
+    assert!(matches!(bad, Err(NavError::Path(_))));
+    let nan = Navigator::new(NavConfig::rocky8([f64::NAN, 0.0, 0.0], 0.0), &path, &calib);
+    assert!(matches!(nan, Err(NavError::BadConfig)));
 }

@@ -1,0 +1,456 @@
+//! The software-in-the-loop (SIL) acceptance cases: closed-loop scenario runs of the flight
+//! software with thresholds, each tagged with a requirement id. One table of cases serves both
+//! the tests (`tests/tests/sil_scenarios.rs`) and the results page (`sim-host sil`, which writes
+//! `docs/sil-results.md`), so the thresholds are written once.
+//!
+//! Every case renders the stereo images (the flight VO runs on them) and uses the simulated
+//! time as the execution counter, so the figures are deterministic for a scenario and seed.
+
+use crate::camera::{StereoRenderer, TexturedRenderer};
+use crate::devices::hazcam_calibration;
+use crate::hal_devices::CounterMode;
+use crate::output::summary::{summarise, Summary};
+use crate::scenario::Scenario;
+use crate::sim::{run, RunOptions};
+use std::path::Path;
+
+/// How a measured value is compared with its threshold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Compare {
+    /// Pass when `value <= threshold`.
+    AtMost,
+    /// Pass when `value >= threshold`.
+    AtLeast,
+}
+
+/// One check of a case.
+#[derive(Debug, Clone, Copy)]
+pub struct Check {
+    /// What is measured (table text).
+    pub what: &'static str,
+    /// The measurement from the run's summary (`None`: the estimate does not exist).
+    pub value: fn(&Summary) -> Option<f64>,
+    /// Comparison.
+    pub compare: Compare,
+    /// Threshold.
+    pub threshold: f64,
+    /// Unit (table text).
+    pub unit: &'static str,
+    /// A requirement (failing fails the test) or a goal (reported only).
+    pub required: bool,
+}
+
+/// One SIL case: a scenario run and its checks.
+#[derive(Debug, Clone, Copy)]
+pub struct Case {
+    /// Requirement id.
+    pub id: &'static str,
+    /// Scenario file stem in `scenarios/`.
+    pub scenario: &'static str,
+    /// Run without slip compensation.
+    pub no_slip_comp: bool,
+    /// What the case shows.
+    pub title: &'static str,
+    /// Checks.
+    pub checks: &'static [Check],
+}
+
+/// The measured result of one check.
+#[derive(Debug, Clone, Copy)]
+pub struct CheckResult {
+    /// The check.
+    pub check: Check,
+    /// Measured value.
+    pub value: Option<f64>,
+    /// Passed.
+    pub pass: bool,
+}
+
+/// A finished case.
+#[derive(Debug, Clone)]
+pub struct CaseResult {
+    /// The case.
+    pub case: Case,
+    /// The run's summary.
+    pub summary: Summary,
+    /// Check results in the case's order.
+    pub checks: Vec<CheckResult>,
+}
+
+impl CaseResult {
+    /// True when every required check passed.
+    pub fn passed(&self) -> bool {
+        self.checks.iter().all(|c| c.pass || !c.check.required)
+    }
+}
+
+const fn req(
+    what: &'static str,
+    value: fn(&Summary) -> Option<f64>,
+    compare: Compare,
+    threshold: f64,
+    unit: &'static str,
+) -> Check {
+    Check {
+        what,
+        value,
+        compare,
+        threshold,
+        unit,
+        required: true,
+    }
+}
+
+const fn goal(
+    what: &'static str,
+    value: fn(&Summary) -> Option<f64>,
+    compare: Compare,
+    threshold: f64,
+    unit: &'static str,
+) -> Check {
+    Check {
+        required: false,
+        ..req(what, value, compare, threshold, unit)
+    }
+}
+
+fn flag(b: bool) -> Option<f64> {
+    Some(if b { 1.0 } else { 0.0 })
+}
+
+/// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
+pub const CASES: [Case; 7] = [
+    Case {
+        id: "SIL-GNC-1",
+        scenario: "slope-10-cross",
+        no_slip_comp: false,
+        title: "10 deg sand cross slope, slip compensation on (H05 Fig. 9)",
+        checks: &[
+            req(
+                "cross-track max",
+                |s| Some(s.cross_track_m.max),
+                Compare::AtMost,
+                0.15,
+                "m",
+            ),
+            req(
+                "goal miss",
+                |s| Some(s.goal_miss_m),
+                Compare::AtMost,
+                0.10,
+                "m",
+            ),
+            goal(
+                "cross-track rms",
+                |s| Some(s.cross_track_m.rms),
+                Compare::AtMost,
+                0.05,
+                "m",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-GNC-2",
+        scenario: "slope-10-cross",
+        no_slip_comp: true,
+        title: "10 deg sand cross slope, slip compensation off: drifts downhill (H05 Fig. 9)",
+        checks: &[req(
+            "cross-track max (downhill drift)",
+            |s| Some(s.cross_track_m.max),
+            Compare::AtLeast,
+            0.5,
+            "m",
+        )],
+    },
+    Case {
+        id: "SIL-NAV-1",
+        scenario: "marsyard-25m",
+        no_slip_comp: false,
+        title: "25 m Mars Yard path with rocks (H04 sec. 6)",
+        checks: &[
+            req(
+                "VO error / distance",
+                |s| s.error_pct.vo,
+                Compare::AtMost,
+                2.5,
+                "%",
+            ),
+            req(
+                "EKF error / distance",
+                |s| s.error_pct.ekf,
+                Compare::AtMost,
+                1.0,
+                "%",
+            ),
+            req(
+                "EKF attitude error max",
+                |s| s.max_attitude_error_deg.ekf,
+                Compare::AtMost,
+                2.0,
+                "deg",
+            ),
+            req(
+                "VO attitude error max",
+                |s| s.max_attitude_error_deg.vo,
+                Compare::AtMost,
+                2.0,
+                "deg",
+            ),
+            req(
+                "goal reached",
+                |s| flag(s.goal_reached),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            goal(
+                "EKF error / distance",
+                |s| s.error_pct.ekf,
+                Compare::AtMost,
+                0.5,
+                "%",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-KIN-1",
+        scenario: "rough-kinematics",
+        no_slip_comp: false,
+        title: "very rough terrain: 3D kinematics against planar 2D (H04 Fig. 17)",
+        checks: &[
+            req(
+                "3D kinematics error / distance",
+                |s| s.error_pct.kin3d,
+                Compare::AtMost,
+                3.0,
+                "%",
+            ),
+            goal(
+                "2D error / 3D error",
+                |s| Some(s.error_pct.kin2d? / s.error_pct.kin3d?.max(1e-9)),
+                Compare::AtLeast,
+                10.0,
+                "x",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-GNC-3",
+        scenario: "slope-20-cross",
+        no_slip_comp: false,
+        title: "20 deg sand cross slope: heavy slip, the gate rejects kinematics",
+        checks: &[
+            req(
+                "goal reached",
+                |s| flag(s.goal_reached),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            req(
+                "gate rejection fraction",
+                |s| s.slip.gate_reject_fraction,
+                Compare::AtLeast,
+                0.5,
+                "",
+            ),
+            req(
+                "cross-track max",
+                |s| Some(s.cross_track_m.max),
+                Compare::AtMost,
+                0.3,
+                "m",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-GNC-4",
+        scenario: "slope-10-faults",
+        no_slip_comp: false,
+        title: "10 deg slope with black frames, IMU dropout, NaN joints and no sun: fallbacks",
+        checks: &[
+            req(
+                "goal reached",
+                |s| flag(s.goal_reached),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            req(
+                "cross-track max",
+                |s| Some(s.cross_track_m.max),
+                Compare::AtMost,
+                0.15,
+                "m",
+            ),
+            req(
+                "device faults counted",
+                |s| Some(f64::from(s.device_faults)),
+                Compare::AtLeast,
+                100.0,
+                "",
+            ),
+            req(
+                "VO failures counted",
+                |s| s.vo.failures.map(|f| f as f64),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            req(
+                "sensor holds (rover stopped)",
+                |s| Some(f64::from(s.nav.sensor_holds)),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            req(
+                "not safed",
+                |s| flag(s.nav_mode != "Safed"),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-NAV-2",
+        scenario: "dunes-long",
+        no_slip_comp: false,
+        title: "over 50 m across 15-25 deg sandy dunes",
+        checks: &[
+            req(
+                "goal reached",
+                |s| flag(s.goal_reached),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            goal(
+                "EKF error / distance",
+                |s| s.error_pct.ekf,
+                Compare::AtMost,
+                0.5,
+                "%",
+            ),
+        ],
+    },
+];
+
+/// The case with `id` and the slip-compensation setting, if any.
+pub fn case(id: &str) -> Option<Case> {
+    CASES.iter().copied().find(|c| c.id == id)
+}
+
+/// Run `case` with the scenarios in `scenarios_dir`.
+pub fn run_case(case: Case, scenarios_dir: &Path) -> anyhow::Result<CaseResult> {
+    let scenario = Scenario::load(&scenarios_dir.join(format!("{}.toml", case.scenario)))?;
+    let sun = &scenario.sensors.sun;
+    let renderer: Box<dyn StereoRenderer> = Box::new(TexturedRenderer::new(
+        hazcam_calibration(),
+        scenario.seed,
+        sun.azimuth_deg,
+        sun.elevation_deg,
+    ));
+    let result = run(
+        &scenario,
+        RunOptions {
+            no_slip_comp: case.no_slip_comp,
+            counter: CounterMode::SimTime,
+            renderer: Some(renderer),
+            ..RunOptions::default()
+        },
+    )?;
+    let summary = summarise(&result);
+    let checks = case
+        .checks
+        .iter()
+        .map(|c| {
+            let value = (c.value)(&summary);
+            let pass = value.is_some_and(|v| match c.compare {
+                Compare::AtMost => v <= c.threshold,
+                Compare::AtLeast => v >= c.threshold,
+            });
+            CheckResult {
+                check: *c,
+                value,
+                pass,
+            }
+        })
+        .collect();
+    Ok(CaseResult {
+        case,
+        summary,
+        checks,
+    })
+}
+
+/// The results as a Markdown page.
+pub fn markdown(results: &[CaseResult]) -> String {
+    let mut s = String::new();
+    s += "# SIL results\n\n";
+    s += "Generated by `cargo run --release -p sim-host -- sil` (do not edit by hand). Each case is a\n";
+    s += "closed-loop run of the flight software on the simulator with rendered stereo images; the\n";
+    s += "thresholds live in `sim-host/src/sil.rs` and the same cases run as tests in\n";
+    s += "`tests/tests/sil_scenarios.rs`. Requirement checks fail the tests; goals are reported.\n";
+    s += "Errors are horizontal position errors at the end of the run divided by the distance driven.\n\n";
+    s += "| id | scenario | check | kind | threshold | measured | result |\n";
+    s += "|---|---|---|---|---|---|---|\n";
+    for r in results {
+        let scenario = if r.case.no_slip_comp {
+            format!("{} (no slip comp)", r.case.scenario)
+        } else {
+            r.case.scenario.to_string()
+        };
+        for c in &r.checks {
+            let op = match c.check.compare {
+                Compare::AtMost => "<=",
+                Compare::AtLeast => ">=",
+            };
+            let value = c
+                .value
+                .map_or("-".to_string(), |v| format!("{v:.3} {}", c.check.unit));
+            s += &format!(
+                "| {} | {} | {} | {} | {op} {} {} | {} | {} |\n",
+                r.case.id,
+                scenario,
+                c.check.what,
+                if c.check.required {
+                    "requirement"
+                } else {
+                    "goal"
+                },
+                c.check.threshold,
+                c.check.unit,
+                value.trim(),
+                if c.pass { "pass" } else { "FAIL" }
+            );
+        }
+    }
+    s += "\n## Runs\n\n";
+    s += "| id | distance m | sim time s | EKF % | VO % | kin3d % | kin2d % | gate rejects | VO updates/failures | cross-track rms/max m | goal miss m |\n";
+    s += "|---|---|---|---|---|---|---|---|---|---|---|\n";
+    let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.2}"));
+    for r in results {
+        let m = &r.summary;
+        s += &format!(
+            "| {} | {:.2} | {:.1} | {} | {} | {} | {} | {} | {}/{} | {:.3}/{:.3} | {:.3} |\n",
+            r.case.id,
+            m.distance_m,
+            m.sim_time_s,
+            f(m.error_pct.ekf),
+            f(m.error_pct.vo),
+            f(m.error_pct.kin3d),
+            f(m.error_pct.kin2d),
+            m.slip
+                .gate_reject_fraction
+                .map_or("-".to_string(), |x| format!("{:.0} %", 100.0 * x)),
+            m.vo.updates.unwrap_or(0),
+            m.vo.failures.unwrap_or(0),
+            m.cross_track_m.rms,
+            m.cross_track_m.max,
+            m.goal_miss_m
+        );
+    }
+    s
+}

@@ -1,0 +1,68 @@
+//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1: closed-loop scenario runs of the flight software on the
+//! simulator with rendered stereo, against the thresholds of `sim_host::sil::CASES` (the same
+//! table `sim-host sil` writes to `docs/sil-results.md`).
+
+use sim_host::sil::{case, run_case, CaseResult};
+use std::path::PathBuf;
+
+fn scenarios() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
+}
+
+fn check(id: &str) {
+    let Some(c) = case(id) else {
+        panic!("no SIL case {id}");
+    };
+    let result: CaseResult = match run_case(c, &scenarios()) {
+        Ok(r) => r,
+        Err(e) => panic!("{id}: run failed: {e:#}"),
+    };
+    for r in &result.checks {
+        println!(
+            "{id} {}: {:?} {} (threshold {:?} {}) -> {}{}",
+            r.check.what,
+            r.value,
+            r.check.unit,
+            r.check.compare,
+            r.check.threshold,
+            if r.pass { "pass" } else { "FAIL" },
+            if r.check.required { "" } else { " (goal)" }
+        );
+    }
+    assert!(result.passed(), "{id}: a required check failed");
+}
+
+#[test]
+fn sil_gnc_1_slope_10_with_compensation() {
+    check("SIL-GNC-1");
+}
+
+#[test]
+fn sil_gnc_2_slope_10_without_compensation_drifts() {
+    check("SIL-GNC-2");
+}
+
+#[test]
+fn sil_nav_1_marsyard() {
+    check("SIL-NAV-1");
+}
+
+#[test]
+fn sil_kin_1_rough_kinematics() {
+    check("SIL-KIN-1");
+}
+
+#[test]
+fn sil_gnc_3_slope_20() {
+    check("SIL-GNC-3");
+}
+
+#[test]
+fn sil_nav_2_dunes_long() {
+    check("SIL-NAV-2");
+}
+
+#[test]
+fn sil_gnc_4_faults_and_fallbacks() {
+    check("SIL-GNC-4");
+}
