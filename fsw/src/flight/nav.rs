@@ -79,9 +79,10 @@ pub struct NavConfig {
     pub vo: VoConfig,
     /// Run visual odometry on stereo captures.
     pub vo_enabled: bool,
-    /// A VO relative pose whose Mahalanobis distance `d_m^2` exceeds this is refused as a
-    /// blunder (VO is otherwise fused ungated: it is the measurement that corrects slip).
-    pub vo_max_d2: f64,
+    /// A VO relative pose whose Mahalanobis distance `d_m^2` exceeds this is counted in
+    /// [`NavCounters::vo_large_d2`] (it is still fused: VO rejects its own outliers and is the
+    /// measurement that corrects slip).
+    pub vo_warn_d2: f64,
     /// Slip compensation: guidance on the EKF pose with the slip vector (on) or on kinematic
     /// dead reckoning without slip vector (off); see the module doc.
     pub slip_compensation: bool,
@@ -94,6 +95,8 @@ pub struct NavConfig {
     /// lost, or VO off), kinematic intervals are fused without the gate, since without VO the
     /// slip cannot be measured and the EKF would otherwise run on the IMU alone.
     pub vo_timeout_cycles: u32,
+    /// Slip allowance of the VO-loss fallback, as a fraction of the kinematic step.
+    pub vo_loss_slip_fraction: f64,
     /// Guidance settings.
     pub guidance: GuidanceConfig,
     /// Minor frames without a checked IMU sample after which the rover is stopped.
@@ -125,10 +128,11 @@ impl NavConfig {
             odometry: OdometryConfig::default(),
             vo: VoConfig::default(),
             vo_enabled: true,
-            vo_max_d2: 1.0e4,
+            vo_warn_d2: 1.0e3,
             slip_compensation: true,
             slip_hold_cycles: 20,
             vo_timeout_cycles: 60,
+            vo_loss_slip_fraction: 0.3,
             guidance: GuidanceConfig::rocky8(xy),
             imu_timeout_frames: 20,
             joints_timeout_cycles: 10,
@@ -190,8 +194,8 @@ pub struct NavCounters {
     pub vo_fused: u32,
     /// VO attempts that failed (after the first keyframe).
     pub vo_failures: u32,
-    /// VO relative poses refused as blunders (`d_m^2 > vo_max_d2`).
-    pub vo_refused: u32,
+    /// VO relative poses fused with `d_m^2 > vo_warn_d2` (the estimate had drifted).
+    pub vo_large_d2: u32,
     /// Captures skipped because VO was still busy or no clone slot was free.
     pub captures_skipped: u32,
     /// Sun updates applied.
@@ -394,8 +398,8 @@ impl Navigator {
         self.kin2d
     }
 
-    /// The VO-only pose: VO relative poses chained from the first keyframe's EKF pose; `None`
-    /// before the first VO update.
+    /// The VO-only pose: VO relative poses chained from the EKF pose of the first keyframe
+    /// after the start or after a VO outage; `None` before the first VO update.
     pub fn vo_pose(&self) -> Option<PoseEstimate> {
         self.vo_pose
     }
@@ -573,14 +577,22 @@ impl Navigator {
         let holding = self.cycles_since_reject < self.config.slip_hold_cycles;
         let result = if vo_lost {
             self.counters.kin_ungated = self.counters.kin_ungated.saturating_add(1);
-            // Without VO nothing observes the vertical: add the ground vehicle's constraint
-            // that it does not move along its own z axis, with a 1-sigma of 20 % of the step
-            // plus 0.5 mm (the kinematics' unobserved component, H04 sec. 3).
-            let sigma_z = 0.2 * rp.trans_0_1_m.norm() + 5.0e-4;
+            // Without VO the slip is unobservable: the kinematics is fused without the gate but
+            // with a slip allowance (`vo_loss_slip_fraction` of the step on x, y and yaw), so
+            // that slip is not learnt as a heading error; and since nothing else observes the
+            // vertical, with the ground vehicle's constraint that it does not move along its
+            // own z axis (1-sigma 20 % of the step plus 0.5 mm; H04 sec. 3 leaves it unobserved).
+            let step = rp.trans_0_1_m.norm();
+            let yaw = libm::fabs(crate::estimation::state::log_quat(&rp.rot_0_1).z);
+            let f = self.config.vo_loss_slip_fraction;
+            let sigma_z = 0.2 * step + 5.0e-4;
             if let Some(o) = rp.observed.get_mut(5) {
                 *o = true;
             }
             rp.covariance[(5, 5)] += sigma_z * sigma_z;
+            rp.covariance[(3, 3)] += (f * step) * (f * step);
+            rp.covariance[(4, 4)] += (f * step) * (f * step);
+            rp.covariance[(2, 2)] += (f * yaw) * (f * yaw) + 1.0e-8;
             ekf.update_relative_pose(&rp, false)
         } else if holding {
             ekf.gate_relative_pose(&rp)
@@ -877,9 +889,14 @@ impl Navigator {
         match result {
             Ok(out) => {
                 self.vo_quality = Some(out);
-                if let Some(rp) = out.pose {
-                    self.counters.vo_updates = self.counters.vo_updates.saturating_add(1);
-                    self.vo_fuse(&rp);
+                match out.pose {
+                    Some(rp) => {
+                        self.counters.vo_updates = self.counters.vo_updates.saturating_add(1);
+                        self.vo_fuse(&rp);
+                    }
+                    // A new keyframe without a previous one (start, or after a VO outage): the
+                    // VO-only trajectory is anchored again at the EKF pose of this keyframe.
+                    None => self.vo_pose = None,
                 }
             }
             Err(_) => {
@@ -888,14 +905,24 @@ impl Navigator {
                 }
             }
         }
-        // The new frame is the keyframe when VO built one from it.
-        let key_now = self.vo.as_ref().is_some_and(|v| v.keyframe_features() > 0);
+        // Keep the clone of whichever frame VO now holds as its keyframe.
+        let key_t = self.vo.as_ref().and_then(|v| v.keyframe_time_us());
         let old_key = self.key_clone.take();
-        self.release(old_key);
-        if key_now {
-            self.key_clone = capture;
-        } else {
-            self.release(capture);
+        let (keep, drop) = match (key_t, capture, old_key) {
+            (Some(t), Some(c), _) if c.t_us() == t => (Some(c), old_key),
+            (Some(t), _, Some(k)) if k.t_us() == t => (Some(k), capture),
+            _ => {
+                self.release(old_key);
+                (None, capture)
+            }
+        };
+        self.release(drop);
+        self.key_clone = keep;
+        if keep.is_none() {
+            if let Some(vo) = self.vo.as_mut() {
+                // A keyframe without its clone cannot be used: rebuild at the next capture.
+                vo.reset();
+            }
         }
     }
 
@@ -913,15 +940,17 @@ impl Navigator {
             v.p_n += v.q_nr.transform_vector(&rp.trans_0_1_m);
             v.q_nr = crate::estimation::state::renormalize(&(v.q_nr * rp.rot_0_1));
         }
-        match ekf.gate_relative_pose(rp) {
-            Ok(d) if d.d2 <= self.config.vo_max_d2 => match ekf.update_relative_pose(rp, false) {
-                Ok(_) => {
-                    self.counters.vo_fused = self.counters.vo_fused.saturating_add(1);
-                    self.cycles_since_vo = 0;
+        // VO is fused without the gate: it rejects its own outliers (LMedS, H04 sec. 2) and it
+        // is the measurement that corrects an estimate slip has pulled away; a large distance
+        // is counted for the ground.
+        match ekf.update_relative_pose(rp, false) {
+            Ok(d) => {
+                self.counters.vo_fused = self.counters.vo_fused.saturating_add(1);
+                if d.d2 > self.config.vo_warn_d2 {
+                    self.counters.vo_large_d2 = self.counters.vo_large_d2.saturating_add(1);
                 }
-                Err(e) => self.ekf_error(e),
-            },
-            Ok(_) => self.counters.vo_refused = self.counters.vo_refused.saturating_add(1),
+                self.cycles_since_vo = 0;
+            }
             Err(e) => self.ekf_error(e),
         }
     }

@@ -167,6 +167,11 @@ impl<const N: usize> VisualOdometry<N> {
         }
     }
 
+    /// Capture time of the keyframe (microseconds since boot), `None` without a keyframe.
+    pub fn keyframe_time_us(&self) -> Option<u64> {
+        self.key_valid.then_some(self.key_t_us)
+    }
+
     /// Forgets the keyframe and abandons a running update.
     pub fn reset(&mut self) {
         self.key_valid = false;

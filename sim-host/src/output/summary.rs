@@ -121,10 +121,11 @@ pub struct Summary {
     pub wall_time_s: f64,
 }
 
+/// A pose: position m, quaternion `[x, y, z, w]`.
+type Pose = ([f64; 3], [f64; 4]);
+
 /// The VO-only poses at their capture times with the truth there.
-fn vo_pairs(
-    run: &RunResult,
-) -> impl Iterator<Item = (([f64; 3], [f64; 4]), ([f64; 3], [f64; 4]))> + '_ {
+fn vo_pairs(run: &RunResult) -> impl Iterator<Item = (Pose, Pose)> + '_ {
     run.vo_checks
         .iter()
         .filter_map(|c| c.vo_pose.map(|v| (v, c.truth_pose)))
