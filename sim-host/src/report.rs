@@ -3,7 +3,7 @@
 //! The page is a pure function of the run, so it is byte-identical for identical runs.
 
 use crate::output::summary::Summary;
-use crate::sim::RunResult;
+use crate::sim::{Estimates, Record, RunResult};
 use std::fmt::Write as _;
 
 const W: f64 = 640.0;
@@ -213,13 +213,118 @@ pub fn report_html(run: &RunResult, summary: &Summary) -> String {
     };
     let truth = series("truth", "#d62728", &|x| (x.pos_m[1], x.pos_m[0]));
     let rocks: Vec<_> = run.rocks.iter().map(|k| (k[1], k[0], k[2])).collect();
+    let est = |name, color, f: &dyn Fn(&Estimates) -> (f64, f64)| Series {
+        name,
+        color,
+        dashed: false,
+        points: r.iter().filter_map(|x| x.est.as_ref().map(f)).collect(),
+    };
+    let vo_top = Series {
+        name: "VO",
+        color: "#2ca02c",
+        dashed: false,
+        points: run
+            .vo_checks
+            .iter()
+            .filter_map(|c| c.vo_pose.map(|(p, _)| (p[1], p[0])))
+            .collect(),
+    };
     let top = plot(
-        "Top view (estimates appear when the flight code produces them)",
+        "Top view: truth and flight estimates",
         "east (m)",
         "north (m)",
-        &[path, truth],
+        &[
+            path,
+            truth,
+            est("EKF", "#1f77b4", &|e| (e.ekf_pos_m[1], e.ekf_pos_m[0])),
+            vo_top,
+            est("kin3d", "#ff7f0e", &|e| (e.kin3d.0[1], e.kin3d.0[0])),
+            est("kin2d", "#9467bd", &|e| (e.kin2d[1], e.kin2d[0])),
+        ],
         true,
         &rocks,
+    );
+    // EKF errors against the truth with the filter's own 3-sigma bounds.
+    let err_plot = |title: &str, unit: &str, f: &dyn Fn(&Record, &Estimates) -> (f64, f64)| {
+        let pts: Vec<(f64, f64, f64)> = r
+            .iter()
+            .filter_map(|x| {
+                x.est.as_ref().map(|e| {
+                    let (err, sigma) = f(x, e);
+                    (x.t_s, err, 3.0 * sigma)
+                })
+            })
+            .collect();
+        let line = |name, color, dashed, g: &dyn Fn(&(f64, f64, f64)) -> f64| Series {
+            name,
+            color,
+            dashed,
+            points: pts.iter().map(|p| (p.0, g(p))).collect(),
+        };
+        plot(
+            title,
+            "time (s)",
+            unit,
+            &[
+                line("error", "#1f77b4", false, &|p| p.1),
+                line("+3 sigma", "#999", true, &|p| p.2),
+                line("-3 sigma", "#999", true, &|p| -p.2),
+            ],
+            false,
+            &[],
+        )
+    };
+    let ekf_north = err_plot("EKF north error and 3-sigma", "m", &|x, e| {
+        (e.ekf_pos_m[0] - x.pos_m[0], e.ekf_pos_sigma_m[0])
+    });
+    let ekf_east = err_plot("EKF east error and 3-sigma", "m", &|x, e| {
+        (e.ekf_pos_m[1] - x.pos_m[1], e.ekf_pos_sigma_m[1])
+    });
+    let ekf_heading = err_plot("EKF heading error and 3-sigma", "deg", &|x, e| {
+        let yaw = |q: [f64; 4]| {
+            let [qx, qy, qz, qw] = q;
+            (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz))
+        };
+        let d = crate::world::wrap_pi(yaw(e.ekf_quat_xyzw) - yaw(x.quat_xyzw));
+        (d.to_degrees(), e.ekf_heading_sigma_rad.to_degrees())
+    });
+    let flight_slip = plot(
+        "Flight slip vector (EKF minus kinematics, per 50 ms cycle; 0 when the gate accepts)",
+        "time (s)",
+        "mm / mrad",
+        &[
+            est("x slip (mm)", "#1f77b4", &|e| (0.0, e.slip[0] * 1e3)),
+            est("y slip (mm)", "#d62728", &|e| (0.0, e.slip[1] * 1e3)),
+            est("yaw slip (mrad)", "#2ca02c", &|e| (0.0, e.slip[2] * 1e3)),
+        ]
+        .map(|mut s| {
+            let times = r.iter().filter(|x| x.est.is_some()).map(|x| x.t_s);
+            for (p, t) in s.points.iter_mut().zip(times) {
+                p.0 = t;
+            }
+            s
+        }),
+        false,
+        &[],
+    );
+    let vo_line = |name, color, dashed, g: &dyn Fn(&crate::sim::VoCheck) -> f64| Series {
+        name,
+        color,
+        dashed,
+        points: run.vo_checks.iter().map(|c| (c.t_s, g(c) * 1e3)).collect(),
+    };
+    let vo_errors = plot(
+        "Flight VO relative-pose translation error per update and 3-sigma",
+        "time (s)",
+        "mm",
+        &[
+            vo_line("x error", "#1f77b4", false, &|c| c.trans_err_m[0]),
+            vo_line("y error", "#d62728", false, &|c| c.trans_err_m[1]),
+            vo_line("+3 sigma x", "#999", true, &|c| 3.0 * c.trans_sigma_m[0]),
+            vo_line("-3 sigma x", "#999", true, &|c| -3.0 * c.trans_sigma_m[0]),
+        ],
+        false,
+        &[],
     );
     let cross = plot(
         "Cross-track error of the true path",
@@ -289,11 +394,17 @@ cross-track rms {rms:.3} m, max {max:.3} m.</p>\n",
         html.push_str(svg);
         html.push('\n');
     }
-    html.push_str(
-        "<h2>Estimates and 3-sigma bounds</h2>\n<p>The flight software does not produce EKF, VO or \
-kinematic estimates yet; their error and 3-sigma plots appear here when it does \
-(<code>ekf.tum</code> etc. hold no poses until then).</p>\n",
-    );
+    html.push_str("<h2>Flight estimates and 3-sigma bounds</h2>\n");
+    for svg in [
+        &ekf_north,
+        &ekf_east,
+        &ekf_heading,
+        &flight_slip,
+        &vo_errors,
+    ] {
+        html.push_str(svg);
+        html.push('\n');
+    }
     html.push_str(&timing_bars(run));
     let _ = write!(
         html,

@@ -22,6 +22,15 @@ fn deterministic(seed: Option<u64>, no_slip_comp: bool) -> RunOptions {
     }
 }
 
+/// The simulator's own reference driver (truth-based, or open loop with `no_slip_comp`): for
+/// tests of the simulator's models rather than of the flight software.
+fn reference(seed: Option<u64>, no_slip_comp: bool) -> RunOptions {
+    RunOptions {
+        reference_driver: true,
+        ..deterministic(seed, no_slip_comp)
+    }
+}
+
 fn out_dir(tag: &str) -> PathBuf {
     std::env::temp_dir().join(format!("sim-host-test-{}-{tag}", std::process::id()))
 }
@@ -92,18 +101,19 @@ fn sim_11_same_seed_byte_identical_outputs() {
 
 /// SIM-12: on the 10 deg sand cross slope without slip compensation the rover drifts at least
 /// 0.5 m downhill over the 4.5 m traverse (H05 Fig. 9); with the (truth) compensating driver it
-/// stays within 0.1 m of the path and reaches the goal.
+/// stays within 0.1 m of the path and reaches the goal. Both with the simulator's reference
+/// driver (the flight software's version is SIL-GNC-1/2).
 #[test]
 fn sim_12_cross_slope_drift_without_compensation() {
     let s = scenario("slope-10-cross");
     for seed in [1, 2, 3] {
-        let open = run(&s, deterministic(Some(seed), true)).unwrap();
+        let open = run(&s, reference(Some(seed), true)).unwrap();
         assert!(
             final_east(&open) >= 0.5,
             "seed {seed}: drift {:.3} m",
             final_east(&open)
         );
-        let comp = run(&s, deterministic(Some(seed), false)).unwrap();
+        let comp = run(&s, reference(Some(seed), false)).unwrap();
         let max_cross = comp
             .records
             .iter()
@@ -124,7 +134,7 @@ fn sim_13_flat_firm_soil_small_slip() {
     s.terrain.base = sim_host::terrain::BaseShape::Flat;
     s.soil = sim_host::scenario::SoilSpec::Preset("firm_soil".into());
     s.driver = DriverMode::OpenLoop;
-    let r = run(&s, deterministic(Some(3), false)).unwrap();
+    let r = run(&s, reference(Some(3), false)).unwrap();
     let summary = sim_host::output::summary::summarise(&r);
     assert!(summary.slip.mean_slip_ratio.abs() < 0.02, "{summary:?}");
     assert!(final_east(&r).abs() < 0.02, "{}", final_east(&r));
