@@ -11,7 +11,7 @@
 //!   mirrored, so `P` stays exactly symmetric;
 //! - `dx = K r` (eq. 55-56), injected into the nominal state ([`Ekf::inject`]).
 
-use super::state::{Cov, ErrorVec, DIM};
+use super::state::{Cov, ErrorVec, CLONE_DIM, CORE_DIM, DIM};
 use super::{Ekf, EstError};
 use nalgebra::{SMatrix, SVector};
 
@@ -69,6 +69,28 @@ impl<const M: usize, const C: usize> Innovation<M, C> {
 }
 
 impl Ekf {
+    /// Indices of the live error-state components (the core and the live clones), in order,
+    /// and their count.
+    pub(crate) fn live_indices(&self) -> ([usize; DIM], usize) {
+        let mut out = [0usize; DIM];
+        let mut n = 0;
+        let live = self.live_mask();
+        for i in 0..DIM {
+            let alive = i < CORE_DIM
+                || live
+                    .get((i - CORE_DIM) / CLONE_DIM)
+                    .copied()
+                    .unwrap_or(false);
+            if alive {
+                if let Some(o) = out.get_mut(n) {
+                    *o = i;
+                }
+                n += 1;
+            }
+        }
+        (out, n)
+    }
+
     /// Apply an innovation (eq. 53-56, Joseph form), then run the covariance health check.
     pub(crate) fn fuse<const M: usize, const C: usize>(
         &mut self,
@@ -87,10 +109,13 @@ impl Ekf {
         let k = kt.transpose();
         let dx: ErrorVec = k * inn.r;
         // Joseph form P - K U' - U K' + K S K' = P - U K' - K W' with W = U - K S (zero up to
-        // rounding), evaluated on the upper triangle and mirrored: exactly symmetric.
+        // rounding), evaluated on the upper triangle and mirrored: exactly symmetric. Rows and
+        // columns of released clones are zero in P, hence in U, K and W: they are skipped.
         let w: SMatrix<f64, DIM, M> = u - k * inn.s;
-        for j in 0..DIM {
-            for i in 0..=j {
+        let (live, count) = self.live_indices();
+        let live = live.get(..count).unwrap_or(&[]);
+        for (b, &j) in live.iter().enumerate() {
+            for &i in live.get(..=b).unwrap_or(&[]) {
                 let mut acc = 0.0;
                 for m in 0..M {
                     acc += u[(i, m)] * k[(j, m)] + k[(i, m)] * w[(j, m)];
