@@ -121,8 +121,39 @@ pub struct RunResult {
     pub wall_time_s: f64,
 }
 
+/// Hooks into a run (used by `record`): wrap the simulated devices before the flight software
+/// is built, and look at the flight software after every frame.
+pub trait RunHooks {
+    /// Device types after wrapping.
+    type Platform: Platform;
+    /// Wrap the simulated devices.
+    fn wrap(&mut self, devices: Devices<WorldPlatform>) -> Devices<Self::Platform>;
+    /// Called after every `Fsw::tick`.
+    fn after_tick(&mut self, fsw: &Fsw<Self::Platform>);
+}
+
+/// No hooks: the simulated devices as they are.
+pub struct NoHooks;
+
+impl RunHooks for NoHooks {
+    type Platform = WorldPlatform;
+    fn wrap(&mut self, devices: Devices<WorldPlatform>) -> Devices<WorldPlatform> {
+        devices
+    }
+    fn after_tick(&mut self, _fsw: &Fsw<WorldPlatform>) {}
+}
+
 /// Run `scenario` with `options`.
-pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunResult> {
+pub fn run(scenario: &Scenario, options: RunOptions) -> anyhow::Result<RunResult> {
+    run_with(scenario, options, &mut NoHooks)
+}
+
+/// Run `scenario` with `options` and `hooks`.
+pub fn run_with<H: RunHooks>(
+    scenario: &Scenario,
+    mut options: RunOptions,
+    hooks: &mut H,
+) -> anyhow::Result<RunResult> {
     let start = std::time::Instant::now();
     let seed = options.seed.unwrap_or(scenario.seed);
     let world: SharedWorld = Rc::new(RefCell::new(World::new(scenario, seed)?));
@@ -143,7 +174,7 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
         sun: WorldSun::new(world.clone()),
         telemetry: CountingTelemetry::default(),
     };
-    let mut fsw = Fsw::new(devices, ExecConfig::default())
+    let mut fsw = Fsw::new(hooks.wrap(devices), ExecConfig::default())
         .map_err(|e| anyhow::anyhow!("flight schedule refused: {e:?}"))?;
     let mode = if options.no_slip_comp {
         DriverMode::OpenLoop
@@ -175,6 +206,7 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
             }
         }
         fsw.tick();
+        hooks.after_tick(&fsw);
         steps += 1;
         if steps % 200 == 0 {
             if let Some(p) = options.progress.as_mut() {

@@ -1,0 +1,293 @@
+//! Replay of a call tape through the flight software, and the digest of its outputs.
+//!
+//! ## Digest of a frame
+//!
+//! [`frame_digest`] is FNV-1a 64 ([`rover_replay::Digest`]) over, in this order:
+//!
+//! 1. the frame's tick;
+//! 2. selected public flight state from [`Fsw::state`] ([`digest_frame`]);
+//! 3. every mobility output the flight code issued in the frame, in call order (the bit
+//!    patterns of each [`rover_hal::MobilityCommand`], or a stop marker);
+//! 4. every telemetry record it sent, in call order;
+//! 5. the count of outputs that did not fit in [`FrameOutputs`].
+//!
+//! **Timing-derived data is excluded**: the execution counter is not replayed (on the rover CPU
+//! it is SysTick, on the host it is zero), so the executive's cycle-slip count and timing-fault
+//! flag legitimately differ. They are left out of the flight state (`exec_status`) and out of
+//! [`fsw::telemetry::FrameStatus`] records (`cycle_slips`, `timing_fault`); every other field is
+//! digested.
+//!
+//! To digest more flight state (the navigation state being added to [`FlightState`]), add one
+//! line to [`digest_frame`]: for example `h.f64s(state.ekf_covariance.as_slice());`.
+
+use core::fmt::Write;
+use fsw::exec::{ExecConfig, ExecError};
+use fsw::flight::{Devices, FlightState, Fsw, Platform};
+use fsw::telemetry::{DeviceHealth, FrameStatus, RecordKind};
+use rover_replay::tape::{ByteSource, FrameMark, TapeReader, MAX_WAYPOINTS};
+use rover_replay::{Digest, Divergence, FrameOutputs, MobilityOutput, TapeError, TapeHandle};
+
+/// What the flight software is built with apart from its devices: the path and the start pose
+/// (from the scenario for a replay, defaults for the rover standing still).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlightSetup {
+    /// Path waypoints (north, east), m; the first `waypoint_count` are used.
+    pub waypoints: [[f64; 2]; MAX_WAYPOINTS],
+    /// Number of waypoints.
+    pub waypoint_count: usize,
+    /// Start pose: north, east, down (m), roll, pitch, yaw (rad).
+    pub start_pose: [f64; 6],
+}
+
+impl FlightSetup {
+    /// A rover standing still at the origin with no path.
+    pub const fn still() -> Self {
+        Self {
+            waypoints: [[0.0; 2]; MAX_WAYPOINTS],
+            waypoint_count: 0,
+            start_pose: [0.0; 6],
+        }
+    }
+
+    /// The setup recorded in a tape's header.
+    pub fn from_header(header: &rover_replay::TapeHeader) -> Self {
+        Self {
+            waypoints: header.waypoints,
+            waypoint_count: usize::from(header.waypoint_count).min(MAX_WAYPOINTS),
+            start_pose: header.start_pose,
+        }
+    }
+}
+
+/// Build the flight software around `devices`: the one place the rover-CPU image and the host
+/// replay construct it (adapt here when the constructor changes).
+pub fn build_fsw<P: Platform>(
+    devices: Devices<P>,
+    setup: &FlightSetup,
+) -> Result<Fsw<P>, ExecError> {
+    // The flight software does not take a path or start pose yet (issue 7 adds them).
+    let _ = setup;
+    Fsw::new(devices, ExecConfig::default())
+}
+
+/// Selected public flight state and the frame's outputs, into `h` (see the module doc).
+/// Timing-derived state (`exec_status`) is excluded.
+pub fn digest_frame(h: &mut Digest, state: &FlightState, outputs: &FrameOutputs) {
+    h.put(&state.imu)
+        .put(&state.joints)
+        .put(&state.sun)
+        .put(&state.capture_pending_t_us)
+        .put(&state.last_capture_t_us);
+    for d in &state.health {
+        digest_health(h, d);
+    }
+    h.u32(state.stereo_frames).u32(state.telemetry_dropped);
+    for m in outputs.mobility() {
+        match m {
+            MobilityOutput::Command(c) => h.u8(1).put(c),
+            MobilityOutput::Stop => h.u8(2),
+        };
+    }
+    for record in outputs.telemetry() {
+        digest_telemetry(h, record);
+    }
+    h.u32(outputs.dropped());
+}
+
+/// Digest of frame `tick`: the tick, then [`digest_frame`].
+pub fn frame_digest(tick: u64, state: &FlightState, outputs: &FrameOutputs) -> u64 {
+    let mut h = Digest::new();
+    h.u64(tick);
+    digest_frame(&mut h, state, outputs);
+    h.value()
+}
+
+fn digest_health(h: &mut Digest, d: &DeviceHealth) {
+    h.u32(d.good)
+        .u32(d.errors)
+        .u32(d.stale)
+        .u32(d.time_backwards)
+        .u32(d.invalid);
+}
+
+/// A telemetry record: [`FrameStatus`] without its timing-derived fields (`cycle_slips`,
+/// `timing_fault`); any other record (or one that does not decode) byte for byte.
+fn digest_telemetry(h: &mut Digest, record: &[u8]) {
+    let status = match record.split_first() {
+        Some((tag, body)) if *tag == RecordKind::FrameStatus as u8 => {
+            postcard::from_bytes::<FrameStatus>(body).ok()
+        }
+        _ => None,
+    };
+    match status {
+        Some(s) => {
+            h.u8(RecordKind::FrameStatus as u8).u64(s.tick);
+            for d in &s.health {
+                digest_health(h, d);
+            }
+            h.u32(s.stereo_frames).u32(s.telemetry_dropped);
+        }
+        None => {
+            h.u8(0xFF).u32(record.len() as u32).bytes(record);
+        }
+    }
+}
+
+/// Frames between two progress lines of [`Replay`].
+pub const REPORT_EVERY: u64 = 200;
+
+/// Outcome of one replayed frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameCheck {
+    /// Tick of the frame (from the tape).
+    pub tick: u64,
+    /// Digest of the replayed frame.
+    pub digest: u64,
+    /// Digest the recording run computed.
+    pub recorded: u64,
+}
+
+/// The replay driver shared by the host and the rover CPU: loads a frame's calls into the
+/// player before the caller ticks the flight software, then checks the frame.
+///
+/// Use: `while replay.load(&tape)? { fsw.tick(); replay.finish(&tape, &fsw, out)?; }` then
+/// [`Replay::summary`].
+#[derive(Debug)]
+pub struct Replay<S: ByteSource> {
+    reader: TapeReader<S>,
+    pending: Option<(u64, u64)>,
+    frames: u64,
+    mismatches: u64,
+    first_mismatch: Option<u64>,
+    running: Digest,
+    divergence: Option<Divergence>,
+}
+
+impl<S: ByteSource> Replay<S> {
+    /// A replay of the tape in `source` (its header is read).
+    pub fn open(source: S) -> Result<Self, TapeError> {
+        Ok(Self {
+            reader: TapeReader::open(source)?,
+            pending: None,
+            frames: 0,
+            mismatches: 0,
+            first_mismatch: None,
+            running: Digest::new(),
+            divergence: None,
+        })
+    }
+
+    /// The tape's header.
+    pub fn header(&self) -> &rover_replay::TapeHeader {
+        self.reader.header()
+    }
+
+    /// Queue the next frame's calls in the player. `Ok(false)` at the end of the tape or after
+    /// a divergence.
+    pub fn load<H: TapeHandle>(&mut self, tape: &H) -> Result<bool, TapeError> {
+        if self.divergence.is_some() {
+            return Ok(false);
+        }
+        let reader = &mut self.reader;
+        let mark = tape
+            .with(|p| {
+                p.begin_frame();
+                reader.load_frame(p)
+            })
+            .ok_or(TapeError::Io)??;
+        match mark {
+            FrameMark::Frame { tick, digest } => {
+                self.pending = Some((tick, digest));
+                Ok(true)
+            }
+            FrameMark::End => Ok(false),
+        }
+    }
+
+    /// After the tick: end the frame in the player, digest the flight software's state and
+    /// outputs, compare with the recording and write a progress line every
+    /// [`REPORT_EVERY`] frames.
+    pub fn finish<P: Platform, H: TapeHandle, W: Write>(
+        &mut self,
+        tape: &H,
+        fsw: &Fsw<P>,
+        out: &mut W,
+    ) -> Result<FrameCheck, Divergence> {
+        let (tick, recorded) = self.pending.take().unwrap_or((self.frames, 0));
+        let result = tape
+            .with(|p| {
+                p.end_frame()?;
+                Ok(frame_digest(tick, fsw.state(), p.outputs()))
+            })
+            .unwrap_or(Err(Divergence::Tape(TapeError::Io)));
+        let digest = match result {
+            Ok(d) => d,
+            Err(d) => {
+                self.divergence = Some(d);
+                return Err(d);
+            }
+        };
+        self.frames += 1;
+        self.running.u64(digest);
+        if digest != recorded {
+            self.mismatches += 1;
+            self.first_mismatch.get_or_insert(tick);
+        }
+        if self.frames % REPORT_EVERY == 0 {
+            let _ = writeln!(
+                out,
+                "replay frame {tick} digest {digest:016x} running {:016x}",
+                self.running.value()
+            );
+        }
+        Ok(FrameCheck {
+            tick,
+            digest,
+            recorded,
+        })
+    }
+
+    /// Frames replayed.
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// Frames whose digest differed from the recording.
+    pub fn mismatches(&self) -> u64 {
+        self.mismatches
+    }
+
+    /// The running digest (over every frame's digest).
+    pub fn running(&self) -> u64 {
+        self.running.value()
+    }
+
+    /// The divergence that stopped the replay, if any.
+    pub fn divergence(&self) -> Option<Divergence> {
+        self.divergence
+    }
+
+    /// True when every frame matched and nothing diverged.
+    pub fn passed(&self) -> bool {
+        self.divergence.is_none() && self.mismatches == 0 && self.frames > 0
+    }
+
+    /// Write the final line: frames, mismatches, running digest, divergence.
+    pub fn summary<W: Write>(&self, out: &mut W) {
+        let _ = write!(
+            out,
+            "replay end frames {} mismatches {} running {:016x} first_mismatch ",
+            self.frames,
+            self.mismatches,
+            self.running.value()
+        );
+        let _ = match self.first_mismatch {
+            Some(t) => write!(out, "{t}"),
+            None => write!(out, "none"),
+        };
+        let _ = match self.divergence {
+            Some(d) => writeln!(out, " divergence {d:?}"),
+            None => writeln!(out, " divergence none"),
+        };
+    }
+}
