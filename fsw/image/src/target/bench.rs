@@ -63,6 +63,21 @@ struct VoSummary {
     work_items_max: u32,
 }
 
+/// The EKF's static (its symbol names it in the memory map).
+fn ekf_static(ekf: Ekf) -> Option<&'static mut Ekf> {
+    super::take_static!(Ekf, ekf)
+}
+
+/// The visual odometry's static.
+fn vo_static(vo: VisualOdometry<VO_FEATURES>) -> Option<&'static mut VisualOdometry<VO_FEATURES>> {
+    super::take_static!(VisualOdometry<VO_FEATURES>, vo)
+}
+
+/// The bench's own static.
+fn bench_static(bench: Bench) -> Option<&'static mut Bench> {
+    super::take_static!(Bench, bench)
+}
+
 /// The navigation state and the measurements.
 pub struct Bench {
     ekf: &'static mut Ekf,
@@ -95,10 +110,10 @@ impl Bench {
         start.q_nr = Quat::from_euler_angles(roll, pitch, yaw);
         let p0 = CoreCov::identity() * 1e-4;
         let ekf = Ekf::new(EkfConfig::default(), start, &p0).ok()?;
-        let ekf = super::take_static!(Ekf, ekf)?;
+        let ekf = ekf_static(ekf)?;
         let vo =
             VisualOdometry::<VO_FEATURES>::new(VoConfig::default(), &header.calibration).ok()?;
-        let vo = super::take_static!(VisualOdometry<VO_FEATURES>, vo)?;
+        let vo = vo_static(vo)?;
         let contacts = wheel_contact_points(&ROCKY8, &SuspensionState::default()).ok()?;
         let wheel_xy = contacts.map(|c| [c.x, c.y]);
         let path = Path::new(header.waypoints()).ok()?;
@@ -123,7 +138,7 @@ impl Bench {
                 ..VoSummary::default()
             },
         };
-        super::take_static!(Bench, bench)
+        bench_static(bench)
     }
 
     /// Go through the tape's records and measure the tasks on them.

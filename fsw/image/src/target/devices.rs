@@ -10,7 +10,7 @@
 
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
-use cortex_m::peripheral::SYST;
+use cortex_m::peripheral::{SCB, SYST};
 use rover_hal::{
     CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
     StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
@@ -255,15 +255,21 @@ impl Clock for SystickClock {
         Ok(frame_time_us(self.ticks))
     }
     fn counter(&mut self) -> Result<u64, ErrorKind> {
-        // Read the interrupt count on both sides of the SysTick value so a wrap in between is
-        // seen; retry a bounded number of times.
+        // The SysTick value counts down and reloads at zero, where the interrupt becomes
+        // pending; the handler may run a few instructions later. Read the interrupt count on
+        // both sides and the value twice: without a reload between the two value reads, a
+        // pending SysTick means the reload happened before them and its tick is not counted
+        // yet. Retry a bounded number of times.
         for _ in 0..4 {
             let before = self.ticks.load(Ordering::Relaxed);
+            let first = SYST::get_current();
+            let pending = SCB::is_pendst_pending();
             let current = SYST::get_current();
             let after = self.ticks.load(Ordering::Relaxed);
-            if before == after {
+            if before == after && current <= first {
+                let ticks = u64::from(before) + u64::from(pending);
                 let into_frame = u64::from(self.reload.saturating_sub(current));
-                return Ok(u64::from(before) * u64::from(self.reload) + into_frame);
+                return Ok(ticks * u64::from(self.reload) + into_frame);
             }
         }
         Err(ErrorKind::Busy)
