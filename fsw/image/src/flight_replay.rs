@@ -291,3 +291,70 @@ impl<S: ByteSource> Replay<S> {
         };
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fsw::telemetry::{encode, MAX_RECORD_BYTES};
+    use rover_hal::MobilityCommand;
+
+    fn status_record(
+        cycle_slips: u64,
+        timing_fault: bool,
+        tick: u64,
+    ) -> ([u8; MAX_RECORD_BYTES], usize) {
+        let status = FrameStatus {
+            tick,
+            cycle_slips,
+            timing_fault,
+            ..FrameStatus::default()
+        };
+        let mut buf = [0u8; MAX_RECORD_BYTES];
+        let n = match encode(RecordKind::FrameStatus, &status, &mut buf) {
+            Ok(b) => b.len(),
+            Err(e) => panic!("{e:?}"),
+        };
+        (buf, n)
+    }
+
+    fn digest(state: &FlightState, outputs: &FrameOutputs) -> u64 {
+        frame_digest(7, state, outputs)
+    }
+
+    #[test]
+    fn timing_derived_data_is_excluded_and_the_rest_counts() {
+        let state = FlightState::default();
+        let mut slipped = state.clone();
+        slipped.exec_status = (12, true);
+        let outputs = FrameOutputs::new();
+        assert_eq!(digest(&state, &outputs), digest(&slipped, &outputs));
+
+        let (a, n) = status_record(0, false, 3);
+        let (b, m) = status_record(99, true, 3);
+        let (c, k) = status_record(0, false, 4);
+        let mut oa = FrameOutputs::new();
+        oa.push_telemetry(&a[..n]);
+        let mut ob = FrameOutputs::new();
+        ob.push_telemetry(&b[..m]);
+        let mut oc = FrameOutputs::new();
+        oc.push_telemetry(&c[..k]);
+        assert_eq!(digest(&state, &oa), digest(&state, &ob));
+        assert_ne!(digest(&state, &oa), digest(&state, &oc));
+
+        let mut moved = state.clone();
+        moved.stereo_frames = 1;
+        assert_ne!(digest(&state, &outputs), digest(&moved, &outputs));
+        let mut commanded = FrameOutputs::new();
+        commanded.push_mobility(MobilityOutput::Command(MobilityCommand {
+            steer_angle_rad: [-0.0; 6],
+            ..MobilityCommand::default()
+        }));
+        let mut commanded_zero = FrameOutputs::new();
+        commanded_zero.push_mobility(MobilityOutput::Command(MobilityCommand::default()));
+        assert_ne!(digest(&state, &commanded), digest(&state, &commanded_zero));
+        assert_ne!(
+            frame_digest(1, &state, &outputs),
+            frame_digest(2, &state, &outputs)
+        );
+    }
+}
