@@ -15,13 +15,18 @@
 //! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
 //! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
 //! - [`devices`], [`run`]: the standing-still devices of the `still` command.
+//! - [`record`], [`replay`]: call tapes of the HAL inputs (`record`) and their replay through
+//!   the flight software with per-frame output digests (`replay`), for bit-identical
+//!   host/target comparison (`docs/timing.md`).
 
 pub mod camera;
 pub mod devices;
 pub mod driver;
 pub mod hal_devices;
 pub mod output;
+pub mod record;
 pub mod render;
+pub mod replay;
 pub mod report;
 pub mod run;
 pub mod scenario;

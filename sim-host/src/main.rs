@@ -79,6 +79,84 @@ enum Command {
         #[arg(long)]
         no_render: bool,
     },
+    /// Record the HAL call tape of a scenario segment (with rendered stereo images) for replay
+    /// on the host or the rover CPU (docs/timing.md).
+    Record {
+        /// Scenario file (TOML).
+        scenario: PathBuf,
+        /// Simulated seconds to record.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        /// Seed (default: the scenario's).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Tape file to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Uniform grey images instead of rendered ones.
+        #[arg(long)]
+        no_render: bool,
+    },
+    /// Replay a call tape through the flight software and print per-frame digest lines;
+    /// fails unless every frame matches the recording.
+    Replay {
+        /// Tape file written by `record`.
+        tape: PathBuf,
+        /// Also write the digest of every frame, one hex value per line, to this file.
+        #[arg(long)]
+        digests: Option<PathBuf>,
+    },
+}
+
+fn record(
+    path: PathBuf,
+    seconds: f64,
+    seed: Option<u64>,
+    out: PathBuf,
+    no_render: bool,
+) -> anyhow::Result<()> {
+    let scenario = Scenario::load(&path)?;
+    let start = std::time::Instant::now();
+    let recording = sim_host::record::record(
+        &scenario,
+        sim_host::record::RecordOptions {
+            seconds,
+            seed,
+            render: !no_render,
+        },
+    )?;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(&out, &recording.tape)?;
+    println!(
+        "sim-host record {}: {} frames, {} stereo pairs, {} bytes in {} ({:.1} s)",
+        scenario.name,
+        recording.digests.len(),
+        recording.image_pairs,
+        recording.tape.len(),
+        out.display(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn replay(path: PathBuf, digests: Option<PathBuf>) -> anyhow::Result<()> {
+    let tape = std::fs::read(&path)?;
+    let outcome = sim_host::replay::replay(&tape)?;
+    print!("{}", outcome.text);
+    if let Some(file) = digests {
+        let lines: String = outcome
+            .digests
+            .iter()
+            .map(|d| format!("{d:016x}\n"))
+            .collect();
+        std::fs::write(file, lines)?;
+    }
+    if !outcome.passed() {
+        anyhow::bail!("the replay does not reproduce the recording");
+    }
+    Ok(())
 }
 
 fn still(frames: u64) -> anyhow::Result<()> {
@@ -436,5 +514,13 @@ fn main() -> anyhow::Result<()> {
             quiet: false,
         })
         .map(|_| ()),
+        Some(Command::Record {
+            scenario,
+            seconds,
+            seed,
+            out,
+            no_render,
+        }) => record(scenario, seconds, seed, out, no_render),
+        Some(Command::Replay { tape, digests }) => replay(tape, digests),
     }
 }

@@ -196,8 +196,39 @@ pub struct RunResult {
     pub wall_time_s: f64,
 }
 
+/// Hooks into a run (used by `record`): wrap the simulated devices before the flight software
+/// is built, and look at the flight software after every frame.
+pub trait RunHooks {
+    /// Device types after wrapping.
+    type Platform: Platform;
+    /// Wrap the simulated devices.
+    fn wrap(&mut self, devices: Devices<WorldPlatform>) -> Devices<Self::Platform>;
+    /// Called after every `Fsw::tick`.
+    fn after_tick(&mut self, fsw: &Fsw<Self::Platform>);
+}
+
+/// No hooks: the simulated devices as they are.
+pub struct NoHooks;
+
+impl RunHooks for NoHooks {
+    type Platform = WorldPlatform;
+    fn wrap(&mut self, devices: Devices<WorldPlatform>) -> Devices<WorldPlatform> {
+        devices
+    }
+    fn after_tick(&mut self, _fsw: &Fsw<WorldPlatform>) {}
+}
+
 /// Run `scenario` with `options`.
-pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunResult> {
+pub fn run(scenario: &Scenario, options: RunOptions) -> anyhow::Result<RunResult> {
+    run_with(scenario, options, &mut NoHooks)
+}
+
+/// Run `scenario` with `options` and `hooks`.
+pub fn run_with<H: RunHooks>(
+    scenario: &Scenario,
+    mut options: RunOptions,
+    hooks: &mut H,
+) -> anyhow::Result<RunResult> {
     let start = std::time::Instant::now();
     let seed = options.seed.unwrap_or(scenario.seed);
     let world: SharedWorld = Rc::new(RefCell::new(World::new(scenario, seed)?));
@@ -219,7 +250,7 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
         telemetry: CountingTelemetry::default(),
     };
     let config = flight_config(scenario, &world.borrow(), !options.no_slip_comp);
-    let mut fsw = Fsw::new(devices, &config, &scenario.waypoints)
+    let mut fsw = Fsw::new(hooks.wrap(devices), &config, &scenario.waypoints)
         .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
     let mut source = if options.reference_driver {
         let mode = if options.no_slip_comp {
@@ -261,6 +292,7 @@ pub fn run(scenario: &Scenario, mut options: RunOptions) -> anyhow::Result<RunRe
             }
         }
         fsw.tick();
+        hooks.after_tick(&fsw);
         let nav = fsw.nav();
         if nav.counters().vo_updates > vo_seen {
             vo_seen = nav.counters().vo_updates;
@@ -411,7 +443,7 @@ fn quat_xyzw(q: &fsw::types::Quat) -> [f64; 4] {
     [q.i, q.j, q.k, q.w]
 }
 
-fn estimates(fsw: &Fsw<WorldPlatform>) -> Option<Estimates> {
+fn estimates<P: Platform>(fsw: &Fsw<P>) -> Option<Estimates> {
     let nav = fsw.nav();
     let ekf = nav.ekf()?;
     let x = ekf.state();
@@ -438,7 +470,7 @@ fn estimates(fsw: &Fsw<WorldPlatform>) -> Option<Estimates> {
     })
 }
 
-fn record(w: &World, path: &[[f64; 2]], fsw: &Fsw<WorldPlatform>) -> Record {
+fn record<P: Platform>(w: &World, path: &[[f64; 2]], fsw: &Fsw<P>) -> Record {
     let t = &w.truth;
     let q = nalgebra::UnitQuaternion::from_rotation_matrix(&t.pose.rot_w_from_r());
     let (_, cross) = closest_arc(path, [t.pose.pos_m[0], t.pose.pos_m[1]]);

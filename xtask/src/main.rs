@@ -6,6 +6,12 @@
 //! - `cargo xtask setup`: only the setup (adds `thumbv7em-none-eabihf`, installs
 //!   `qemu-system-arm` when missing).
 //! - `cargo xtask qemu`: build the rover-CPU image and run it in QEMU `mps2-an500`.
+//! - `cargo xtask timing`: timing analysis on the rover CPU model (instruction counts per task,
+//!   utilisation, response times, stack, memory, panic sites) and the bit-identical host/target
+//!   replay check; writes `docs/timing.md`. Also the last step of `test`.
+
+mod elf;
+mod timing;
 
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
@@ -30,11 +36,16 @@ fn main() -> Result<()> {
             setup()?;
             qemu_run().map(|_| ())
         }
+        Some("timing") => {
+            setup()?;
+            timing::timing()
+        }
         _ => {
-            eprintln!("usage: cargo xtask <test|setup|qemu>");
+            eprintln!("usage: cargo xtask <test|setup|qemu|timing>");
             eprintln!("  test   everything CI checks (does its own setup first)");
             eprintln!("  setup  add the {TARGET} target and install qemu-system-arm if missing");
             eprintln!("  qemu   build the rover-CPU image and run it in QEMU {QEMU_MACHINE}");
+            eprintln!("  timing timing analysis on the rover CPU model, writes docs/timing.md");
             bail!("unknown or missing command")
         }
     }
@@ -156,6 +167,8 @@ fn test() -> Result<()> {
         "fsw",
         "-p",
         "fsw-image",
+        "-p",
+        "rover-replay",
         "--",
         "-D",
         "warnings",
@@ -176,11 +189,17 @@ fn test() -> Result<()> {
         "fsw",
         "-p",
         "rover-hal",
+        "-p",
+        "rover-replay",
     ]))?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
 
     let t = step("rover-CPU image in QEMU");
     qemu_run()?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("timing analysis on the rover CPU model (docs/timing.md)");
+    timing::timing()?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
 
     println!(
@@ -201,10 +220,7 @@ fn qemu_run() -> Result<String> {
         "-p",
         "fsw-image",
     ]))?;
-    let image = Path::new("target")
-        .join(TARGET)
-        .join(FLIGHT_PROFILE)
-        .join("fsw-image");
+    let image = image_path();
     let output = Command::new("timeout")
         .arg("600")
         .arg("qemu-system-arm")
@@ -221,6 +237,14 @@ fn qemu_run() -> Result<String> {
         bail!("the rover-CPU image did not report PASS");
     }
     Ok(text)
+}
+
+/// The rover-CPU image built by `cargo build --profile flight --target thumbv7em-none-eabihf`.
+fn image_path() -> PathBuf {
+    Path::new("target")
+        .join(TARGET)
+        .join(FLIGHT_PROFILE)
+        .join("fsw-image")
 }
 
 /// QEMU arguments: the rover CPU model, semihosting for output and exit code, and `-icount`

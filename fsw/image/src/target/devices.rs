@@ -1,16 +1,26 @@
 //! Rover-CPU devices behind the HAL traits (HAL glue; the only `unsafe` of the project is here).
 //!
-//! The clock is SysTick. The sensors are those of a rover at rest on level ground, the same
-//! situation as the host simulator's first scenario, so both implementations of the HAL can be
-//! compared. The stereo buffers live in the external RAM region (`.extram` in `memory.x`).
+//! The clock is SysTick. Two sets of sensors: those of a rover at rest on level ground (the
+//! `still` run, the same situation as the host simulator's first scenario, so both
+//! implementations of the HAL can be compared), and the replay devices of `rover_replay` that
+//! return a recorded call tape read from the host by semihosting (the `timing` run). One
+//! [`TargetPlatform`] holds either set (enum dispatch), so the image has one flight-software
+//! type and one static instance of it. The stereo buffers live in the external RAM region
+//! (`.extram` in `memory.x`).
 
-use core::sync::atomic::{AtomicU32, Ordering};
-use cortex_m::peripheral::SYST;
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use cortex_m::peripheral::{SCB, SYST};
 use rover_hal::{
     CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
     StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
 };
+use rover_replay::devices::{
+    ReplayClock, ReplayImu, ReplayMobility, ReplayStereo, ReplaySun, ReplayTelemetry,
+};
+use rover_replay::Player;
 
+use super::semihost::HostFile;
 use super::CORE_CLOCK_HZ;
 
 /// Mars gravity, m/s^2.
@@ -22,12 +32,201 @@ const FRAME_US: u64 = 5_000;
 pub struct TargetPlatform;
 
 impl fsw::flight::Platform for TargetPlatform {
-    type Clock = SystickClock;
-    type Imu = StillImu;
-    type Mobility = StillMobility;
-    type Camera = ExtramStereo;
-    type Sun = FixedSun;
-    type Telemetry = CountingTelemetry;
+    type Clock = TargetClock;
+    type Imu = TargetImu;
+    type Mobility = TargetMobility;
+    type Camera = TargetCamera;
+    type Sun = TargetSun;
+    type Telemetry = TargetTelemetry;
+}
+
+/// The replay state shared by the replay devices.
+pub type Tape = &'static RefCell<Player>;
+
+/// One image buffer in external RAM.
+pub type ImageBuffer = [u8; IMAGE_PIXELS];
+
+/// Number of image buffers in external RAM: two pairs for the replay camera, one pair for the
+/// visual-odometry measurement.
+pub const IMAGE_BUFFERS: usize = 6;
+
+/// Stereo image buffers, in external RAM.
+#[link_section = ".extram"]
+static mut IMAGES: [ImageBuffer; IMAGE_BUFFERS] = [[0; IMAGE_PIXELS]; IMAGE_BUFFERS];
+static IMAGES_TAKEN: AtomicBool = AtomicBool::new(false);
+
+/// The external-RAM image buffers (once; `None` afterwards). The region is NOLOAD: the buffers
+/// hold garbage until written.
+pub fn take_image_buffers() -> Option<&'static mut [ImageBuffer; IMAGE_BUFFERS]> {
+    if IMAGES_TAKEN.swap(true, Ordering::AcqRel) {
+        return None;
+    }
+    // SAFETY: the flag above makes this the only reference ever made to IMAGES.
+    Some(unsafe { &mut *core::ptr::addr_of_mut!(IMAGES) })
+}
+
+/// The replay player, in `.bss` (once; `None` afterwards). Only shared references to it are
+/// handed out; its `RefCell` serialises mutation.
+pub fn player() -> Option<Tape> {
+    let player: &'static mut RefCell<Player> =
+        super::take_static!(RefCell<Player>, RefCell::new(Player::new()))?;
+    Some(player)
+}
+
+/// Clock: SysTick alone (still run) or the tape's `now_us` with the SysTick counter (replay).
+pub enum TargetClock {
+    /// Still run.
+    Systick(SystickClock),
+    /// Replay.
+    Replay(ReplayClock<Tape, SystickClock>),
+}
+
+/// IMU.
+pub enum TargetImu {
+    /// Still run.
+    Still(StillImu),
+    /// Replay.
+    Replay(ReplayImu<Tape>),
+}
+
+/// Mobility.
+pub enum TargetMobility {
+    /// Still run.
+    Still(StillMobility),
+    /// Replay.
+    Replay(ReplayMobility<Tape>),
+}
+
+/// Stereo camera.
+pub enum TargetCamera {
+    /// Still run: a fixed test pattern.
+    Still(ExtramStereo),
+    /// Replay: pairs read from the tape into external RAM.
+    Replay(ReplayStereo<Tape, HostFile, &'static mut [u8]>),
+}
+
+/// Sun sensor.
+pub enum TargetSun {
+    /// Still run.
+    Still(FixedSun),
+    /// Replay.
+    Replay(ReplaySun<Tape>),
+}
+
+/// Telemetry sink.
+pub enum TargetTelemetry {
+    /// Still run: counts records.
+    Counting(CountingTelemetry),
+    /// Replay: results from the tape.
+    Replay(ReplayTelemetry<Tape>),
+}
+
+impl Clock for TargetClock {
+    type Error = ErrorKind;
+    fn now_us(&mut self) -> Result<u64, ErrorKind> {
+        match self {
+            Self::Systick(d) => d.now_us(),
+            Self::Replay(d) => d.now_us(),
+        }
+    }
+    fn counter(&mut self) -> Result<u64, ErrorKind> {
+        match self {
+            Self::Systick(d) => d.counter(),
+            Self::Replay(d) => d.counter(),
+        }
+    }
+    fn counter_hz(&self) -> u64 {
+        match self {
+            Self::Systick(d) => d.counter_hz(),
+            Self::Replay(d) => d.counter_hz(),
+        }
+    }
+}
+
+impl Imu for TargetImu {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<ImuSample, ErrorKind> {
+        match self {
+            Self::Still(d) => d.read(),
+            Self::Replay(d) => d.read(),
+        }
+    }
+}
+
+impl Mobility for TargetMobility {
+    type Error = ErrorKind;
+    fn read_joints(&mut self) -> Result<JointState, ErrorKind> {
+        match self {
+            Self::Still(d) => d.read_joints(),
+            Self::Replay(d) => d.read_joints(),
+        }
+    }
+    fn command(&mut self, command: &MobilityCommand) -> Result<(), ErrorKind> {
+        match self {
+            Self::Still(d) => d.command(command),
+            Self::Replay(d) => d.command(command),
+        }
+    }
+    fn stop(&mut self) -> Result<(), ErrorKind> {
+        match self {
+            Self::Still(d) => d.stop(),
+            Self::Replay(d) => d.stop(),
+        }
+    }
+}
+
+impl StereoCamera for TargetCamera {
+    type Error = ErrorKind;
+    fn calibration(&self) -> StereoCalibration {
+        match self {
+            Self::Still(d) => d.calibration(),
+            Self::Replay(d) => d.calibration(),
+        }
+    }
+    fn trigger(&mut self) -> Result<u64, ErrorKind> {
+        match self {
+            Self::Still(d) => d.trigger(),
+            Self::Replay(d) => d.trigger(),
+        }
+    }
+    fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
+        match self {
+            Self::Still(d) => d.poll(),
+            Self::Replay(d) => d.poll(),
+        }
+    }
+    fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
+        match self {
+            Self::Still(d) => d.frame(),
+            Self::Replay(d) => d.frame(),
+        }
+    }
+    fn release(&mut self) -> Result<(), ErrorKind> {
+        match self {
+            Self::Still(d) => d.release(),
+            Self::Replay(d) => d.release(),
+        }
+    }
+}
+
+impl SunSensor for TargetSun {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<SunReading, ErrorKind> {
+        match self {
+            Self::Still(d) => d.read(),
+            Self::Replay(d) => d.read(),
+        }
+    }
+}
+
+impl Telemetry for TargetTelemetry {
+    type Error = ErrorKind;
+    fn send(&mut self, record: &[u8]) -> Result<(), ErrorKind> {
+        match self {
+            Self::Counting(d) => d.send(record),
+            Self::Replay(d) => d.send(record),
+        }
+    }
 }
 
 fn frame_time_us(ticks: &AtomicU32) -> u64 {
@@ -37,6 +236,7 @@ fn frame_time_us(ticks: &AtomicU32) -> u64 {
 /// SysTick-based clock: time from the interrupt count, the execution counter from the interrupt
 /// count and the down-counting SysTick value (core clock cycles; instruction-driven in QEMU with
 /// `-icount`).
+#[derive(Clone, Copy)]
 pub struct SystickClock {
     reload: u32,
     ticks: &'static AtomicU32,
@@ -55,15 +255,21 @@ impl Clock for SystickClock {
         Ok(frame_time_us(self.ticks))
     }
     fn counter(&mut self) -> Result<u64, ErrorKind> {
-        // Read the interrupt count on both sides of the SysTick value so a wrap in between is
-        // seen; retry a bounded number of times.
+        // The SysTick value counts down and reloads at zero, where the interrupt becomes
+        // pending; the handler may run a few instructions later. Read the interrupt count on
+        // both sides and the value twice: without a reload between the two value reads, a
+        // pending SysTick means the reload happened before them and its tick is not counted
+        // yet. Retry a bounded number of times.
         for _ in 0..4 {
             let before = self.ticks.load(Ordering::Relaxed);
+            let first = SYST::get_current();
+            let pending = SCB::is_pendst_pending();
             let current = SYST::get_current();
             let after = self.ticks.load(Ordering::Relaxed);
-            if before == after {
+            if before == after && current <= first {
+                let ticks = u64::from(before) + u64::from(pending);
                 let into_frame = u64::from(self.reload.saturating_sub(current));
-                return Ok(u64::from(before) * u64::from(self.reload) + into_frame);
+                return Ok(ticks * u64::from(self.reload) + into_frame);
             }
         }
         Err(ErrorKind::Busy)
@@ -142,14 +348,10 @@ impl Mobility for StillMobility {
     }
 }
 
-/// Both stereo images, in external RAM.
-#[link_section = ".extram"]
-static mut STEREO_BUFFERS: [[u8; IMAGE_PIXELS]; 2] = [[0; IMAGE_PIXELS]; 2];
-
 /// Stereo pair whose images live in the `.extram` region; a capture completes one poll after
 /// its trigger.
 pub struct ExtramStereo {
-    buffers: &'static mut [[u8; IMAGE_PIXELS]; 2],
+    buffers: [&'static mut ImageBuffer; 2],
     ticks: &'static AtomicU32,
     pending: Option<u64>,
     ready: Option<u64>,
@@ -157,18 +359,17 @@ pub struct ExtramStereo {
 }
 
 impl ExtramStereo {
-    /// Take the external-RAM buffers (call once) and fill them with a test pattern.
-    pub fn take(ticks: &'static AtomicU32) -> Self {
-        // SAFETY: called once from `main` before interrupts use anything else; this is the only
-        // reference ever made to STEREO_BUFFERS. The region is NOLOAD, so it is written here
-        // before any read.
-        let buffers = unsafe { &mut *core::ptr::addr_of_mut!(STEREO_BUFFERS) };
-        for (i, px) in buffers[0].iter_mut().enumerate() {
+    /// A camera on two external-RAM buffers, filled here with a test pattern (the region is
+    /// NOLOAD, so it is written before any read).
+    pub fn new(buffers: [&'static mut ImageBuffer; 2], ticks: &'static AtomicU32) -> Self {
+        let [left, right] = buffers;
+        for (i, px) in left.iter_mut().enumerate() {
             *px = (i % 251) as u8;
         }
-        for (i, px) in buffers[1].iter_mut().enumerate() {
+        for (i, px) in right.iter_mut().enumerate() {
             *px = ((i + 3) % 251) as u8;
         }
+        let buffers = [left, right];
         Self {
             buffers,
             ticks,
@@ -217,8 +418,8 @@ impl StereoCamera for ExtramStereo {
     fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
         let t = self.ready.ok_or(ErrorKind::NotReady)?;
         Ok(StereoFrame {
-            left: &self.buffers[0],
-            right: &self.buffers[1],
+            left: &self.buffers[0][..],
+            right: &self.buffers[1][..],
             capture_t_us: t,
             sequence: self.sequence,
         })

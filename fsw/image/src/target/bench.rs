@@ -1,0 +1,367 @@
+//! The navigation tasks measured on the inputs of a recorded call tape.
+//!
+//! The flight software does not call its navigation modules from the executive yet (issue 7),
+//! so this runs them the way the flight loop will, on the tape's real inputs, and measures each
+//! call: every valid IMU sample is propagated by the EKF; every joint reading (RG2, 20 Hz) goes
+//! through forward kinematics, kinematic odometry, the Mahalanobis gate and the relative-pose
+//! update over the last RG2 interval (between two clones), guidance on the EKF pose and inverse
+//! kinematics of its command; every stereo pair goes through one full visual-odometry update
+//! (`VisualOdometry::<150>::run_to_completion`, images in `.extram`) and, when it gives a pose,
+//! the gate and update between the two capture clones. Updates are applied ungated so that
+//! every update is measured whole.
+
+use super::devices::ImageBuffer;
+use super::measure::{Meter, Stats};
+use super::report;
+use super::semihost::HostFile;
+use fsw::estimation::{CloneHandle, CoreCov, Ekf, EkfConfig, NominalState};
+use fsw::guidance::{Guidance, GuidanceConfig, Path, Pose2, SlipVector};
+use fsw::kinematics::{
+    forward_kinematics_from_joints, inverse_kinematics, wheel_contact_points, KinematicOdometry,
+    OdometryConfig, SuspensionRates, SuspensionState, VehicleCommand, ROCKY8,
+};
+use fsw::types::{Quat, Vec3};
+use fsw::vo::VisualOdometry;
+use rover_hal::{ImuSample, JointState, StereoFrame};
+use rover_replay::tape::{PayloadSource, TapeReader, MAX_WAYPOINTS};
+use rover_replay::{Call, FrameInfo, ImagesRef, Record, TapeError, TapeHeader};
+
+/// Feature capacity of the visual odometry.
+pub const VO_FEATURES: usize = 150;
+
+/// Names of the measured tasks, in report order.
+const TASKS: [&str; 9] = [
+    "ekf_propagate",
+    "ekf_gate_relative_pose",
+    "ekf_update_relative_pose",
+    "ekf_clone",
+    "forward_kinematics",
+    "kinematic_odometry",
+    "inverse_kinematics",
+    "guidance_step",
+    "vo_update",
+];
+const PROPAGATE: usize = 0;
+const GATE: usize = 1;
+const UPDATE: usize = 2;
+const CLONE: usize = 3;
+const FK: usize = 4;
+const ODOMETRY: usize = 5;
+const IK: usize = 6;
+const GUIDANCE: usize = 7;
+const VO: usize = 8;
+
+/// Visual-odometry outcomes over the tape.
+#[derive(Clone, Copy, Default)]
+struct VoSummary {
+    updates: u32,
+    poses: u32,
+    failures: u32,
+    inliers_min: u16,
+    inliers_max: u16,
+    features_max: u16,
+    work_items_max: u32,
+}
+
+/// The EKF's static (its symbol names it in the memory map).
+fn ekf_static(ekf: Ekf) -> Option<&'static mut Ekf> {
+    super::take_static!(Ekf, ekf)
+}
+
+/// The visual odometry's static.
+fn vo_static(vo: VisualOdometry<VO_FEATURES>) -> Option<&'static mut VisualOdometry<VO_FEATURES>> {
+    super::take_static!(VisualOdometry<VO_FEATURES>, vo)
+}
+
+/// The bench's own static.
+fn bench_static(bench: Bench) -> Option<&'static mut Bench> {
+    super::take_static!(Bench, bench)
+}
+
+/// The navigation state and the measurements.
+pub struct Bench {
+    ekf: &'static mut Ekf,
+    vo: &'static mut VisualOdometry<VO_FEATURES>,
+    guidance: Guidance<MAX_WAYPOINTS>,
+    images: [&'static mut ImageBuffer; 2],
+    loaded: Option<u32>,
+    kin: KinematicOdometry,
+    vo_prior: KinematicOdometry,
+    start: NominalState,
+    started: bool,
+    prev_joints: Option<JointState>,
+    kin_clone: Option<CloneHandle>,
+    capture: Option<CloneHandle>,
+    prev_capture: Option<CloneHandle>,
+    stats: [Stats; TASKS.len()],
+    vo_summary: VoSummary,
+}
+
+impl Bench {
+    /// Build the navigation state for the tape's scenario in static memory; `None` when a
+    /// module refuses its setup (or on a second call).
+    pub fn install(
+        header: &TapeHeader,
+        images: [&'static mut ImageBuffer; 2],
+    ) -> Option<&'static mut Self> {
+        let [n, e, d, roll, pitch, yaw] = header.start_pose;
+        let mut start = NominalState::at_rest(0);
+        start.p_n = Vec3::new(n, e, d);
+        start.q_nr = Quat::from_euler_angles(roll, pitch, yaw);
+        let p0 = CoreCov::identity() * 1e-4;
+        let ekf = Ekf::new(EkfConfig::default(), start, &p0).ok()?;
+        let ekf = ekf_static(ekf)?;
+        // The flight software's VO tuning (8 px tracking window with the EKF prior).
+        let vo_config = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0).vo;
+        let vo = VisualOdometry::<VO_FEATURES>::new(vo_config, &header.calibration).ok()?;
+        let vo = vo_static(vo)?;
+        let contacts = wheel_contact_points(&ROCKY8, &SuspensionState::default()).ok()?;
+        let wheel_xy = contacts.map(|c| [c.x, c.y]);
+        let path = Path::new(header.waypoints()).ok()?;
+        let guidance = Guidance::new(path, GuidanceConfig::rocky8(wheel_xy)).ok()?;
+        let bench = Self {
+            ekf,
+            vo,
+            guidance,
+            images,
+            loaded: None,
+            kin: KinematicOdometry::new(ROCKY8, OdometryConfig::default()),
+            vo_prior: KinematicOdometry::new(ROCKY8, OdometryConfig::default()),
+            start,
+            started: false,
+            prev_joints: None,
+            kin_clone: None,
+            capture: None,
+            prev_capture: None,
+            stats: [Stats::new(); TASKS.len()],
+            vo_summary: VoSummary {
+                inliers_min: u16::MAX,
+                ..VoSummary::default()
+            },
+        };
+        bench_static(bench)
+    }
+
+    /// Go through the tape's records and measure the tasks on them.
+    pub fn run(
+        &mut self,
+        meter: &mut Meter,
+        reader: &mut TapeReader<HostFile>,
+        mut payload: HostFile,
+    ) -> Result<(), TapeError> {
+        let records = (u64::from(reader.header().frames) + 1)
+            * (rover_replay::player::MAX_RECORDS_PER_FRAME as u64 + 1);
+        for _ in 0..records {
+            match reader.next_record()? {
+                Record::End => return Ok(()),
+                Record::Call(Call::ImuRead(Ok(s))) => self.imu(meter, &s),
+                Record::Call(Call::JointsRead(Ok(j))) => self.joints(meter, &j),
+                Record::Call(Call::CameraTrigger(Ok(t))) => self.trigger(meter, t),
+                Record::Images(i) => self.load(&mut payload, &i)?,
+                Record::Call(Call::CameraFrame(Ok(f))) => self.visual_odometry(meter, &f),
+                _ => {}
+            }
+        }
+        Err(TapeError::FrameTooLong)
+    }
+
+    /// The task statistics, by name.
+    pub fn tasks(&self) -> impl Iterator<Item = (&'static str, &Stats)> + '_ {
+        TASKS.iter().copied().zip(self.stats.iter())
+    }
+
+    /// Print the visual-odometry outcomes.
+    pub fn report_vo(&self) {
+        let v = &self.vo_summary;
+        report(format_args!(
+            "timing vo features {} updates {} poses {} failures {} inliers_min {} inliers_max {} features_max {} work_items_max {}\n",
+            VO_FEATURES,
+            v.updates,
+            v.poses,
+            v.failures,
+            if v.poses == 0 { 0 } else { v.inliers_min },
+            v.inliers_max,
+            v.features_max,
+            v.work_items_max
+        ));
+    }
+
+    fn add(&mut self, task: usize, insns: u64, ok: bool) {
+        if let Some(s) = self.stats.get_mut(task) {
+            s.add(insns, ok);
+        }
+    }
+
+    fn imu(&mut self, meter: &mut Meter, s: &ImuSample) {
+        if !s.valid {
+            return;
+        }
+        if !self.started {
+            let mut x0 = self.start;
+            x0.t_us = s.t_us;
+            let p0 = CoreCov::identity() * 1e-4;
+            self.started = self.ekf.reset(x0, &p0).is_ok();
+            return;
+        }
+        let ekf = &mut *self.ekf;
+        let (r, n) = meter.measure(|| ekf.propagate(s));
+        self.add(PROPAGATE, n, r.is_ok());
+    }
+
+    fn joints(&mut self, meter: &mut Meter, j: &JointState) {
+        if !self.started {
+            return;
+        }
+        // Forward kinematics with suspension rates from the last two readings.
+        if let Some(p) = self.prev_joints {
+            let dt = j.t_us.saturating_sub(p.t_us) as f64 * 1e-6;
+            if dt > 0.0 {
+                let rates = SuspensionRates {
+                    rocker_rad_s: (j.rocker_rad - p.rocker_rad) / dt,
+                    bogie_rad_s: [
+                        (j.bogie_rad[0] - p.bogie_rad[0]) / dt,
+                        (j.bogie_rad[1] - p.bogie_rad[1]) / dt,
+                    ],
+                };
+                let (r, n) = meter.measure(|| forward_kinematics_from_joints(&ROCKY8, j, &rates));
+                self.add(FK, n, r.is_ok());
+            }
+        }
+        self.prev_joints = Some(*j);
+
+        // Kinematic odometry over the RG2 interval, then gate and update between two clones.
+        let kin = &mut self.kin;
+        let (r, n) = meter.measure(|| kin.update(j));
+        if r.is_err() {
+            let _ = self.kin.start(j);
+        } else {
+            self.add(ODOMETRY, n, true);
+        }
+        if self.vo_prior.update(j).is_err() {
+            let _ = self.vo_prior.start(j);
+        }
+        if let Some(c0) = self.kin_clone.take() {
+            if let Ok(m) = self.kin.take() {
+                if m.t0_us == c0.t_us() {
+                    let ekf = &*self.ekf;
+                    let (r, n) = meter.measure(|| ekf.gate_relative_pose(&m));
+                    self.add(GATE, n, r.is_ok());
+                    let ekf = &mut *self.ekf;
+                    let (r, n) = meter.measure(|| ekf.update_relative_pose(&m, false));
+                    self.add(UPDATE, n, r.is_ok());
+                }
+            }
+            let _ = self.ekf.release(c0);
+        }
+        let ekf = &mut *self.ekf;
+        let (r, n) = meter.measure(|| ekf.clone_at(j.t_us));
+        self.add(CLONE, n, r.is_ok());
+        self.kin_clone = r.ok();
+
+        // Guidance on the EKF pose, inverse kinematics of its command.
+        let x = self.ekf.state();
+        let pose = Pose2 {
+            x_m: x.p_n.x,
+            y_m: x.p_n.y,
+            phi_rad: x.q_nr.euler_angles().2,
+        };
+        let guidance = &mut self.guidance;
+        let (r, n) = meter.measure(|| guidance.step(pose, SlipVector::default()));
+        self.add(GUIDANCE, n, r.is_ok());
+        let cmd = match r {
+            Ok(c) => VehicleCommand {
+                x_dot_m_s: c.x_dot_m_s,
+                y_dot_m_s: c.y_dot_m_s,
+                yaw_rate_rad_s: c.phi_dot_rad_s,
+            },
+            Err(_) => VehicleCommand {
+                x_dot_m_s: 0.05,
+                ..VehicleCommand::default()
+            },
+        };
+        let state = SuspensionState::from_joints(j);
+        let (r, n) = meter.measure(|| inverse_kinematics(&ROCKY8, &state, &cmd));
+        self.add(IK, n, r.is_ok());
+    }
+
+    fn trigger(&mut self, meter: &mut Meter, t_us: u64) {
+        if !self.started {
+            return;
+        }
+        if let Some(stale) = self.capture.take() {
+            let _ = self.ekf.release(stale);
+        }
+        let ekf = &mut *self.ekf;
+        let (r, n) = meter.measure(|| ekf.clone_at(t_us));
+        self.add(CLONE, n, r.is_ok());
+        self.capture = r.ok();
+    }
+
+    fn load(&mut self, payload: &mut HostFile, i: &ImagesRef) -> Result<(), TapeError> {
+        let [left, right] = &mut self.images;
+        let l = left
+            .get_mut(..i.left_len as usize)
+            .ok_or(TapeError::BufferTooSmall)?;
+        payload.read_at(i.offset, l)?;
+        let r = right
+            .get_mut(..i.right_len as usize)
+            .ok_or(TapeError::BufferTooSmall)?;
+        payload.read_at(i.offset + u64::from(i.left_len), r)?;
+        self.loaded = Some(i.id);
+        Ok(())
+    }
+
+    fn visual_odometry(&mut self, meter: &mut Meter, f: &FrameInfo) {
+        if self.loaded != Some(f.images) {
+            return;
+        }
+        let [left, right] = &self.images;
+        let (Some(left), Some(right)) = (
+            left.get(..f.left_len as usize),
+            right.get(..f.right_len as usize),
+        ) else {
+            return;
+        };
+        let frame = StereoFrame {
+            left,
+            right,
+            capture_t_us: f.capture_t_us,
+            sequence: f.sequence,
+        };
+        let prior = self.vo_prior.take().ok();
+        let vo = &mut *self.vo;
+        let (r, n) = meter.measure(|| vo.run_to_completion(&frame, prior.as_ref()));
+        self.add(VO, n, r.is_ok());
+        let v = &mut self.vo_summary;
+        v.updates += 1;
+        match &r {
+            Ok(out) => {
+                v.features_max = v.features_max.max(out.quality.features);
+                v.work_items_max = v.work_items_max.max(out.quality.work_items);
+                if out.pose.is_some() {
+                    v.poses += 1;
+                    v.inliers_min = v.inliers_min.min(out.quality.inliers);
+                    v.inliers_max = v.inliers_max.max(out.quality.inliers);
+                }
+            }
+            Err(_) => v.failures += 1,
+        }
+        // The VO pose between the previous and this capture, applied between their clones.
+        let pose = r.ok().and_then(|o| o.pose);
+        let capture = self.capture.take();
+        if let (Some(m), Some(c0), Some(c1)) = (pose, self.prev_capture, capture) {
+            if m.t0_us == c0.t_us() && m.t1_us == c1.t_us() {
+                let ekf = &*self.ekf;
+                let (r, n) = meter.measure(|| ekf.gate_relative_pose(&m));
+                self.add(GATE, n, r.is_ok());
+                let ekf = &mut *self.ekf;
+                let (r, n) = meter.measure(|| ekf.update_relative_pose(&m, false));
+                self.add(UPDATE, n, r.is_ok());
+            }
+        }
+        if let Some(old) = self.prev_capture.take() {
+            let _ = self.ekf.release(old);
+        }
+        self.prev_capture = capture;
+    }
+}

@@ -1,0 +1,974 @@
+//! `cargo xtask timing`: timing analysis on the rover CPU model (QEMU `mps2-an500`, `-icount`),
+//! bit-identical host/target replay, stack and memory budgets; writes `docs/timing.md`.
+
+use crate::elf::{self, ElfReport};
+use crate::{cargo, image_path, qemu_args, run, step, FLIGHT_PROFILE, TARGET};
+use anyhow::{bail, Context, Result};
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+/// Scenario and length of the recorded segment.
+const SCENARIO: &str = "scenarios/slope-10-cross.toml";
+const SECONDS: &str = "10";
+/// Where the tape goes.
+const TAPE: &str = "target/timing/slope-10-cross.tape";
+/// The generated document.
+const DOC: &str = "docs/timing.md";
+
+/// Stated clock of the rover CPU, Hz.
+const CLOCK_HZ: f64 = 300e6;
+/// Stated range of cycles per instruction.
+const CPI: [f64; 2] = [1.0, 2.0];
+/// CPU design margin: total utilisation must stay at or below this.
+const DESIGN_MARGIN: f64 = 0.5;
+
+/// Goals (reported, not enforced).
+const GOAL_PROPAGATE: u64 = 15_000;
+const GOAL_RG2_FRAME: u64 = 100_000;
+const GOAL_VO: u64 = 60_000_000;
+const GOAL_STACK: u64 = 32 * 1024;
+const GOAL_STATIC_RAM: u64 = 256 * 1024;
+
+/// Statistics of one measured item, instructions.
+#[derive(Debug, Clone, Copy, Default)]
+struct Stat {
+    n: u64,
+    min: u64,
+    max: u64,
+    mean: u64,
+    errors: u64,
+}
+
+/// Everything the image printed.
+#[derive(Debug, Default)]
+struct Measured {
+    calib: BTreeMap<String, u64>,
+    tape: (String, u64, u64),
+    frames: BTreeMap<String, Stat>,
+    tasks: Vec<(String, Stat)>,
+    exec: Vec<(String, u64, u64, u64)>,
+    exec_tasks: Vec<(String, u64, u64, u64)>,
+    vo: BTreeMap<String, u64>,
+    stack: BTreeMap<String, u64>,
+    replay_insns: u64,
+    replay_end: String,
+}
+
+fn pairs(words: &[&str]) -> BTreeMap<String, u64> {
+    words
+        .chunks(2)
+        .filter_map(|kv| match kv {
+            [k, v] => v.parse().ok().map(|v| (k.to_string(), v)),
+            _ => None,
+        })
+        .collect()
+}
+
+fn stat(words: &[&str]) -> Stat {
+    let p = pairs(words);
+    let g = |k: &str| p.get(k).copied().unwrap_or(0);
+    Stat {
+        n: g("n"),
+        min: g("min"),
+        max: g("max"),
+        mean: g("mean"),
+        errors: g("errors"),
+    }
+}
+
+fn parse(text: &str) -> Result<Measured> {
+    let mut m = Measured::default();
+    for line in text.lines() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["timing", "calib", rest @ ..] => m.calib = pairs(rest),
+            ["timing", "tape", name, "frames", f, "bytes", b] => {
+                m.tape = (name.to_string(), f.parse()?, b.parse()?)
+            }
+            ["timing", "frame", name, rest @ ..] => {
+                m.frames.insert(name.to_string(), stat(rest));
+            }
+            ["timing", "task", name, rest @ ..] => m.tasks.push((name.to_string(), stat(rest))),
+            ["timing", "exec", name, "runs", r, "max_us", x, "mean_us", a] => {
+                m.exec
+                    .push((name.to_string(), r.parse()?, x.parse()?, a.parse()?))
+            }
+            ["timing", "exec_task", name, "max_us", x, "mean_us", a, "budget_us", b] => m
+                .exec_tasks
+                .push((name.to_string(), x.parse()?, a.parse()?, b.parse()?)),
+            ["timing", "vo", rest @ ..] => m.vo = pairs(rest),
+            ["timing", "stack", rest @ ..] => m.stack = pairs(rest),
+            ["timing", "replay", "frames", _, "insns", i] => m.replay_insns = i.parse()?,
+            ["replay", "end", ..] => m.replay_end = line.to_string(),
+            _ => {}
+        }
+    }
+    if m.tasks.is_empty() || m.frames.is_empty() || m.stack.is_empty() {
+        bail!("the image's timing output is incomplete");
+    }
+    Ok(m)
+}
+
+impl Measured {
+    fn task(&self, name: &str) -> Stat {
+        self.tasks
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, s)| *s)
+            .unwrap_or_default()
+    }
+    fn frame(&self, name: &str) -> Stat {
+        self.frames.get(name).copied().unwrap_or_default()
+    }
+}
+
+fn lines_with<'a>(text: &'a str, prefix: &str) -> Vec<&'a str> {
+    text.lines().filter(|l| l.starts_with(prefix)).collect()
+}
+
+fn run_qemu(image: &Path) -> Result<String> {
+    let mut args = qemu_args(image);
+    let semihosting = args
+        .iter()
+        .position(|a| a == "enable=on,target=native")
+        .context("qemu arguments changed")?;
+    args[semihosting] = format!("enable=on,target=native,arg=fsw-image,arg=timing,arg={TAPE}");
+    let output = Command::new("timeout")
+        .arg("900")
+        .arg("qemu-system-arm")
+        .args(&args)
+        .stderr(Stdio::inherit())
+        .output()
+        .context("cannot start qemu-system-arm")?;
+    let text = String::from_utf8_lossy(&output.stdout).into_owned();
+    if !output.status.success() || !text.contains("fsw-image: PASS") {
+        print!("{text}");
+        bail!("the timing run in QEMU failed ({})", output.status);
+    }
+    Ok(text)
+}
+
+/// Seconds at the stated clock for `insns` instructions at `cpi`.
+fn secs(insns: u64, cpi: f64) -> f64 {
+    insns as f64 * cpi / CLOCK_HZ
+}
+
+fn fmt_time(s: f64) -> String {
+    if s >= 1.0 {
+        format!("{s:.2} s")
+    } else if s >= 1e-3 {
+        format!("{:.2} ms", s * 1e3)
+    } else {
+        format!("{:.1} us", s * 1e6)
+    }
+}
+
+fn thousands(v: u64) -> String {
+    let s = v.to_string();
+    let mut out = String::new();
+    for (i, c) in s.chars().enumerate() {
+        if i > 0 && (s.len() - i) % 3 == 0 {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+fn pass(ok: bool) -> &'static str {
+    if ok {
+        "PASS"
+    } else {
+        "FAIL"
+    }
+}
+
+/// One schedulable entity of the response-time analysis.
+struct Group {
+    name: &'static str,
+    period_s: f64,
+    /// Worst-case instructions per release.
+    insns: u64,
+    /// What the figure is made of.
+    content: String,
+}
+
+/// Joseph-Pandya response time of entity `i` (entities in priority order), seconds; `None`
+/// when the iteration passes the period (deadline = period) or the demand never converges.
+fn response_time(groups: &[Group], i: usize, cpi: f64) -> Option<f64> {
+    let c = |g: &Group| secs(g.insns, cpi);
+    let me = groups.get(i)?;
+    let mut r: f64 = groups[..=i].iter().map(c).sum();
+    for _ in 0..10_000 {
+        if r > me.period_s {
+            return None;
+        }
+        let next = c(me)
+            + groups[..i]
+                .iter()
+                .map(|h| (r / h.period_s).ceil() * c(h))
+                .sum::<f64>();
+        if (next - r).abs() <= 1e-15 {
+            return Some(r);
+        }
+        r = next;
+    }
+    None
+}
+
+/// Run the timing analysis and write `docs/timing.md`.
+pub fn timing() -> Result<()> {
+    let total = Instant::now();
+
+    let t = step("timing: record the call tape (sim-host, 10 s of slope-10-cross, rendered)");
+    run(cargo().args(["build", "--release", "-p", "sim-host"]))?;
+    let sim = Path::new("target").join("release").join("sim-host");
+    run(Command::new(&sim).args(["record", SCENARIO, "--seconds", SECONDS, "--out", TAPE]))?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("timing: host replay of the tape");
+    let out = Command::new(&sim)
+        .args(["replay", TAPE])
+        .output()
+        .context("cannot run sim-host replay")?;
+    let host = String::from_utf8_lossy(&out.stdout).into_owned();
+    if !out.status.success() {
+        print!("{host}");
+        bail!("the host replay does not reproduce the recording");
+    }
+    let host_replay = lines_with(&host, "replay ");
+    println!(
+        "{}",
+        host_replay.last().copied().unwrap_or("no replay output")
+    );
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("timing: rover-CPU image, two runs in QEMU (-icount shift=0)");
+    run(cargo().args([
+        "build",
+        "--profile",
+        FLIGHT_PROFILE,
+        "--target",
+        TARGET,
+        "-p",
+        "fsw-image",
+    ]))?;
+    let image = image_path();
+    let first = run_qemu(&image)?;
+    let qemu_s = t.elapsed().as_secs_f64();
+    let second = run_qemu(&image)?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    // Determinism: every figure of the two runs is identical.
+    let (a, b) = (
+        lines_with(&first, "timing "),
+        lines_with(&second, "timing "),
+    );
+    if a != b {
+        for (x, y) in a.iter().zip(b.iter()).filter(|(x, y)| x != y) {
+            println!("run 1: {x}\nrun 2: {y}");
+        }
+        bail!("two QEMU runs gave different instruction counts");
+    }
+    println!(
+        "determinism: {} timing lines identical in two runs",
+        a.len()
+    );
+    // Bit-identical replay: the image's digest lines are the host's.
+    let target_replay = lines_with(&first, "replay ");
+    if target_replay != host_replay {
+        for (x, y) in host_replay
+            .iter()
+            .zip(target_replay.iter())
+            .filter(|(x, y)| x != y)
+        {
+            println!("host:   {x}\ntarget: {y}");
+        }
+        bail!("the rover CPU's replay digests differ from the host's");
+    }
+    println!(
+        "replay: {} digest lines identical on host and rover CPU",
+        target_replay.len()
+    );
+
+    let m = parse(&first)?;
+    let calib_ok = {
+        let expect = m.calib.get("expect").copied().unwrap_or(0);
+        let tol = 2 * m.calib.get("insns_per_count").copied().unwrap_or(40) + 16;
+        ["loop2", "loop4"]
+            .iter()
+            .all(|k| m.calib.get(*k).is_some_and(|v| v.abs_diff(expect) <= tol))
+    };
+    if !calib_ok {
+        bail!("instruction-count calibration failed: {:?}", m.calib);
+    }
+    let report = elf::analyse(&image)?;
+    let stack_sizes = stack_sizes_note();
+    let qemu = Command::new("qemu-system-arm")
+        .arg("--version")
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .and_then(|s| s.lines().next().map(str::to_string))
+        .unwrap_or_else(|| "qemu-system-arm".into());
+    let doc = document(&m, &report, &target_replay, &stack_sizes, &qemu)?;
+    let old = std::fs::read_to_string(DOC).unwrap_or_default();
+    std::fs::write(DOC, &doc).with_context(|| format!("cannot write {DOC}"))?;
+    println!(
+        "{DOC}: {}",
+        if old == doc {
+            "unchanged"
+        } else {
+            "written (changed: commit it)"
+        }
+    );
+    println!("{}", summary(&m, &report));
+    println!(
+        "timing: done in {:.1} s (one QEMU run {:.1} s)",
+        total.elapsed().as_secs_f64(),
+        qemu_s
+    );
+    Ok(())
+}
+
+/// Whether `-Z emit-stack-sizes` can cross-check the painted stack here.
+fn stack_sizes_note() -> String {
+    let nightly_target = Command::new("rustup")
+        .args(["+nightly", "target", "list", "--installed"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).contains(TARGET));
+    match nightly_target {
+        None => "not done: no nightly toolchain is installed (`-Z emit-stack-sizes` is \
+                 nightly-only, and stable ignores `-C llvm-args=-stack-size-section`)"
+            .into(),
+        Some(false) => format!(
+            "not done: the nightly toolchain here has no `{TARGET}` standard library and no \
+             `rust-src` for `-Z build-std`, and neither can be installed offline \
+             (`-Z emit-stack-sizes` is nightly-only; stable ignores \
+             `-C llvm-args=-stack-size-section`)"
+        ),
+        Some(true) => format!(
+            "available (nightly with `{TARGET}`) but not automated yet: build with \
+             `RUSTFLAGS=\"-Z emit-stack-sizes\" cargo +nightly build --profile flight --target \
+             {TARGET} -p fsw-image` and read `.stack_sizes`"
+        ),
+    }
+}
+
+/// The rate groups with the navigation tasks of the design (ARCHITECTURE.md sec. 4) added to
+/// the measured executive frames.
+fn groups(m: &Measured) -> Vec<Group> {
+    let rg1_only = m.frame("RG1");
+    let base = rg1_only.min;
+    let task = |n: &str| m.task(n).max;
+    let extra = |f: &str| m.frame(f).max.saturating_sub(base);
+    vec![
+        Group {
+            name: "RG1",
+            period_s: 0.005,
+            insns: rg1_only.max + task("ekf_propagate"),
+            content:
+                "RG1 frame (executive, IMU read and checks, background poll) + EKF propagation"
+                    .into(),
+        },
+        Group {
+            name: "RG2",
+            period_s: 0.05,
+            insns: extra("RG1+RG2")
+                + task("forward_kinematics")
+                + task("kinematic_odometry")
+                + task("ekf_gate_relative_pose")
+                + task("ekf_update_relative_pose")
+                + task("ekf_clone")
+                + task("guidance_step")
+                + task("inverse_kinematics"),
+            content: "RG2 tasks (joints, telemetry) + forward kinematics, odometry, gate, \
+                      relative-pose update, clone, guidance, inverse kinematics"
+                .into(),
+        },
+        Group {
+            name: "RG3",
+            period_s: 1.0,
+            insns: extra("RG1+RG3") + task("ekf_clone"),
+            content: "RG3 task (stereo trigger) + capture clone".into(),
+        },
+        Group {
+            name: "RG4",
+            period_s: 5.0,
+            insns: extra("RG1+RG4"),
+            content: "RG4 task (sun sensor read)".into(),
+        },
+        Group {
+            name: "VO",
+            period_s: 1.0,
+            insns: task("vo_update"),
+            content: "one visual-odometry update per stereo pair, background slack".into(),
+        },
+    ]
+}
+
+fn summary(m: &Measured, r: &ElfReport) -> String {
+    let g = groups(m);
+    let u = |cpi: f64| -> f64 {
+        g.iter()
+            .map(|x| secs(x.insns, cpi) / x.period_s)
+            .sum::<f64>()
+    };
+    format!(
+        "timing summary: propagate max {} insns, VO max {} insns, total utilisation at 300 MHz \
+         {:.1}-{:.1} % (CPI 1-2), stack flight {} B / nav tasks {} B, static RAM {} B, \
+         panic sites {}",
+        thousands(m.task("ekf_propagate").max),
+        thousands(m.task("vo_update").max),
+        100.0 * u(CPI[0]),
+        100.0 * u(CPI[1]),
+        m.stack.get("flight").copied().unwrap_or(0),
+        m.stack.get("bench").copied().unwrap_or(0),
+        r.section(".data") + r.section(".bss") + r.section(".uninit"),
+        r.panic_total()
+    )
+}
+
+const TASK_DOC: [(&str, &str, &str); 9] = [
+    (
+        "ekf_propagate",
+        "`Ekf::propagate`",
+        "RG1: one IMU sample (every valid sample of the tape)",
+    ),
+    (
+        "ekf_gate_relative_pose",
+        "`Ekf::gate_relative_pose`",
+        "RG2: Mahalanobis gate of the kinematic relative pose; and of each VO pose",
+    ),
+    (
+        "ekf_update_relative_pose",
+        "`Ekf::update_relative_pose`",
+        "RG2: update between two clones (applied ungated, so always whole)",
+    ),
+    (
+        "ekf_clone",
+        "`Ekf::clone_at`",
+        "RG2 interval start and RG3 capture",
+    ),
+    (
+        "forward_kinematics",
+        "`kinematics::forward_kinematics_from_joints`",
+        "RG2: body rates from a joint reading",
+    ),
+    (
+        "kinematic_odometry",
+        "`KinematicOdometry::update`",
+        "RG2: odometry integration of a joint reading",
+    ),
+    (
+        "inverse_kinematics",
+        "`kinematics::inverse_kinematics`",
+        "RG2: steering and wheel rates of guidance's command",
+    ),
+    (
+        "guidance_step",
+        "`Guidance::step`",
+        "RG2: carrot, heading and crab loops on the EKF pose",
+    ),
+    (
+        "vo_update",
+        "`VisualOdometry::<150>::run_to_completion`",
+        "background: one full update on a 640x480 pair in `.extram`",
+    ),
+];
+
+fn document(
+    m: &Measured,
+    r: &ElfReport,
+    replay: &[&str],
+    stack_sizes: &str,
+    qemu: &str,
+) -> Result<String> {
+    let mut d = String::new();
+    let calib = |k: &str| m.calib.get(k).copied().unwrap_or(0);
+    let stack = |k: &str| m.stack.get(k).copied().unwrap_or(0);
+    writeln!(
+        d,
+        "# Timing, stack and memory on the rover CPU\n\n\
+         Generated by `cargo xtask timing` (also the last step of `cargo xtask test`); do not \
+         edit by hand. Every figure below comes from the flight image built with the `flight` \
+         profile (fat LTO, `-C target-cpu=cortex-m7`) running in {qemu}, machine `mps2-an500` \
+         (Cortex-M7), with `-icount shift=0,align=off,sleep=off`, on the inputs recorded from \
+         {} s of `{SCENARIO}` ({} minor frames, {} stereo pairs rendered by the simulator's \
+         textured renderer, tape of {} bytes). The command runs QEMU twice and fails unless both \
+         runs print identical figures, and fails unless the image's replay digests equal the \
+         host's.\n",
+        SECONDS,
+        m.tape.1,
+        m.vo.get("updates").copied().unwrap_or(0),
+        thousands(m.tape.2)
+    )?;
+
+    writeln!(d, "## Method\n")?;
+    writeln!(
+        d,
+        "- **Time base.** With `-icount shift=0` QEMU advances virtual time by exactly 1 ns per \
+         guest instruction, whatever the host does (`align=off`: no coupling to host time; \
+         `sleep=off`: idle time jumps to the next timer). SysTick counts the model's 25 MHz core \
+         clock in that virtual time, so one SysTick count is **{} instructions**. The image reads \
+         the SysTick count and value around each measured call (`fsw/image/src/target/measure.rs`); \
+         resolution is one count (40 instructions); the cost of an empty measurement ({} \
+         instructions) is subtracted.\n\
+         - **Calibration** (run every time, the command fails if it is off by more than two \
+         counts): a loop of 1,000,000 iterations of `subs; bne` (2,000,000 instructions) \
+         measured **{}** instructions, and 500,000 iterations of `nop; nop; subs; bne` \
+         measured **{}**.\n\
+         - **Inputs.** `sim-host record` ran the scenario with every HAL device wrapped in a \
+         recording decorator and wrote the call tape (`rover-replay`): the result of every device \
+         call in call order, and the pixels of each stereo pair. The image reads it from the host \
+         by semihosting. Phase 1 replays it through the flight software (`Fsw::tick` per minor \
+         frame, measured whole). Phase 2 runs the navigation modules on the tape's inputs the way \
+         the flight loop will once they are wired in (issue 7; `fsw/image/src/target/bench.rs`): \
+         every IMU sample, every joint reading, every stereo pair.\n\
+         - **Instructions to time.** QEMU counts instructions, not cycles. Time = instructions x \
+         CPI / clock, at the stated clock of **{:.0} MHz** and a CPI range of **{:.1} to {:.1}**. \
+         The Cortex-M7 is a dual-issue, 6-stage in-order core: with code in ITCM and data in DTCM \
+         (zero wait states) integer and load/store code runs near or below 1 CPI, which offsets \
+         the multi-cycle double-precision operations of the filter (FP64 multiply-accumulate \
+         several cycles, divide and square root about 30); the upper bound 2.0 covers data-cache \
+         misses on the stereo images in external RAM (the VO's correlation and Forstner scans \
+         stream through them), branch mispredictions and FP64 dependency stalls. The range is an \
+         assumption to be replaced by measurements on the flight board.\n",
+        calib("insns_per_count"),
+        calib("overhead"),
+        thousands(calib("loop2")),
+        thousands(calib("loop4")),
+        CLOCK_HZ / 1e6,
+        CPI[0],
+        CPI[1]
+    )?;
+
+    writeln!(d, "## Flight tasks (instructions per call)\n")?;
+    writeln!(
+        d,
+        "| task | function | calls | min | max | mean | time of max at {:.0} MHz, CPI {:.1} / {:.1} | errors |",
+        CLOCK_HZ / 1e6,
+        CPI[0],
+        CPI[1]
+    )?;
+    writeln!(d, "|---|---|---:|---:|---:|---:|---:|---:|")?;
+    for (key, func, what) in TASK_DOC {
+        let s = m.task(key);
+        writeln!(
+            d,
+            "| {key} ({what}) | {func} | {} | {} | {} | {} | {} / {} | {} |",
+            s.n,
+            thousands(s.min),
+            thousands(s.max),
+            thousands(s.mean),
+            fmt_time(secs(s.max, CPI[0])),
+            fmt_time(secs(s.max, CPI[1])),
+            s.errors
+        )?;
+    }
+    writeln!(
+        d,
+        "\nErrors are calls that returned an error value (they are measured too). Visual \
+         odometry: {} updates, {} poses (the first pair only builds the keyframe), {} failures, \
+         {}-{} inliers, up to {} work items.\n",
+        m.vo.get("updates").copied().unwrap_or(0),
+        m.vo.get("poses").copied().unwrap_or(0),
+        m.vo.get("failures").copied().unwrap_or(0),
+        m.vo.get("inliers_min").copied().unwrap_or(0),
+        m.vo.get("inliers_max").copied().unwrap_or(0),
+        m.vo.get("work_items_max").copied().unwrap_or(0)
+    )?;
+
+    writeln!(d, "## Whole minor frames of the flight software (replay)\n")?;
+    writeln!(
+        d,
+        "`Fsw::tick` as it is today (executive, device reads and checks, status telemetry, stereo \
+         capture protocol; the navigation modules are not in the loop yet), by the groups that \
+         ran in the frame. Every frame runs RG1 and the background slot.\n"
+    )?;
+    writeln!(
+        d,
+        "| frame | frames | min | max | mean | max at {:.0} MHz, CPI {:.1} / {:.1} |",
+        CLOCK_HZ / 1e6,
+        CPI[0],
+        CPI[1]
+    )?;
+    writeln!(d, "|---|---:|---:|---:|---:|---:|")?;
+    for (name, s) in &m.frames {
+        writeln!(
+            d,
+            "| {name} | {} | {} | {} | {} | {} / {} |",
+            s.n,
+            thousands(s.min),
+            thousands(s.max),
+            thousands(s.mean),
+            fmt_time(secs(s.max, CPI[0])),
+            fmt_time(secs(s.max, CPI[1]))
+        )?;
+    }
+    writeln!(
+        d,
+        "\nAll {} frames: {} instructions. Cross-check, the executive's own per-group timing \
+         from `Clock::counter` (SysTick, 1 us = 1000 instructions of virtual time; whole \
+         microseconds):\n",
+        m.tape.1,
+        thousands(m.replay_insns)
+    )?;
+    writeln!(d, "| group | runs | max_us | mean_us |")?;
+    writeln!(d, "|---|---:|---:|---:|")?;
+    for (name, runs, max, mean) in &m.exec {
+        writeln!(d, "| {name} | {runs} | {max} | {mean} |")?;
+    }
+
+    let groups = groups(m);
+    writeln!(d, "\n## Utilisation and response times\n")?;
+    writeln!(
+        d,
+        "Worst case per release of each rate group: the measured frame of the group (its tasks \
+         and the executive; for RG2-RG4 the largest frame with the group minus the smallest \
+         RG1-only frame) plus the maxima of the navigation tasks the design puts in the group \
+         (ARCHITECTURE.md sec. 4). Visual odometry runs in the background slack, one update per \
+         stereo pair (1 s).\n"
+    )?;
+    writeln!(
+        d,
+        "| group | period | worst case (instructions) | contents | U at CPI {:.1} | U at CPI {:.1} |",
+        CPI[0], CPI[1]
+    )?;
+    writeln!(d, "|---|---:|---:|---|---:|---:|")?;
+    let mut u = [0.0; 2];
+    for g in &groups {
+        let ui = CPI.map(|c| secs(g.insns, c) / g.period_s);
+        u[0] += ui[0];
+        u[1] += ui[1];
+        writeln!(
+            d,
+            "| {} | {} | {} | {} | {:.2} % | {:.2} % |",
+            g.name,
+            fmt_time(g.period_s),
+            thousands(g.insns),
+            g.content,
+            100.0 * ui[0],
+            100.0 * ui[1]
+        )?;
+    }
+    let rt_u: [f64; 2] = CPI.map(|c| {
+        groups
+            .iter()
+            .filter(|g| g.name != "VO")
+            .map(|g| secs(g.insns, c) / g.period_s)
+            .sum()
+    });
+    writeln!(
+        d,
+        "| **total** | | | | **{:.2} %** | **{:.2} %** |\n| total without VO | | | | {:.2} % | {:.2} % |\n",
+        100.0 * u[0],
+        100.0 * u[1],
+        100.0 * rt_u[0],
+        100.0 * rt_u[1]
+    )?;
+    writeln!(
+        d,
+        "Margin against the {:.0} % CPU design margin: {:+.1} points at CPI {:.1}, {:+.1} points \
+         at CPI {:.1} (positive: below the limit).\n",
+        100.0 * DESIGN_MARGIN,
+        100.0 * (DESIGN_MARGIN - u[0]),
+        CPI[0],
+        100.0 * (DESIGN_MARGIN - u[1]),
+        CPI[1]
+    )?;
+    writeln!(
+        d,
+        "Response-time analysis (rate-monotonic fixed priorities RG1 > RG2 > RG3 > RG4 > VO, \
+         deadline = period, Joseph-Pandya iteration `R = C + sum over higher priorities of \
+         ceil(R / T_j) C_j`). The cyclic executive runs the groups in order inside a 5 ms frame \
+         and hands the background a quantum per frame, so this preemptive model is the \
+         schedulability test of the task set; the frame check below covers the non-preemptive \
+         frame.\n"
+    )?;
+    writeln!(
+        d,
+        "| group | period | R at CPI {:.1} | R / T | R at CPI {:.1} | R / T |",
+        CPI[0], CPI[1]
+    )?;
+    writeln!(d, "|---|---:|---:|---:|---:|---:|")?;
+    for (i, g) in groups.iter().enumerate() {
+        let cells: Vec<String> = CPI
+            .iter()
+            .map(|c| match response_time(&groups, i, *c) {
+                Some(rt) => format!("{} | {:.1} %", fmt_time(rt), 100.0 * rt / g.period_s),
+                None => "misses its deadline | > 100 %".into(),
+            })
+            .collect();
+        writeln!(
+            d,
+            "| {} | {} | {} | {} |",
+            g.name,
+            fmt_time(g.period_s),
+            cells[0],
+            cells[1]
+        )?;
+    }
+    let worst_frame = groups[0].insns + groups[1].insns;
+    writeln!(
+        d,
+        "\nWorst minor frame without VO (RG1 + RG2 with navigation): {} instructions, {} / {} of \
+         the 5 ms frame ({:.1} % / {:.1} %).\n",
+        thousands(worst_frame),
+        fmt_time(secs(worst_frame, CPI[0])),
+        fmt_time(secs(worst_frame, CPI[1])),
+        100.0 * secs(worst_frame, CPI[0]) / 0.005,
+        100.0 * secs(worst_frame, CPI[1]) / 0.005
+    )?;
+
+    writeln!(d, "## Stack\n")?;
+    writeln!(
+        d,
+        "cortex-m-rt's `paint-stack` fills the stack region with `0xCCCCCCCC` at reset; the \
+         image scans up from the bottom of the region (`_stack_end`) for the first changed word \
+         after each phase and paints the unused part again before the next (a 256-byte margin \
+         below the stack pointer is left unpainted, so the later phases read up to 256 bytes \
+         high).\n"
+    )?;
+    writeln!(d, "| phase | high-water mark |")?;
+    writeln!(d, "|---|---:|")?;
+    writeln!(
+        d,
+        "| initialisation (flight software, EKF, VO built by value, then moved into statics) | {} B |",
+        thousands(stack("init"))
+    )?;
+    writeln!(
+        d,
+        "| flight software, 2000 replayed frames | {} B |",
+        thousands(stack("flight"))
+    )?;
+    writeln!(
+        d,
+        "| navigation tasks on the tape (EKF, kinematics, guidance, VO) | {} B |",
+        thousands(stack("bench"))
+    )?;
+    writeln!(
+        d,
+        "| stack region (RAM above the statics, 0x{:08x}-0x{:08x}) | {} B |\n",
+        r.stack_region.1,
+        r.stack_region.0,
+        thousands(stack("region"))
+    )?;
+    writeln!(
+        d,
+        "The initialisation peak comes from constructors that return their (large) value: \
+         `VisualOdometry::<150>::new` returns a {} KiB struct that passes through the stack \
+         before it reaches its static. It happens once, before the first frame; an in-place \
+         constructor in `fsw` would remove it. Cross-check with `-Z emit-stack-sizes`: {stack_sizes}.\n",
+        r.statics
+            .iter()
+            .find(|s| s.name.contains("vo_static"))
+            .map(|s| s.size / 1024)
+            .unwrap_or(0)
+    )?;
+
+    writeln!(d, "## Memory\n")?;
+    writeln!(
+        d,
+        "Read from the ELF (`xtask/src/elf.rs`, `object` crate). Regions from `memory.x`: FLASH \
+         4 MiB at 0x0, RAM 512 KiB at 0x2000_0000, EXTRAM 16 MiB at 0x6000_0000.\n"
+    )?;
+    writeln!(d, "| section | address | size |")?;
+    writeln!(d, "|---|---:|---:|")?;
+    for s in &r.sections {
+        writeln!(
+            d,
+            "| {} | 0x{:08x} | {} B |",
+            s.name,
+            s.addr,
+            thousands(s.size)
+        )?;
+    }
+    let flash =
+        r.section(".vector_table") + r.section(".text") + r.section(".rodata") + r.section(".data");
+    let ram = r.section(".data") + r.section(".bss") + r.section(".uninit");
+    let extram = r.section(".extram");
+    writeln!(
+        d,
+        "\n| budget | bytes | of region |\n|---|---:|---:|\n\
+         | flash (.vector_table + .text + .rodata + .data load image) | {} | {:.1} % of 4 MiB |\n\
+         | static RAM (.data + .bss + .uninit) | {} | {:.1} % of 512 KiB |\n\
+         | image buffers (.extram) | {} | {:.1} % of 16 MiB |\n",
+        thousands(flash),
+        100.0 * flash as f64 / (4.0 * 1024.0 * 1024.0),
+        thousands(ram),
+        100.0 * ram as f64 / (512.0 * 1024.0),
+        thousands(extram),
+        100.0 * extram as f64 / (16.0 * 1024.0 * 1024.0)
+    )?;
+    writeln!(
+        d,
+        "Largest statics:\n\n| symbol | address | size |\n|---|---:|---:|"
+    )?;
+    for s in &r.statics {
+        writeln!(
+            d,
+            "| `{}` | 0x{:08x} | {} B |",
+            s.name,
+            s.addr,
+            thousands(s.size)
+        )?;
+    }
+    writeln!(
+        d,
+        "\n(`bench::vo_static`, `bench::ekf_static` and `bench::bench_static` hold the navigation \
+         state measured in phase 2: the VO with 150 features, the EKF and the bench's own state; \
+         `devices::player` is the replay's frame queue; the flight software itself is \
+         `target::FSW`.)\n"
+    )?;
+
+    writeln!(d, "## No allocator, panic sites\n")?;
+    if r.allocator_symbols.is_empty() {
+        writeln!(
+            d,
+            "**No allocator**: the image's symbol table has none of `__rust_alloc`, \
+             `__rust_dealloc`, `__rust_realloc`, `__rust_alloc_zeroed`, `__rg_alloc`, \
+             `__rdl_alloc`, `__rust_alloc_error_handler` or any `alloc::alloc::` function (and \
+             the flight crates are `no_std` without `extern crate alloc`).\n"
+        )?;
+    } else {
+        writeln!(
+            d,
+            "**Allocator symbols found**: {}\n",
+            r.allocator_symbols.join(", ")
+        )?;
+    }
+    writeln!(
+        d,
+        "**Panic sites: {}.** Method: every function of `.text` is decoded as Thumb-2 (skipping \
+         the `$d` literal pools marked by the ARM mapping symbols; {} instructions decoded), and \
+         every `bl`, `b.w`, `b<cond>.w`, `b` and `b<cond>` whose target is a panic function \
+         (`core::panicking::*`, `core::option::unwrap_failed` / `expect_failed`, \
+         `core::result::unwrap_failed`, `core::slice::index::*` failures, `len_mismatch_fail`, \
+         `core::cell::panic_already_*`, `rust_begin_unwind`) is counted, except calls between \
+         panic functions. After fat LTO a site is attributed to the function it was inlined \
+         into, so the crate column is where the code ended up, not necessarily where it was \
+         written (the `Meter::measure` instances of the timing run contain the measured flight \
+         functions inlined; `core::fmt` and `flt2dec` are the image's semihosting reports and \
+         panic handler). Each site is a bounds, arithmetic or unwrap check the compiler could not prove \
+         away; it is reachable only if that check fails.\n",
+        r.panic_total(),
+        thousands(r.decoded_instructions as u64)
+    )?;
+    writeln!(d, "| panic function | sites |\n|---|---:|")?;
+    for (name, n) in &r.panic_sites {
+        writeln!(d, "| `{name}` | {n} |")?;
+    }
+    writeln!(d, "\n| enclosing crate | sites |\n|---|---:|")?;
+    for (name, n) in &r.panic_sites_by_crate {
+        writeln!(d, "| `{name}` | {n} |")?;
+    }
+    writeln!(
+        d,
+        "\n| enclosing function (most sites) | sites |\n|---|---:|"
+    )?;
+    for (name, n) in r.panic_sites_by_function.iter().take(15) {
+        writeln!(d, "| `{name}` | {n} |")?;
+    }
+
+    writeln!(d, "\n## Bit-identical replay\n")?;
+    writeln!(
+        d,
+        "The tape was replayed through the flight software on the host (`sim-host replay`) and \
+         on the rover CPU model; both printed the same lines: a digest every 200 frames and the \
+         end line. Each frame's digest (FNV-1a 64, `fsw_image::flight_replay::frame_digest`) \
+         covers the frame's mobility commands, telemetry records and selected public flight \
+         state, and is also compared with the digest the recording run wrote into the tape, \
+         frame by frame. Timing-derived data (the executive's cycle-slip count and timing-fault \
+         flag, in the flight state and in `FrameStatus` telemetry) is excluded: the execution \
+         counter is not replayed and legitimately differs.\n"
+    )?;
+    writeln!(d, "```text")?;
+    for l in replay {
+        writeln!(d, "{l}")?;
+    }
+    writeln!(d, "```\n")?;
+    let end_ok = m.replay_end.contains("mismatches 0") && m.replay_end.contains("divergence none");
+    writeln!(
+        d,
+        "Result: **{}** ({}).\n",
+        if end_ok { "bit-identical" } else { "MISMATCH" },
+        m.replay_end
+    )?;
+
+    writeln!(d, "## Goals\n")?;
+    writeln!(d, "| goal | measured | result |\n|---|---:|---|")?;
+    let prop = m.task("ekf_propagate").max;
+    writeln!(
+        d,
+        "| EKF propagation <= {} instructions | {} | {} |",
+        thousands(GOAL_PROPAGATE),
+        thousands(prop),
+        pass(prop <= GOAL_PROPAGATE)
+    )?;
+    let rg2_now = m.frame("RG1+RG2").max;
+    writeln!(
+        d,
+        "| whole RG2 frame <= {} instructions, flight software as it is (replay) | {} | {} |",
+        thousands(GOAL_RG2_FRAME),
+        thousands(rg2_now),
+        pass(rg2_now <= GOAL_RG2_FRAME)
+    )?;
+    let rg2_nav = m.frame("RG1").min + groups[1].insns;
+    writeln!(
+        d,
+        "| whole RG2 frame <= {} instructions, with the navigation tasks of the design | {} | {} |",
+        thousands(GOAL_RG2_FRAME),
+        thousands(rg2_nav),
+        pass(rg2_nav <= GOAL_RG2_FRAME)
+    )?;
+    let vo = m.task("vo_update").max;
+    writeln!(
+        d,
+        "| VO update <= {} instructions | {} | {} |",
+        thousands(GOAL_VO),
+        thousands(vo),
+        pass(vo <= GOAL_VO)
+    )?;
+    for (i, cpi) in CPI.iter().enumerate() {
+        writeln!(
+            d,
+            "| total utilisation at {:.0} MHz <= {:.0} %, CPI {cpi:.1} | {:.1} % | {} |",
+            CLOCK_HZ / 1e6,
+            100.0 * DESIGN_MARGIN,
+            100.0 * u[i],
+            pass(u[i] <= DESIGN_MARGIN)
+        )?;
+    }
+    let st = stack("flight").max(stack("bench"));
+    writeln!(
+        d,
+        "| stack <= 32 KiB (flight software and navigation tasks) | {} B | {} |",
+        thousands(st),
+        pass(st <= GOAL_STACK)
+    )?;
+    writeln!(
+        d,
+        "| stack <= 32 KiB including initialisation | {} B | {} |",
+        thousands(stack("init")),
+        pass(stack("init") <= GOAL_STACK)
+    )?;
+    writeln!(
+        d,
+        "| static RAM apart from image buffers <= 256 KiB | {} B | {} |",
+        thousands(ram),
+        pass(ram <= GOAL_STATIC_RAM)
+    )?;
+    writeln!(
+        d,
+        "| host and rover CPU replay bit-identical | {} frames | {} |",
+        m.tape.1,
+        pass(end_ok)
+    )?;
+    Ok(d)
+}
