@@ -440,7 +440,10 @@ fn mesh_spec<S: TerrainSurface + ?Sized>(
         max_range_m: settings.max_range_m,
     };
     let (w, h) = (width as f64, height as f64);
-    let margin_px = 0.25 * w;
+    // A pole within this margin of the image gives a full circle. The level hazcam has the
+    // nadir 144 px (20 deg) below its image: with a margin of a quarter of the width it
+    // got a full circle, 2.3 times the vertices it needs.
+    let margin_px = 0.1 * w;
     let sees_pole = views.iter().any(|v| {
         [1.0, -1.0].iter().any(|&sign| {
             // Vertical direction in K: sign * third row of R_WK.
