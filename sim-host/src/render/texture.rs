@@ -361,31 +361,72 @@ impl AlbedoTexture {
             .min(x_m.len())
             .min(y_m.len())
             .min(footprint_m.len());
+        let fine_top = self.fine.levels.len() - 1;
+        let detail_top = self.detail.levels.len() - 1;
+        let detail_on = self.params.detail_contrast > 0.0;
+        let (sin, cos) = self.detail_rotation;
+        let mut level = [0u8; BATCH];
+        let mut blend = [0.0f64; BATCH];
+        // Detail points: index into the batch, level, weight.
+        let mut detail = [(0u8, 0u8, 0.0f64); BATCH];
         for start in (0..n).step_by(BATCH) {
             let end = (start + BATCH).min(n);
             let x = &x_m[start..end];
             let y = &y_m[start..end];
             let f = &footprint_m[start..end];
             let out = &mut out[start..end];
-            let mut level = [0usize; BATCH];
-            let mut blend = [0.0f64; BATCH];
-            for ((l, b), &f) in level.iter_mut().zip(blend.iter_mut()).zip(f) {
-                (*l, *b) = self.fine.level_blend(f);
+            // Levels from one fast_log2 per point: its integer part is the exponent of the
+            // ratio footprint / texel and its fraction the mantissa (the same values as
+            // Pyramid::level_blend and Pyramid::nearest_level with a four times finer texel).
+            let mut details = 0;
+            for k in 0..out.len() {
+                let ratio = f[k] * self.fine.inv_texel;
+                let bits = ratio.to_bits();
+                let exponent = ((bits >> 52) & 0x7ff) as i64 - 1023;
+                let fraction =
+                    f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000) - 1.0;
+                let (i0, t) = if ratio <= 1.0 || exponent < 0 {
+                    (0, 0.0)
+                } else if exponent as usize >= fine_top {
+                    (fine_top, 0.0)
+                } else {
+                    (
+                        exponent as usize,
+                        ((fraction - 0.375) * 4.0).clamp(0.0, 1.0),
+                    )
+                };
+                level[k] = i0 as u8;
+                blend[k] = t;
+                let weight = (3.0 - 2.0 * ratio).min(1.0);
+                if detail_on && weight > 0.0 {
+                    // Detail texel = fine texel / 4: log2 of its ratio is exponent + 2 +
+                    // fraction, rounded to the nearest level.
+                    let d = if ratio * 4.0 > 1.414 {
+                        ((exponent + 2 + i64::from(fraction >= 0.5)).max(0) as usize)
+                            .min(detail_top)
+                    } else {
+                        0
+                    };
+                    detail[details] = (k as u8, d as u8, weight);
+                    details += 1;
+                }
             }
             for (k, o) in out.iter_mut().enumerate() {
-                *o = self.fine.at_level(level[k], x[k], y[k]);
+                *o = self.fine.at_level(usize::from(level[k]), x[k], y[k]);
             }
             for (k, o) in out.iter_mut().enumerate() {
                 let t = blend[k];
                 if t > 0.0 {
-                    *o += t * (self.fine.at_level(level[k] + 1, x[k], y[k]) - *o);
+                    *o += t * (self.fine.at_level(usize::from(level[k]) + 1, x[k], y[k]) - *o);
                 }
             }
-            for (k, o) in out.iter_mut().enumerate() {
-                let weight = self.detail_weight(f[k]);
-                if weight > 0.0 {
-                    *o *= self.detail_factor(x[k], y[k], f[k], weight);
-                }
+            for &(k, d, weight) in &detail[..details] {
+                let k = usize::from(k);
+                let (u, v) = (cos * x[k] - sin * y[k], sin * x[k] + cos * y[k]);
+                let value = self.detail.at_level(usize::from(d), u, v);
+                out[k] *= 1.0 + weight * (2.0 * value - 1.0);
+            }
+            for o in out.iter_mut() {
                 *o = o.clamp(0.0, 1.0);
             }
         }
