@@ -92,6 +92,9 @@ const STRETCH_KNOT_PX: usize = 16;
 /// Pixels per run handed to the albedo function at once.
 const BATCH: usize = 64;
 
+/// Pixels that share one 64-bit noise hash (16 bits each).
+const NOISE_GROUP: usize = 4;
+
 impl Frame {
     /// Buffers for a `width x height` image.
     pub(crate) fn new(width: usize, height: usize) -> Self {
@@ -154,53 +157,64 @@ impl Frame {
         }
         let inv_area = 1.0 / area;
         self.triangles_drawn += 1;
-        // Barycentrics l1 (towards b) and l2 (towards c) are affine in (u, v):
-        // l = l_v * (v - a_v) + l_u * (u - a_u); l0 = 1 - l1 - l2.
+        // Barycentrics l1 (towards b), l2 (towards c) and l0 = 1 - l1 - l2 are affine in
+        // (u, v): l = l_u * (u - a_u) + l_v * (v - a_v) + l(a).
         let l1_du = e2[1] * inv_area;
         let l1_dv = -e2[0] * inv_area;
         let l2_du = -e1[1] * inv_area;
         let l2_dv = e1[0] * inv_area;
-        let l0_du = -(l1_du + l2_du);
-        let (za, dzb, dzc) = (a[2], b[2] - a[2], c[2] - a[2]);
+        // Each edge function bounds u on a row: l + l_u (u - a_u) >= -tol gives
+        // u >= (or <=, as l_u > 0 or < 0) a_u + (-tol - l) / l_u, with l = l_v (v - a_v) + l(a):
+        // an affine bound bound0 + bound_dv * (v - a_v). Lower bounds go in `lo`, upper ones in
+        // `hi` (the other slot gets an infinite, inactive bound); an edge along u (l_u = 0)
+        // only bounds v, which the bounding box does.
+        let mut lo = [(f64::NEG_INFINITY, 0.0); 3];
+        let mut hi = [(f64::INFINITY, 0.0); 3];
+        for (k, (l_a, l_du, l_dv)) in [
+            (0.0, l1_du, l1_dv),
+            (0.0, l2_du, l2_dv),
+            (1.0, -(l1_du + l2_du), -(l1_dv + l2_dv)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            if l_du != 0.0 {
+                let r = 1.0 / l_du;
+                let bound = (a[0] + (-EDGE_TOL - l_a) * r, -l_dv * r);
+                if l_du > 0.0 {
+                    lo[k] = bound;
+                } else {
+                    hi[k] = bound;
+                }
+            }
+        }
+        // 1/z and shade are affine too: value(u, v) = value(a) + d_u (u - a_u) + d_v (v - a_v).
+        let (dzb, dzc) = (b[2] - a[2], c[2] - a[2]);
         let (sa, sb, sc) = (f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
         let (dsb, dsc) = (sb - sa, sc - sa);
         let iz_du = l1_du * dzb + l2_du * dzc;
+        let iz_dv = l1_dv * dzb + l2_dv * dzc;
         let sh_du = l1_du * dsb + l2_du * dsc;
-        // Reciprocal slopes (0 where an edge function does not change along u).
-        let inv = |d: f64| if d != 0.0 { 1.0 / d } else { 0.0 };
-        let (r1, r2, r0) = (inv(l1_du), inv(l2_du), inv(l0_du));
+        let sh_dv = l1_dv * dsb + l2_dv * dsc;
         let width = self.width;
         for v in vmin..=vmax {
             let dv = v as f64 - a[1];
-            // Edge functions at u = a_u on this row.
-            let l1 = l1_dv * dv;
-            let l2 = l2_dv * dv;
-            let l0 = 1.0 - l1 - l2;
-            // Span of u where every l >= -EDGE_TOL: l + l_du * (u - a_u) >= -tol.
-            let (mut lo, mut hi) = (umin, umax);
-            let mut empty = false;
-            for (l, du, r) in [(l1, l1_du, r1), (l2, l2_du, r2), (l0, l0_du, r0)] {
-                if du > 0.0 {
-                    lo = lo.max(a[0] + (-EDGE_TOL - l) * r);
-                } else if du < 0.0 {
-                    hi = hi.min(a[0] + (-EDGE_TOL - l) * r);
-                } else {
-                    empty |= l < -EDGE_TOL;
-                }
-            }
-            if empty || !(lo <= hi) {
+            let at = |(b0, b1): (f64, f64)| b0 + b1 * dv;
+            let first_u = umin.max(at(lo[0])).max(at(lo[1])).max(at(lo[2]));
+            let last_u = umax.min(at(hi[0])).min(at(hi[1])).min(at(hi[2]));
+            // (f64::max and min ignore a NaN bound, so both stay within the bounding box.)
+            if first_u > last_u {
                 continue;
             }
-            let first = -floor_i64(-lo);
-            let last = floor_i64(hi);
+            let first = -floor_i64(-first_u);
+            let last = floor_i64(last_u);
             if first > last {
                 continue;
             }
             // Depth and shade at the first pixel, then per-pixel steps.
             let du0 = first as f64 - a[0];
-            let (l1f, l2f) = (l1 + l1_du * du0, l2 + l2_du * du0);
-            let iz0 = za + l1f * dzb + l2f * dzc;
-            let sh0 = sa + l1f * dsb + l2f * dsc;
+            let iz0 = a[2] + iz_du * du0 + iz_dv * dv;
+            let sh0 = sa + sh_du * du0 + sh_dv * dv;
             let row = v as usize * width;
             let (start, end) = (row + first as usize, row + last as usize + 1);
             let depth = &mut self.inv_z[start..end];
@@ -210,9 +224,11 @@ impl Frame {
                 let t = k as u32 as f64;
                 let iz = (iz0 + t * iz_du) as f32;
                 let s = (sh0 + t * sh_du) as f32;
-                let nearer = iz > *d;
-                *sh = if nearer { s } else { *sh };
-                *d = if nearer { iz } else { *d };
+                // All ones where this triangle is nearer (bit select, so that the compiler
+                // does not turn it back into a branch).
+                let m = u32::from(iz > *d).wrapping_neg();
+                *sh = f32::from_bits((s.to_bits() & m) | (sh.to_bits() & !m));
+                *d = f32::from_bits((iz.to_bits() & m) | (d.to_bits() & !m));
             }
         }
     }
@@ -230,8 +246,8 @@ impl Frame {
         out: &mut [u8],
     ) -> usize {
         let width = self.width;
-        let table_mask = (gauss.len() - 1) as u64;
-        let bits = table_mask.count_ones();
+        // Table indices are 16-bit fields of the hash (the table has at most 2^16 entries).
+        let table_mask = (gauss.len().min(1 << 16) - 1) as u64;
         let sigma = settings.noise_sigma_dn;
         let exposure = settings.exposure_dn;
         let sky_dn = settings.sky_dn;
@@ -286,24 +302,24 @@ impl Frame {
                     }
                     albedo(&xs[..n], &ys[..n], &fs[..n], &mut albedos[..n]);
                     let mut m = 0;
-                    for i in run..end {
-                        let clean = if inv_z[i] > 0.0 {
-                            let a = albedos[m];
-                            m += 1;
-                            exposure * a * f64::from(shade[i])
-                        } else {
-                            sky += 1;
-                            sky_dn
-                        };
-                        let noise = if sigma > 0.0 {
-                            let idx = (j * width + i) as u64;
-                            let h = mix64(key ^ idx.wrapping_mul(0x9e37_79b9_7f4a_7c15));
-                            sigma * f64::from(gauss[((h >> (64 - bits)) & table_mask) as usize])
-                        } else {
-                            0.0
-                        };
-                        // Round half up; NaN saturates to 0.
-                        row[i] = ((clean + noise).clamp(0.0, 255.0) + 0.5) as u8;
+                    // Noise: one hash per group of four pixels, 16 bits of it per pixel.
+                    for group in (run..end).step_by(NOISE_GROUP) {
+                        let id = ((j * width + group) / NOISE_GROUP) as u64;
+                        let h = mix64(key ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+                        for (q, i) in (group..end.min(group + NOISE_GROUP)).enumerate() {
+                            let clean = if inv_z[i] > 0.0 {
+                                let a = albedos[m];
+                                m += 1;
+                                exposure * a * f64::from(shade[i])
+                            } else {
+                                sky += 1;
+                                sky_dn
+                            };
+                            let g = gauss[((h >> (16 * q)) & table_mask) as usize];
+                            let noise = sigma * f64::from(g);
+                            // Round half up; NaN saturates to 0.
+                            row[i] = ((clean + noise).clamp(0.0, 255.0) + 0.5) as u8;
+                        }
                     }
                 }
                 sky
