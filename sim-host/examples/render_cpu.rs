@@ -96,6 +96,12 @@ fn main() -> anyhow::Result<()> {
                 &mut right,
             );
             ns.push(thread_cpu_ns() - t0);
+            if std::env::var_os("RENDER_CPU_EACH").is_some() {
+                println!(
+                    "pair {k}: {:.1} ms at {pos:?}",
+                    (thread_cpu_ns() - t0) as f64 * 1e-6
+                );
+            }
             for &b in left.iter().chain(right.iter()) {
                 hash = (hash ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
             }
