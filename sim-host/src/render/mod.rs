@@ -50,6 +50,22 @@ pub trait FilteredAlbedo: TerrainSurface {
         let _ = footprint_m;
         self.albedo(x_m, y_m)
     }
+
+    /// [`Self::albedo_filtered`] of many points at once: `out[k]` for `(x_m[k], y_m[k],
+    /// footprint_m[k])`, over the shortest of the four slices. The renderer calls this once per
+    /// run of ground pixels; override it where batching is faster (as [`TexturedSurface`]
+    /// does). The default calls [`Self::albedo_filtered`] per point.
+    fn albedo_filtered_batch(
+        &self,
+        x_m: &[f64],
+        y_m: &[f64],
+        footprint_m: &[f64],
+        out: &mut [f64],
+    ) {
+        for (((o, &x), &y), &f) in out.iter_mut().zip(x_m).zip(y_m).zip(footprint_m) {
+            *o = self.albedo_filtered(x, y, f);
+        }
+    }
 }
 
 /// Pose of the left camera in the world.
@@ -198,6 +214,8 @@ pub struct StereoRenderer {
     height: usize,
     mesh: Mesh,
     frames: [Frame; 2],
+    /// Mesh vertices projected into the left and right cameras.
+    proj: [Vec<[f64; 3]>; 2],
     gauss: Vec<f32>,
 }
 
@@ -212,6 +230,7 @@ impl StereoRenderer {
             height,
             mesh: Mesh::default(),
             frames: [Frame::new(width, height), Frame::new(width, height)],
+            proj: [Vec::new(), Vec::new()],
             gauss: noise::gaussian_table(),
         }
     }
@@ -243,7 +262,9 @@ impl StereoRenderer {
         left: &mut [u8],
         right: &mut [u8],
     ) -> Result<RenderStats, RenderError> {
-        let albedo = |x: f64, y: f64, f: f64| surface.albedo_filtered(x, y, f);
+        let albedo = |x: &[f64], y: &[f64], f: &[f64], out: &mut [f64]| {
+            surface.albedo_filtered_batch(x, y, f, out)
+        };
         self.render_with(surface, &albedo, left_pose, sun, noise_seed, left, right)
     }
 
@@ -258,12 +279,16 @@ impl StereoRenderer {
         left: &mut [u8],
         right: &mut [u8],
     ) -> Result<RenderStats, RenderError> {
-        let albedo = |x: f64, y: f64, _f: f64| surface.albedo(x, y);
+        let albedo = |x: &[f64], y: &[f64], _f: &[f64], out: &mut [f64]| {
+            for ((o, &x), &y) in out.iter_mut().zip(x).zip(y) {
+                *o = surface.albedo(x, y);
+            }
+        };
         self.render_with(surface, &albedo, left_pose, sun, noise_seed, left, right)
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn render_with<S: TerrainSurface + ?Sized, A: Fn(f64, f64, f64) -> f64 + Sync>(
+    fn render_with<S, A>(
         &mut self,
         surface: &S,
         albedo: &A,
@@ -272,21 +297,37 @@ impl StereoRenderer {
         noise_seed: u64,
         left: &mut [u8],
         right: &mut [u8],
-    ) -> Result<RenderStats, RenderError> {
+    ) -> Result<RenderStats, RenderError>
+    where
+        S: TerrainSurface + ?Sized,
+        A: Fn(&[f64], &[f64], &[f64], &mut [f64]) + Sync,
+    {
         self.check(left_pose, sun, left.len(), right.len())?;
         let views = self.views(left_pose);
         let spec = mesh_spec(surface, &views, &self.settings, self.width, self.height);
         self.mesh.build(surface, &spec, sun, self.settings.ambient);
+        // Project the mesh once: the right camera is the left one moved by the baseline along
+        // x_K, so u_r = u_l - f_x B / z with the same v and 1/z.
+        let [proj_l, proj_r] = &mut self.proj;
+        let disparity_scale = views[0].fx * self.calib.baseline_m;
+        proj_l.clear();
+        proj_r.clear();
+        for &p in &self.mesh.pos {
+            let q = views[0].project(p).unwrap_or([0.0, 0.0, -1.0]);
+            proj_l.push(q);
+            proj_r.push([q[0] - disparity_scale * q[2], q[1], q[2]]);
+        }
         let (mesh, settings, gauss) = (&self.mesh, &self.settings, &self.gauss);
         let [frame_l, frame_r] = &mut self.frames;
-        let camera = |frame: &mut Frame, view: &View, out: &mut [u8], index: u64| {
-            frame.rasterize(mesh, view);
-            let sky = frame.shade_into(view, settings, albedo, (noise_seed, index), gauss, out);
-            (frame.triangles_drawn, sky)
-        };
+        let camera =
+            |frame: &mut Frame, view: &View, proj: &[[f64; 3]], out: &mut [u8], index: u64| {
+                frame.rasterize(mesh, proj);
+                let sky = frame.shade_into(view, settings, albedo, (noise_seed, index), gauss, out);
+                (frame.triangles_drawn, sky)
+            };
         let ((tl, sl), (tr, sr)) = rayon::join(
-            || camera(frame_l, &views[0], left, 0),
-            || camera(frame_r, &views[1], right, 1),
+            || camera(frame_l, &views[0], &self.proj[0], left, 0),
+            || camera(frame_r, &views[1], &self.proj[1], right, 1),
         );
         Ok(RenderStats {
             vertices: self.mesh.pos.len(),
@@ -399,7 +440,10 @@ fn mesh_spec<S: TerrainSurface + ?Sized>(
         max_range_m: settings.max_range_m,
     };
     let (w, h) = (width as f64, height as f64);
-    let margin_px = 0.25 * w;
+    // A pole within this margin of the image gives a full circle. The level hazcam has the
+    // nadir 144 px (20 deg) below its image: with a margin of a quarter of the width it
+    // got a full circle, 2.3 times the vertices it needs.
+    let margin_px = 0.1 * w;
     let sees_pole = views.iter().any(|v| {
         [1.0, -1.0].iter().any(|&sign| {
             // Vertical direction in K: sign * third row of R_WK.

@@ -77,11 +77,23 @@ pub(crate) struct Frame {
     inv_z: Vec<f32>,
     /// Interpolated shade per pixel.
     shade: Vec<f32>,
-    /// Projected vertices `(u, v, 1/z)`, `1/z = -1` when culled.
-    proj: Vec<[f64; 3]>,
     /// Triangles that reached the pixel loop in the last frame.
     pub triangles_drawn: usize,
 }
+
+/// Tolerance of the inclusive edge test, in barycentric units: pixel centres on a shared edge
+/// (or within rounding of it) belong to both triangles, so shared edges never leave holes.
+const EDGE_TOL: f64 = 1e-7;
+
+/// Pixels per knot of the footprint stretch, which is interpolated linearly between knots along
+/// each row (it varies slowly; it only selects mip levels).
+const STRETCH_KNOT_PX: usize = 16;
+
+/// Pixels per run handed to the albedo function at once.
+const BATCH: usize = 64;
+
+/// Pixels that share one 64-bit noise hash (16 bits each).
+const NOISE_GROUP: usize = 4;
 
 impl Frame {
     /// Buffers for a `width x height` image.
@@ -91,38 +103,35 @@ impl Frame {
             height,
             inv_z: vec![0.0; width * height],
             shade: vec![0.0; width * height],
-            proj: Vec::new(),
             triangles_drawn: 0,
         }
     }
 
-    /// Project and rasterize `mesh` as seen by `view`.
-    pub(crate) fn rasterize(&mut self, mesh: &Mesh, view: &View) {
-        self.inv_z.iter_mut().for_each(|v| *v = 0.0);
-        self.proj.clear();
-        self.proj.extend(
-            mesh.pos
-                .iter()
-                .map(|&p| view.project(p).unwrap_or([0.0, 0.0, -1.0])),
-        );
+    /// Rasterize `mesh` with its vertices projected into this camera (`proj`: `(u, v, 1/z)` per
+    /// vertex, `1/z <= 0` for culled vertices).
+    pub(crate) fn rasterize(&mut self, mesh: &Mesh, proj: &[[f64; 3]]) {
+        self.inv_z.fill(0.0);
         self.triangles_drawn = 0;
         let cols = mesh.cols;
         for k in 0..mesh.rows.saturating_sub(1) {
+            let row0 = &proj[k * cols..(k + 1) * cols];
+            let row1 = &proj[(k + 1) * cols..(k + 2) * cols];
+            let sh0 = &mesh.shade[k * cols..(k + 1) * cols];
+            let sh1 = &mesh.shade[(k + 1) * cols..(k + 2) * cols];
             for j in 0..cols.saturating_sub(1) {
-                let i00 = k * cols + j;
-                let i01 = i00 + 1;
-                let i10 = i00 + cols;
-                let i11 = i10 + 1;
-                self.triangle(mesh, i00, i01, i10);
-                self.triangle(mesh, i01, i11, i10);
+                let (p00, p01, p10, p11) = (row0[j], row0[j + 1], row1[j], row1[j + 1]);
+                let (s00, s01, s10, s11) = (sh0[j], sh0[j + 1], sh1[j], sh1[j + 1]);
+                self.triangle([p00, p01, p10], [s00, s01, s10]);
+                self.triangle([p01, p11, p10], [s01, s11, s10]);
             }
         }
     }
 
-    /// Rasterize one triangle (vertex indices into the mesh) with the depth test.
+    /// Rasterize one projected triangle with the depth test: every pixel centre inside (edges
+    /// included) gets the triangle's `1/z` and shade where it is nearer than what is there.
     #[inline]
-    fn triangle(&mut self, mesh: &Mesh, ia: usize, ib: usize, ic: usize) {
-        let (a, b, c) = (self.proj[ia], self.proj[ib], self.proj[ic]);
+    fn triangle(&mut self, p: [[f64; 3]; 3], s: [f32; 3]) {
+        let [a, b, c] = p;
         if a[2] <= 0.0 || b[2] <= 0.0 || c[2] <= 0.0 {
             return;
         }
@@ -134,9 +143,9 @@ impl Frame {
         }
         // Pixel centres inside the bounding box (ceil of the low ends, floor of the high ends).
         let umin = (-floor_i64(-ulo)).max(0) as f64;
-        let umax = (floor_i64(uhi.min(wmax))) as f64;
-        let vmin = (-floor_i64(-vlo)).max(0) as f64;
-        let vmax = (floor_i64(vhi.min(hmax))) as f64;
+        let umax = floor_i64(uhi.min(wmax)) as f64;
+        let vmin = (-floor_i64(-vlo)).max(0);
+        let vmax = floor_i64(vhi.min(hmax));
         if umin > umax || vmin > vmax {
             return;
         }
@@ -148,46 +157,86 @@ impl Frame {
         }
         let inv_area = 1.0 / area;
         self.triangles_drawn += 1;
-        let (sa, sb, sc) = (
-            f64::from(mesh.shade[ia]),
-            f64::from(mesh.shade[ib]),
-            f64::from(mesh.shade[ic]),
-        );
-        let (za, dzb, dzc) = (a[2], b[2] - a[2], c[2] - a[2]);
-        let (dsb, dsc) = (sb - sa, sc - sa);
-        // Barycentrics l1 (towards b) and l2 (towards c) are affine in (u, v).
+        // Barycentrics l1 (towards b), l2 (towards c) and l0 = 1 - l1 - l2 are affine in
+        // (u, v): l = l_u * (u - a_u) + l_v * (v - a_v) + l(a).
         let l1_du = e2[1] * inv_area;
+        let l1_dv = -e2[0] * inv_area;
         let l2_du = -e1[1] * inv_area;
-        const EPS: f64 = -1e-9;
-        let mut v = vmin;
-        while v <= vmax {
-            let dv = v - a[1];
-            let du0 = umin - a[0];
-            let mut l1 = (du0 * e2[1] - dv * e2[0]) * inv_area;
-            let mut l2 = (e1[0] * dv - e1[1] * du0) * inv_area;
-            let row = v as usize * self.width;
-            let mut u = umin;
-            while u <= umax {
-                if l1 >= EPS && l2 >= EPS && l1 + l2 <= 1.0 - EPS {
-                    let iz = (za + l1 * dzb + l2 * dzc) as f32;
-                    let idx = row + u as usize;
-                    if iz > self.inv_z[idx] {
-                        self.inv_z[idx] = iz;
-                        self.shade[idx] = (sa + l1 * dsb + l2 * dsc) as f32;
-                    }
+        let l2_dv = e1[0] * inv_area;
+        // Each edge function bounds u on a row: l + l_u (u - a_u) >= -tol gives
+        // u >= (or <=, as l_u > 0 or < 0) a_u + (-tol - l) / l_u, with l = l_v (v - a_v) + l(a):
+        // an affine bound bound0 + bound_dv * (v - a_v). Lower bounds go in `lo`, upper ones in
+        // `hi` (the other slot gets an infinite, inactive bound); an edge along u (l_u = 0)
+        // only bounds v, which the bounding box does.
+        let mut lo = [(f64::NEG_INFINITY, 0.0); 3];
+        let mut hi = [(f64::INFINITY, 0.0); 3];
+        for (k, (l_a, l_du, l_dv)) in [
+            (0.0, l1_du, l1_dv),
+            (0.0, l2_du, l2_dv),
+            (1.0, -(l1_du + l2_du), -(l1_dv + l2_dv)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            if l_du != 0.0 {
+                let r = 1.0 / l_du;
+                let bound = (a[0] + (-EDGE_TOL - l_a) * r, -l_dv * r);
+                if l_du > 0.0 {
+                    lo[k] = bound;
+                } else {
+                    hi[k] = bound;
                 }
-                l1 += l1_du;
-                l2 += l2_du;
-                u += 1.0;
             }
-            v += 1.0;
+        }
+        // 1/z and shade are affine too: value(u, v) = value(a) + d_u (u - a_u) + d_v (v - a_v).
+        let (dzb, dzc) = (b[2] - a[2], c[2] - a[2]);
+        let (sa, sb, sc) = (f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
+        let (dsb, dsc) = (sb - sa, sc - sa);
+        let iz_du = l1_du * dzb + l2_du * dzc;
+        let iz_dv = l1_dv * dzb + l2_dv * dzc;
+        let sh_du = l1_du * dsb + l2_du * dsc;
+        let sh_dv = l1_dv * dsb + l2_dv * dsc;
+        let width = self.width;
+        for v in vmin..=vmax {
+            let dv = v as f64 - a[1];
+            let at = |(b0, b1): (f64, f64)| b0 + b1 * dv;
+            let first_u = umin.max(at(lo[0])).max(at(lo[1])).max(at(lo[2]));
+            let last_u = umax.min(at(hi[0])).min(at(hi[1])).min(at(hi[2]));
+            // (f64::max and min ignore a NaN bound, so both stay within the bounding box.)
+            if first_u > last_u {
+                continue;
+            }
+            let first = -floor_i64(-first_u);
+            let last = floor_i64(last_u);
+            if first > last {
+                continue;
+            }
+            // Depth and shade at the first pixel, then per-pixel steps.
+            let du0 = first as f64 - a[0];
+            let iz0 = a[2] + iz_du * du0 + iz_dv * dv;
+            let sh0 = sa + sh_du * du0 + sh_dv * dv;
+            let row = v as usize * width;
+            let (start, end) = (row + first as usize, row + last as usize + 1);
+            let depth = &mut self.inv_z[start..end];
+            let shade = &mut self.shade[start..end];
+            // Branch-free depth test (pixels on shared edges make it unpredictable).
+            for (k, (d, sh)) in depth.iter_mut().zip(shade.iter_mut()).enumerate() {
+                let t = k as u32 as f64;
+                let iz = (iz0 + t * iz_du) as f32;
+                let s = (sh0 + t * sh_du) as f32;
+                // All ones where this triangle is nearer (bit select, so that the compiler
+                // does not turn it back into a branch).
+                let m = u32::from(iz > *d).wrapping_neg();
+                *sh = f32::from_bits((s.to_bits() & m) | (sh.to_bits() & !m));
+                *d = f32::from_bits((iz.to_bits() & m) | (d.to_bits() & !m));
+            }
         }
     }
 
-    /// Shade every pixel into `out` (8-bit, row-major). `albedo(x, y, footprint)` gives the
-    /// ground reflectance; `noise_key` selects this image's noise; `gauss` is the quantile
-    /// table. Returns the number of sky pixels.
-    pub(crate) fn shade_into<A: Fn(f64, f64, f64) -> f64 + Sync>(
+    /// Shade every pixel into `out` (8-bit, row-major). `albedo(x, y, footprint, out)` gives the
+    /// ground reflectance of a run of points; `noise_key` selects this image's noise; `gauss`
+    /// is the quantile table. Returns the number of sky pixels.
+    pub(crate) fn shade_into<A: Fn(&[f64], &[f64], &[f64], &mut [f64]) + Sync>(
         &self,
         view: &View,
         settings: &RenderSettings,
@@ -197,42 +246,81 @@ impl Frame {
         out: &mut [u8],
     ) -> usize {
         let width = self.width;
-        let table_mask = (gauss.len() - 1) as u64;
-        let bits = table_mask.count_ones();
+        // Table indices are 16-bit fields of the hash (the table has at most 2^16 entries).
+        let table_mask = (gauss.len().min(1 << 16) - 1) as u64;
         let sigma = settings.noise_sigma_dn;
+        let exposure = settings.exposure_dn;
+        let sky_dn = settings.sky_dn;
         let inv_fx = 1.0 / view.fx;
         let key = hash3(noise_key.0, noise_key.1, 0x006e_6f69_7365);
+        // Ray of pixel (i, v): ray_w(0, v) + i * step (affine in i).
+        let r0 = view.ray_w(0.0, 0.0);
+        let r1 = view.ray_w(1.0, 0.0);
+        let step = [r1[0] - r0[0], r1[1] - r0[1], r1[2] - r0[2]];
+        let [cx, cy, _] = view.center_w;
+        // Footprint per unit depth, (1 / f_x) * stretch, at knots every STRETCH_KNOT_PX pixels
+        // along each row: the footprint across the ray is z / f_x, stretched by 1 / sqrt(cos i)
+        // for the foreshortening on level ground (geometric mean of the two axes).
+        let knots = width.div_ceil(STRETCH_KNOT_PX) + 1;
+        let knot_table: Vec<f64> = (0..self.height * knots)
+            .map(|n| {
+                let (j, k) = (n / knots, n % knots);
+                let ray = view.ray_w((k * STRETCH_KNOT_PX) as f64, j as f64);
+                let len = (ray[0] * ray[0] + ray[1] * ray[1] + ray[2] * ray[2]).sqrt();
+                inv_fx * (len / ray[2].abs().max(0.05 * len)).sqrt()
+            })
+            .collect();
         out.par_chunks_mut(width)
+            .zip(self.inv_z.par_chunks(width))
+            .zip(self.shade.par_chunks(width))
+            .zip(knot_table.par_chunks(knots))
             .enumerate()
-            .map(|(j, row)| {
-                let v = j as f64;
+            .map(|(j, (((row, inv_z), shade), knot))| {
+                let base = view.ray_w(0.0, j as f64);
                 let mut sky = 0usize;
-                for (i, px) in row.iter_mut().enumerate() {
-                    let idx = j * width + i;
-                    let iz = self.inv_z[idx];
-                    let clean = if iz > 0.0 {
-                        let z = 1.0 / f64::from(iz);
-                        let ray = view.ray_w(i as f64, v);
-                        let x = view.center_w[0] + z * ray[0];
-                        let y = view.center_w[1] + z * ray[1];
-                        // Footprint across the ray z / f_x, stretched by 1 / sqrt(cos i) for
-                        // the foreshortening on level ground (geometric mean of the two axes).
-                        let len = (ray[0] * ray[0] + ray[1] * ray[1] + ray[2] * ray[2]).sqrt();
-                        let stretch = (len / ray[2].abs().max(0.05 * len)).sqrt();
-                        let footprint = z * inv_fx * stretch;
-                        settings.exposure_dn * albedo(x, y, footprint) * f64::from(self.shade[idx])
-                    } else {
-                        sky += 1;
-                        settings.sky_dn
-                    };
-                    let noise = if sigma > 0.0 {
-                        let h = mix64(key ^ (idx as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
-                        sigma * f64::from(gauss[((h >> (64 - bits)) & table_mask) as usize])
-                    } else {
-                        0.0
-                    };
-                    // Round half up; NaN saturates to 0.
-                    *px = ((clean + noise).clamp(0.0, 255.0) + 0.5) as u8;
+                // Runs of BATCH pixels: world points and footprints of the ground pixels, their
+                // albedo in one call, then the pixel values.
+                let mut xs = [0.0f64; BATCH];
+                let mut ys = [0.0f64; BATCH];
+                let mut fs = [0.0f64; BATCH];
+                let mut albedos = [0.0f64; BATCH];
+                for run in (0..width).step_by(BATCH) {
+                    let end = (run + BATCH).min(width);
+                    let mut n = 0;
+                    for (i, &iz) in inv_z.iter().enumerate().take(end).skip(run) {
+                        if iz > 0.0 {
+                            let z = f64::from(1.0 / iz);
+                            let fi = i as u32 as f64;
+                            xs[n] = cx + z * (base[0] + fi * step[0]);
+                            ys[n] = cy + z * (base[1] + fi * step[1]);
+                            let k = i / STRETCH_KNOT_PX;
+                            let t = (i % STRETCH_KNOT_PX) as u32 as f64
+                                * (1.0 / STRETCH_KNOT_PX as f64);
+                            fs[n] = z * (knot[k] + t * (knot[k + 1] - knot[k]));
+                            n += 1;
+                        }
+                    }
+                    albedo(&xs[..n], &ys[..n], &fs[..n], &mut albedos[..n]);
+                    let mut m = 0;
+                    // Noise: one hash per group of four pixels, 16 bits of it per pixel.
+                    for group in (run..end).step_by(NOISE_GROUP) {
+                        let id = ((j * width + group) / NOISE_GROUP) as u64;
+                        let h = mix64(key ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+                        for (q, i) in (group..end.min(group + NOISE_GROUP)).enumerate() {
+                            let clean = if inv_z[i] > 0.0 {
+                                let a = albedos[m];
+                                m += 1;
+                                exposure * a * f64::from(shade[i])
+                            } else {
+                                sky += 1;
+                                sky_dn
+                            };
+                            let g = gauss[((h >> (16 * q)) & table_mask) as usize];
+                            let noise = sigma * f64::from(g);
+                            // Round half up; NaN saturates to 0.
+                            row[i] = ((clean + noise).clamp(0.0, 255.0) + 0.5) as u8;
+                        }
+                    }
                 }
                 sky
             })

@@ -19,7 +19,7 @@
 //! point sample would give on distant, foreshortened ground. The whole texture repeats every
 //! 8.19 m (default), more than a hazcam sees.
 
-use super::noise::{floor_i64, gradient_noise, hash3, unit_f64};
+use super::noise::{gradient_noise, hash3, unit_f64};
 use super::FilteredAlbedo;
 use crate::surface::TerrainSurface;
 use rayon::prelude::*;
@@ -64,6 +64,9 @@ impl Default for TextureParams {
 
 /// One periodic square tile of albedo values (`u16`, 65535 = albedo 1), stored in 8x8 blocks
 /// so that a bilinear lookup touches one or two cache lines whatever the viewing direction.
+/// Each block also keeps a copy of the first column and row of its right, lower and diagonal
+/// neighbours (9x9 values, [`PADDED`] per block), so the four taps of any bilinear lookup are
+/// always in one block: no branch, one bounds check.
 #[derive(Debug, Clone)]
 struct Tile {
     size: usize,
@@ -74,29 +77,38 @@ struct Tile {
 
 /// Block side, texels.
 const BLOCK: usize = 8;
+/// Row stride of a padded block, values.
+const STRIDE: usize = BLOCK + 1;
+/// Values per padded block.
+const PADDED: usize = STRIDE * STRIDE;
 
 impl Tile {
     /// A tile from row-major values (`size` a power of two, at least 8).
     fn from_row_major(size: usize, rows: &[u16]) -> Tile {
-        let blocks_log2 = (size / BLOCK).trailing_zeros();
-        let mut tile = Tile {
-            size,
-            blocks_log2,
-            data: vec![0; size * size],
-        };
-        for j in 0..size {
-            for i in 0..size {
-                let idx = tile.index(i, j);
-                tile.data[idx] = rows[j * size + i];
+        let blocks = size / BLOCK;
+        let blocks_log2 = blocks.trailing_zeros();
+        let mask = size - 1;
+        let mut data = vec![0; blocks * blocks * PADDED];
+        for (b, block) in data.chunks_exact_mut(PADDED).enumerate() {
+            let (bi, bj) = (b & (blocks - 1), b >> blocks_log2);
+            for (r, row) in block.chunks_exact_mut(STRIDE).enumerate() {
+                let j = (bj * BLOCK + r) & mask;
+                for (c, out) in row.iter_mut().enumerate() {
+                    *out = rows[j * size + ((bi * BLOCK + c) & mask)];
+                }
             }
         }
-        tile
+        Tile {
+            size,
+            blocks_log2,
+            data,
+        }
     }
 
     /// Storage index of texel `(i, j)` (both below `size`).
-    #[inline]
+    #[inline(always)]
     fn index(&self, i: usize, j: usize) -> usize {
-        (((j >> 3) << self.blocks_log2) + (i >> 3)) * (BLOCK * BLOCK) + ((j & 7) << 3) + (i & 7)
+        (((j >> 3) << self.blocks_log2) + (i >> 3)) * PADDED + (j & 7) * STRIDE + (i & 7)
     }
 
     /// Texel `(i, j)`, indices wrapped.
@@ -109,28 +121,26 @@ impl Tile {
     /// Bilinear sample at texel coordinates (texel centres at integers), wrapping.
     #[inline(always)]
     fn bilinear(&self, u: f64, v: f64) -> f64 {
-        let u0 = floor_i64(u);
-        let v0 = floor_i64(v);
-        let fu = u - u0 as f64;
-        let fv = v - v0 as f64;
-        // Two's-complement wrap then the mask keeps indices in range.
+        // Integer part without a libm call or a saturating conversion: adding 1.5 * 2^52
+        // rounds `u - 0.5` to an integer `n` (ties to even) in the low mantissa bits, so
+        // `n = floor(u)` or, when `u` is an integer, `u - 1` with weight 1 on the upper tap
+        // (the same value: bilinear interpolation is continuous).
+        const MAGIC: f64 = 6_755_399_441_055_744.0;
+        let tu = (u - 0.5) + MAGIC;
+        let tv = (v - 0.5) + MAGIC;
+        let fu = u - (tu - MAGIC);
+        let fv = v - (tv - MAGIC);
+        // The low bits of the mantissa are n in two's complement: the mask wraps the tile.
         let mask = self.size - 1;
-        let (i0, j0) = (u0 as usize & mask, v0 as usize & mask);
-        let (a, b, c, d) = if (i0 & 7) != 7 && (j0 & 7) != 7 {
-            // All four taps in one 8x8 block: offsets 0, 1, 8, 9 from the first.
-            let base = self.index(i0, j0);
-            let q = &self.data[base..base + 10];
-            (q[0], q[1], q[8], q[9])
-        } else {
-            let (i1, j1) = (i0 + 1, j0 + 1);
-            (
-                self.at(i0, j0),
-                self.at(i1, j0),
-                self.at(i0, j1),
-                self.at(i1, j1),
-            )
-        };
-        let (a, b, c, d) = (f64::from(a), f64::from(b), f64::from(c), f64::from(d));
+        let base = self.index(tu.to_bits() as usize & mask, tv.to_bits() as usize & mask);
+        // Taps (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1): offsets 0, 1, 9, 10.
+        let q = &self.data[base..base + STRIDE + 2];
+        let (a, b, c, d) = (
+            f64::from(q[0]),
+            f64::from(q[1]),
+            f64::from(q[STRIDE]),
+            f64::from(q[STRIDE + 1]),
+        );
         let top = a + fu * (b - a);
         let bottom = c + fu * (d - c);
         (top + fv * (bottom - top)) * (1.0 / 65535.0)
@@ -183,25 +193,35 @@ impl Pyramid {
         }
     }
 
-    /// As [`Self::sample`] without blending levels (one lookup; for low-contrast layers).
+    /// Bilinear sample of level `i` at world `(x, y)`.
     #[inline(always)]
-    fn sample_nearest_level(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
-        let ratio = footprint_m * self.inv_texel;
-        let top = self.levels.len() - 1;
-        let i = if ratio > 1.414 {
-            ((fast_log2(ratio) + 0.5) as usize).min(top)
-        } else {
-            0
-        };
+    fn at_level(&self, i: usize, x_m: f64, y_m: f64) -> f64 {
         let scale = self.scales[i];
         self.levels[i].bilinear(x_m * scale - 0.5, y_m * scale - 0.5)
     }
 
-    /// Value at world `(x, y)` averaged over about `footprint_m`: level
-    /// `log2(footprint / texel)`, blended with the next level over the middle quarter of each
-    /// octave (one lookup for three quarters of the pixels, no sharp level seams).
+    /// Level of [`Self::sample_nearest_level`].
     #[inline(always)]
-    fn sample(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+    fn nearest_level(&self, footprint_m: f64) -> usize {
+        let ratio = footprint_m * self.inv_texel;
+        let top = self.levels.len() - 1;
+        if ratio > 1.414 {
+            ((fast_log2(ratio) + 0.5) as usize).min(top)
+        } else {
+            0
+        }
+    }
+
+    /// As [`Self::sample`] without blending levels (one lookup; for low-contrast layers).
+    #[inline(always)]
+    fn sample_nearest_level(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        self.at_level(self.nearest_level(footprint_m), x_m, y_m)
+    }
+
+    /// Level `i0` and blend weight `t` towards level `i0 + 1` of [`Self::sample`]
+    /// (`t = 0` on the last level).
+    #[inline(always)]
+    fn level_blend(&self, footprint_m: f64) -> (usize, f64) {
         let ratio = footprint_m * self.inv_texel;
         let top = (self.levels.len() - 1) as f64;
         let level = if ratio > 1.0 {
@@ -211,18 +231,30 @@ impl Pyramid {
         };
         let i0 = level as usize;
         let t = ((level - i0 as f64 - 0.375) * 4.0).clamp(0.0, 1.0);
-        let at = |i: usize| {
-            let scale = self.scales[i];
-            self.levels[i].bilinear(x_m * scale - 0.5, y_m * scale - 0.5)
-        };
-        let a = at(i0);
-        if t > 0.0 && i0 + 1 < self.levels.len() {
-            a + t * (at(i0 + 1) - a)
+        if i0 + 1 < self.levels.len() {
+            (i0, t)
+        } else {
+            (i0, 0.0)
+        }
+    }
+
+    /// Value at world `(x, y)` averaged over about `footprint_m`: level
+    /// `log2(footprint / texel)`, blended with the next level over the middle quarter of each
+    /// octave (one lookup for three quarters of the pixels, no sharp level seams).
+    #[inline(always)]
+    fn sample(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        let (i0, t) = self.level_blend(footprint_m);
+        let a = self.at_level(i0, x_m, y_m);
+        if t > 0.0 {
+            a + t * (self.at_level(i0 + 1, x_m, y_m) - a)
         } else {
             a
         }
     }
 }
+
+/// Points per batch of [`AlbedoTexture::albedo_filtered_batch`].
+const BATCH: usize = 64;
 
 /// Procedural albedo texture of sandy ground with pebbles (see the module documentation).
 ///
@@ -278,17 +310,126 @@ impl AlbedoTexture {
     /// fine pyramid is sampled trilinearly at level `log2(footprint / texel)`; the millimetre
     /// detail layer fades out between footprints of one and one and a half fine texels.
     pub fn albedo_filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
+        self.filtered(x_m, y_m, footprint_m)
+    }
+
+    /// [`Self::albedo_filtered`], always inlined.
+    #[inline(always)]
+    fn filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
         let fine = self.fine.sample(x_m, y_m, footprint_m);
         // The detail tile stores 0.5 * factor so that factors up to 2 fit in u16.
         let mut albedo = fine;
-        let weight = (3.0 - 2.0 * footprint_m / self.params.texel_m).min(1.0);
-        if weight > 0.0 && self.params.detail_contrast > 0.0 {
-            let (s, c) = self.detail_rotation;
-            let (u, v) = (c * x_m - s * y_m, s * x_m + c * y_m);
-            let detail = self.detail.sample_nearest_level(u, v, footprint_m);
-            albedo *= 1.0 + weight * (2.0 * detail - 1.0);
+        let weight = self.detail_weight(footprint_m);
+        if weight > 0.0 {
+            albedo *= self.detail_factor(x_m, y_m, footprint_m, weight);
         }
         albedo.clamp(0.0, 1.0)
+    }
+
+    /// Weight of the detail layer at a footprint (0: none).
+    #[inline(always)]
+    fn detail_weight(&self, footprint_m: f64) -> f64 {
+        if self.params.detail_contrast > 0.0 {
+            (3.0 - 2.0 * footprint_m * self.fine.inv_texel).min(1.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// Factor of the detail layer with weight `weight`.
+    #[inline(always)]
+    fn detail_factor(&self, x_m: f64, y_m: f64, footprint_m: f64, weight: f64) -> f64 {
+        let (s, c) = self.detail_rotation;
+        let (u, v) = (c * x_m - s * y_m, s * x_m + c * y_m);
+        let detail = self.detail.sample_nearest_level(u, v, footprint_m);
+        1.0 + weight * (2.0 * detail - 1.0)
+    }
+
+    /// [`Self::albedo_filtered`] of many points: `out[k]` for `(x_m[k], y_m[k],
+    /// footprint_m[k])` (bit-identical to the one-point form). The lookups of each layer run
+    /// as separate tight loops over up to 64 points, which lets the processor overlap their
+    /// memory accesses; the renderer calls this once per run of ground pixels.
+    pub fn albedo_filtered_batch(
+        &self,
+        x_m: &[f64],
+        y_m: &[f64],
+        footprint_m: &[f64],
+        out: &mut [f64],
+    ) {
+        let n = out
+            .len()
+            .min(x_m.len())
+            .min(y_m.len())
+            .min(footprint_m.len());
+        let fine_top = self.fine.levels.len() - 1;
+        let detail_top = self.detail.levels.len() - 1;
+        let detail_on = self.params.detail_contrast > 0.0;
+        let (sin, cos) = self.detail_rotation;
+        let mut level = [0u8; BATCH];
+        let mut blend = [0.0f64; BATCH];
+        // Detail points: index into the batch, level, weight.
+        let mut detail = [(0u8, 0u8, 0.0f64); BATCH];
+        for start in (0..n).step_by(BATCH) {
+            let end = (start + BATCH).min(n);
+            let x = &x_m[start..end];
+            let y = &y_m[start..end];
+            let f = &footprint_m[start..end];
+            let out = &mut out[start..end];
+            // Levels from one fast_log2 per point: its integer part is the exponent of the
+            // ratio footprint / texel and its fraction the mantissa (the same values as
+            // Pyramid::level_blend and Pyramid::nearest_level with a four times finer texel).
+            let mut details = 0;
+            for k in 0..out.len() {
+                let ratio = f[k] * self.fine.inv_texel;
+                let bits = ratio.to_bits();
+                let exponent = ((bits >> 52) & 0x7ff) as i64 - 1023;
+                let fraction =
+                    f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000) - 1.0;
+                let (i0, t) = if ratio <= 1.0 || exponent < 0 {
+                    (0, 0.0)
+                } else if exponent as usize >= fine_top {
+                    (fine_top, 0.0)
+                } else {
+                    (
+                        exponent as usize,
+                        ((fraction - 0.375) * 4.0).clamp(0.0, 1.0),
+                    )
+                };
+                level[k] = i0 as u8;
+                blend[k] = t;
+                let weight = (3.0 - 2.0 * ratio).min(1.0);
+                if detail_on && weight > 0.0 {
+                    // Detail texel = fine texel / 4: log2 of its ratio is exponent + 2 +
+                    // fraction, rounded to the nearest level.
+                    let d = if ratio * 4.0 > 1.414 {
+                        ((exponent + 2 + i64::from(fraction >= 0.5)).max(0) as usize)
+                            .min(detail_top)
+                    } else {
+                        0
+                    };
+                    detail[details] = (k as u8, d as u8, weight);
+                    details += 1;
+                }
+            }
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = self.fine.at_level(usize::from(level[k]), x[k], y[k]);
+            }
+            for (k, o) in out.iter_mut().enumerate() {
+                let t = blend[k];
+                if t > 0.0 {
+                    *o += t * (self.fine.at_level(usize::from(level[k]) + 1, x[k], y[k]) - *o);
+                }
+            }
+            for &(k, d, weight) in &detail[..details] {
+                let k = usize::from(k);
+                let (u, v) = (cos * x[k] - sin * y[k], sin * x[k] + cos * y[k]);
+                let value = self.detail.at_level(usize::from(d), u, v);
+                out[k] *= 1.0 + weight * (2.0 * value - 1.0);
+            }
+            for o in out.iter_mut() {
+                *o = o.clamp(0.0, 1.0);
+            }
+        }
     }
 }
 
@@ -491,8 +632,19 @@ impl<H: TerrainSurface> TerrainSurface for TexturedSurface<H> {
 }
 
 impl<H: TerrainSurface> FilteredAlbedo for TexturedSurface<H> {
+    #[inline(always)]
     fn albedo_filtered(&self, x_m: f64, y_m: f64, footprint_m: f64) -> f64 {
-        self.texture.albedo_filtered(x_m, y_m, footprint_m)
+        self.texture.filtered(x_m, y_m, footprint_m)
+    }
+    fn albedo_filtered_batch(
+        &self,
+        x_m: &[f64],
+        y_m: &[f64],
+        footprint_m: &[f64],
+        out: &mut [f64],
+    ) {
+        self.texture
+            .albedo_filtered_batch(x_m, y_m, footprint_m, out);
     }
 }
 
