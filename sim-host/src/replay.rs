@@ -73,7 +73,8 @@ pub fn replay(tape: &[u8]) -> anyhow::Result<ReplayOutcome> {
         telemetry: ReplayTelemetry::new(player.clone()),
     };
     let mut fsw = build_fsw(devices, &FlightSetup::from_header(&header))
-        .map_err(|e| anyhow::anyhow!("flight schedule refused: {e:?}"))?;
+        .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
+    fsw.start_vo();
     let mut text = String::new();
     let mut digests = Vec::new();
     while replay

@@ -66,6 +66,7 @@ pub fn run_still(frames: u64) -> anyhow::Result<RunSummary> {
     let fsw_config = FswConfig::rocky8([0.0; 3], 0.0);
     let mut fsw = Fsw::new(devices, &fsw_config, &[[0.0, 0.0], [1.0, 0.0]])
         .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
+    fsw.start_vo();
     for _ in 0..frames {
         fsw.tick();
         time.advance(u64::from(config.frame_period_us));

@@ -252,6 +252,7 @@ pub fn run_with<H: RunHooks>(
     let config = flight_config(scenario, &world.borrow(), !options.no_slip_comp);
     let mut fsw = Fsw::new(hooks.wrap(devices), &config, &scenario.waypoints)
         .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
+    fsw.start_vo();
     let mut source = if options.reference_driver {
         let mode = if options.no_slip_comp {
             DriverMode::OpenLoop

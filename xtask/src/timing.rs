@@ -527,9 +527,9 @@ fn document(
          recording decorator and wrote the call tape (`rover-replay`): the result of every device \
          call in call order, and the pixels of each stereo pair. The image reads it from the host \
          by semihosting. Phase 1 replays it through the flight software (`Fsw::tick` per minor \
-         frame, measured whole). Phase 2 runs the navigation modules on the tape's inputs the way \
-         the flight loop will once they are wired in (issue 7; `fsw/image/src/target/bench.rs`): \
-         every IMU sample, every joint reading, every stereo pair.\n\
+         frame, measured whole, the navigation in the loop). Phase 2 runs each navigation module \
+         on its own on the tape's inputs (`fsw/image/src/target/bench.rs`): every IMU sample, \
+         every joint reading, every stereo capture.\n\
          - **Instructions to time.** QEMU counts instructions, not cycles. Time = instructions x \
          CPI / clock, at the stated clock of **{:.0} MHz** and a CPI range of **{:.1} to {:.1}**. \
          The Cortex-M7 is a dual-issue, 6-stage in-order core: with code in ITCM and data in DTCM \
@@ -587,9 +587,11 @@ fn document(
     writeln!(d, "## Whole minor frames of the flight software (replay)\n")?;
     writeln!(
         d,
-        "`Fsw::tick` as it is today (executive, device reads and checks, status telemetry, stereo \
-         capture protocol; the navigation modules are not in the loop yet), by the groups that \
-         ran in the frame. Every frame runs RG1 and the background slot.\n"
+        "`Fsw::tick` (executive, device reads and checks, navigation tasks, telemetry, stereo \
+         capture, and the background slot's VO work items: `background_quantum` = 8 items per \
+         frame), by the groups that ran in the frame. Every frame runs RG1 and the background \
+         slot, so the largest frames are those where VO work items are heavy (image check, \
+         feature selection, tracking).\n"
     )?;
     writeln!(
         d,

@@ -296,6 +296,13 @@ impl<P: Platform> Fsw<P> {
         &self.state
     }
 
+    /// Build the visual odometry state (about 96 KB) in place: call once after the flight
+    /// software has reached its final location (a static on the rover CPU), before the first
+    /// tick. Without it VO stays off (the EKF runs on kinematics and IMU).
+    pub fn start_vo(&mut self) {
+        self.nav.start_vo();
+    }
+
     /// The navigator (estimates, slip, guidance output).
     pub fn nav(&self) -> &Navigator {
         &self.nav

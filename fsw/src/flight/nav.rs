@@ -253,11 +253,15 @@ pub struct Navigator {
     config: NavConfig,
     mode: NavMode,
     align: Alignment,
-    ekf: Option<Ekf>,
+    /// The filter; meaningful once `ekf_running` (alignment done). Kept inline and reset in
+    /// place so that starting it does not move 12 KB through the stack.
+    ekf: Ekf,
+    ekf_running: bool,
     odometry: KinematicOdometry,
     interval: Option<CloneHandle>,
     last_joints: Option<JointState>,
     vo: Option<VisualOdometry<VO_FEATURES>>,
+    calibration: StereoCalibration,
     key_clone: Option<CloneHandle>,
     stereo: StereoStage,
     guidance: Option<Guidance<MAX_WAYPOINTS>>,
@@ -293,8 +297,8 @@ fn yaw_of(q: &Quat) -> f64 {
 }
 
 impl Navigator {
-    /// A navigator for `path` (waypoints north, east in `N`, m) with `config`. The camera
-    /// calibration sets up VO; a calibration VO refuses leaves VO off (counted as a failure).
+    /// A navigator for `path` (waypoints north, east in `N`, m) with `config` and the camera
+    /// `calibration`. VO is not built here (see [`Self::start_vo`]).
     pub fn new(
         config: NavConfig,
         path: &[Point2],
@@ -312,30 +316,27 @@ impl Navigator {
             return Err(NavError::BadConfig);
         }
         let path = Path::<MAX_WAYPOINTS>::new(path).map_err(NavError::Path)?;
+        let ekf = Ekf::new(
+            config.ekf,
+            NominalState::at_rest(0),
+            &(CoreCov::identity() * 1.0e-6),
+        )
+        .map_err(|_| NavError::BadConfig)?;
         let guidance = Guidance::new(path, config.guidance).map_err(NavError::Guidance)?;
-        let mut counters = NavCounters::default();
-        let vo = if config.vo_enabled {
-            match VisualOdometry::new(config.vo, calibration) {
-                Ok(v) => Some(v),
-                Err(_) => {
-                    counters.vo_failures = 1;
-                    None
-                }
-            }
-        } else {
-            None
-        };
+        let counters = NavCounters::default();
         let p0 = Vec3::from(config.initial_position_n_m);
         let q0 = Quat::from_euler_angles(0.0, 0.0, config.initial_yaw_rad);
         Ok(Self {
             config,
             mode: NavMode::Aligning,
             align: Alignment::default(),
-            ekf: None,
+            ekf,
+            ekf_running: false,
             odometry: KinematicOdometry::new(config.geometry, config.odometry),
             interval: None,
             last_joints: None,
-            vo,
+            vo: None,
+            calibration: *calibration,
             key_clone: None,
             stereo: StereoStage::Idle,
             guidance: Some(guidance),
@@ -355,6 +356,20 @@ impl Navigator {
         })
     }
 
+    /// Build the visual odometry state (about 96 KB) in place, when [`NavConfig::vo_enabled`].
+    /// Call once after the navigator has reached its final location (a static on the rover
+    /// CPU), so that the large state is not copied through the stack by the constructors.
+    /// A calibration VO refuses leaves VO off (counted in [`NavCounters::vo_failures`]).
+    pub fn start_vo(&mut self) {
+        if !self.config.vo_enabled || self.vo.is_some() {
+            return;
+        }
+        match VisualOdometry::new(self.config.vo, &self.calibration) {
+            Ok(v) => self.vo = Some(v),
+            Err(_) => self.counters.vo_failures = self.counters.vo_failures.saturating_add(1),
+        }
+    }
+
     /// The current mode.
     pub fn mode(&self) -> NavMode {
         self.mode
@@ -362,7 +377,7 @@ impl Navigator {
 
     /// The EKF, once aligned.
     pub fn ekf(&self) -> Option<&Ekf> {
-        self.ekf.as_ref()
+        self.ekf_running.then_some(&self.ekf)
     }
 
     /// Counters.
@@ -422,7 +437,7 @@ impl Navigator {
     /// True when a capture may be triggered (VO enabled and idle, estimator running).
     pub fn wants_capture(&self) -> bool {
         self.vo.is_some()
-            && self.ekf.is_some()
+            && self.ekf_running
             && matches!(self.stereo, StereoStage::Idle)
             && self.mode != NavMode::Safed
     }
@@ -450,7 +465,7 @@ impl Navigator {
             self.accumulate_alignment(s);
             return;
         }
-        if let Some(ekf) = self.ekf.as_mut() {
+        if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
             if let Err(e) = ekf.propagate(s) {
                 self.ekf_error(e);
             }
@@ -511,13 +526,13 @@ impl Navigator {
         for (i, s) in diag.iter().enumerate() {
             p0[(i, i)] = s * s;
         }
-        match Ekf::new(self.config.ekf, x0, &p0) {
-            Ok(ekf) => {
+        match self.ekf.reset(x0, &p0) {
+            Ok(()) => {
                 self.kin3d = PoseEstimate {
                     p_n: x0.p_n,
                     q_nr: x0.q_nr,
                 };
-                self.ekf = Some(ekf);
+                self.ekf_running = true;
                 self.mode = NavMode::Driving;
             }
             Err(e) => {
@@ -545,7 +560,7 @@ impl Navigator {
                 self.kin2d[2] = crate::guidance::wrap_pi(self.kin2d[2] + dyaw);
             }
         }
-        let Some(ekf) = self.ekf.as_mut() else {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
         };
         let t_us = ekf.time_us();
@@ -638,7 +653,7 @@ impl Navigator {
             }
         }
         if self.is_stopped(j) {
-            if let Some(ekf) = self.ekf.as_mut() {
+            if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
                 match ekf.update_zero_velocity(t_us) {
                     Ok(()) => self.counters.zupts = self.counters.zupts.saturating_add(1),
                     Err(e) => self.ekf_error(e),
@@ -647,7 +662,7 @@ impl Navigator {
         }
         self.release(Some(start));
         self.interval = None;
-        if let Some(ekf) = self.ekf.as_mut() {
+        if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
             match ekf.clone_at(t_us) {
                 Ok(h) => self.interval = Some(h),
                 Err(_) => {
@@ -658,7 +673,7 @@ impl Navigator {
     }
 
     fn restart_interval(&mut self, j: &JointState, t_us: u64) {
-        let Some(ekf) = self.ekf.as_mut() else {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
         };
         if self.odometry.start(j).is_err() {
@@ -682,7 +697,7 @@ impl Navigator {
     }
 
     fn release(&mut self, handle: Option<CloneHandle>) {
-        if let (Some(h), Some(ekf)) = (handle, self.ekf.as_mut()) {
+        if let (Some(h), Some(ekf)) = (handle, self.ekf_running.then_some(&mut self.ekf)) {
             if ekf.release(h).is_err() {
                 self.counters.ekf_errors = self.counters.ekf_errors.saturating_add(1);
             }
@@ -703,7 +718,11 @@ impl Navigator {
             self.counters.sensor_holds = self.counters.sensor_holds.saturating_add(1);
             return None;
         }
-        let (ekf, guidance, joints) = match (&self.ekf, self.guidance.as_mut(), &self.last_joints) {
+        let (ekf, guidance, joints) = match (
+            self.ekf_running.then_some(&self.ekf),
+            self.guidance.as_mut(),
+            &self.last_joints,
+        ) {
             (Some(e), Some(g), Some(j)) => (e, g, *j),
             _ => return None,
         };
@@ -771,7 +790,7 @@ impl Navigator {
     /// RG3: a capture was triggered at `t_us` (camera time base = IMU time base). Clones the
     /// state there (eq. 41). Returns false when the capture cannot be used (no clone slot).
     pub fn capture_started(&mut self, t_us: u64) -> bool {
-        let Some(ekf) = self.ekf.as_mut() else {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return false;
         };
         match ekf.clone_at(t_us) {
@@ -850,7 +869,7 @@ impl Navigator {
         from: Option<CloneHandle>,
         to: Option<CloneHandle>,
     ) -> Option<RelativePose> {
-        let ekf = self.ekf.as_ref()?;
+        let ekf = self.ekf_running.then_some(&self.ekf)?;
         let (q0, p0) = ekf.clone_pose(from?).ok()?;
         let (q1, p1) = ekf.clone_pose(to?).ok()?;
         Some(RelativePose {
@@ -932,7 +951,8 @@ impl Navigator {
     }
 
     fn vo_fuse(&mut self, rp: &RelativePose) {
-        let (Some(key), Some(ekf)) = (self.key_clone, self.ekf.as_mut()) else {
+        let (Some(key), Some(ekf)) = (self.key_clone, self.ekf_running.then_some(&mut self.ekf))
+        else {
             return;
         };
         // VO-only dead reckoning, started at the first keyframe's EKF pose.
@@ -962,7 +982,7 @@ impl Navigator {
 
     /// RG4: one checked sun reading with the sun in view.
     pub fn sun(&mut self, reading: &SunReading) {
-        let Some(ekf) = self.ekf.as_mut() else {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
         };
         match ekf.update_sun(reading) {
@@ -977,7 +997,7 @@ impl Navigator {
 
     /// The EKF pose, or the configured start pose before alignment.
     pub fn pose(&self) -> PoseEstimate {
-        match &self.ekf {
+        match self.ekf_running.then_some(&self.ekf) {
             Some(e) => PoseEstimate {
                 p_n: e.state().p_n,
                 q_nr: e.state().q_nr,

@@ -53,9 +53,50 @@ fn install_fsw(fsw: Fsw<TargetPlatform>) -> Option<&'static mut Fsw<TargetPlatfo
     Some(unsafe { (*core::ptr::addr_of_mut!(FSW)).write(fsw) })
 }
 
+/// Build the flight software for `setup` around `devices`, move it into its static and build its
+/// VO state there. Not inlined, so that the constructors' large temporaries live in this frame
+/// only and the frames that follow run on a shallow stack.
+#[inline(never)]
+fn install_new_fsw(
+    devices: fsw::flight::Devices<TargetPlatform>,
+    setup: &fsw_image::flight_replay::FlightSetup,
+) -> Option<&'static mut Fsw<TargetPlatform>> {
+    let fsw = match fsw_image::flight_replay::build_fsw(devices, setup) {
+        Ok(f) => f,
+        Err(e) => {
+            report(format_args!(
+                "fsw-image: flight software refused its configuration: {e:?}\n"
+            ));
+            return None;
+        }
+    };
+    let Some(fsw) = install_fsw(fsw) else {
+        report(format_args!(
+            "fsw-image: flight software already installed\n"
+        ));
+        return None;
+    };
+    // The VO state is built in the static, not copied through the stack.
+    fsw.start_vo();
+    Some(fsw)
+}
+
 /// A `&'static mut` to a new static of type `$t` holding `$value` (evaluated once; `None` on a
-/// second call). Like `cortex_m::singleton!`, with the static in `.bss` (`MaybeUninit`).
+/// second call). Like `cortex_m::singleton!`, with the static in `.bss` (`MaybeUninit`), or in
+/// the external RAM `.extram` with `take_static!(extram, T, value)` (measurement harness state
+/// that is not part of the flight software's RAM budget).
 macro_rules! take_static {
+    (extram, $t:ty, $value:expr) => {{
+        static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
+        #[link_section = ".extram"]
+        static mut SLOT: core::mem::MaybeUninit<$t> = core::mem::MaybeUninit::uninit();
+        if TAKEN.swap(true, core::sync::atomic::Ordering::AcqRel) {
+            None
+        } else {
+            // SAFETY: the flag above makes this the only reference ever made to SLOT.
+            Some(unsafe { (*core::ptr::addr_of_mut!(SLOT)).write($value) })
+        }
+    }};
     ($t:ty, $value:expr) => {{
         static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);
         static mut SLOT: core::mem::MaybeUninit<$t> = core::mem::MaybeUninit::uninit();

@@ -6,12 +6,12 @@ use super::devices::{
     self, take_image_buffers, ExtramStereo, SystickClock, TargetCamera, TargetClock, TargetImu,
     TargetMobility, TargetPlatform, TargetSun, TargetTelemetry,
 };
-use super::{install_fsw, report, CORE_CLOCK_HZ, SYSTICKS};
+use super::{report, CORE_CLOCK_HZ, SYSTICKS};
 use core::sync::atomic::Ordering;
 use cortex_m::peripheral::syst::SystClkSource;
 use fsw::exec::ExecConfig;
 use fsw::flight::{Devices, SCHEDULE_GROUPS};
-use fsw_image::flight_replay::{build_fsw, FlightSetup};
+use fsw_image::flight_replay::FlightSetup;
 
 /// Minor frames to run: 10 s at 200 Hz.
 const FRAMES: u32 = 2_000;
@@ -36,19 +36,7 @@ pub fn run(mut core: cortex_m::Peripherals) -> bool {
         sun: TargetSun::Still(devices::FixedSun::new(&SYSTICKS)),
         telemetry: TargetTelemetry::Counting(devices::CountingTelemetry::default()),
     };
-    let fsw = match build_fsw(devices, &FlightSetup::still()) {
-        Ok(f) => f,
-        Err(e) => {
-            report(format_args!(
-                "fsw-image: flight software refused its configuration: {e:?}\n"
-            ));
-            return false;
-        }
-    };
-    let Some(fsw) = install_fsw(fsw) else {
-        report(format_args!(
-            "fsw-image: flight software already installed\n"
-        ));
+    let Some(fsw) = super::install_new_fsw(devices, &FlightSetup::still()) else {
         return false;
     };
     report(format_args!(

@@ -13,12 +13,12 @@ use super::measure::{
     repaint_stack, stack_high_water, stack_region, Meter, Stats, INSNS_PER_COUNT,
 };
 use super::semihost::HostFile;
-use super::{install_fsw, report, CORE_CLOCK_HZ, SYSTICKS};
+use super::{report, CORE_CLOCK_HZ, SYSTICKS};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_semihosting::hio;
 use fsw::exec::ExecConfig;
 use fsw::flight::{Devices, GROUP_COUNT};
-use fsw_image::flight_replay::{build_fsw, FlightSetup, Replay};
+use fsw_image::flight_replay::{FlightSetup, Replay};
 use rover_replay::devices::{
     ReplayClock, ReplayImu, ReplayMobility, ReplayStereo, ReplaySun, ReplayTelemetry,
 };
@@ -131,19 +131,7 @@ pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
         sun: TargetSun::Replay(ReplaySun::new(tape)),
         telemetry: TargetTelemetry::Replay(ReplayTelemetry::new(tape)),
     };
-    let fsw = match build_fsw(devices, &FlightSetup::from_header(&header)) {
-        Ok(f) => f,
-        Err(e) => {
-            report(format_args!(
-                "fsw-image: flight software refused its configuration: {e:?}\n"
-            ));
-            return false;
-        }
-    };
-    let Some(fsw) = install_fsw(fsw) else {
-        report(format_args!(
-            "fsw-image: flight software already installed\n"
-        ));
+    let Some(fsw) = super::install_new_fsw(devices, &FlightSetup::from_header(&header)) else {
         return false;
     };
     let Some(bench) = Bench::install(&header, [b4, b5]) else {
