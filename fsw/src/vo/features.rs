@@ -186,6 +186,17 @@ impl ForstnerDetector {
     /// Compacts the non-empty cells and sorts them by descending interest (heap sort: bounded,
     /// no recursion; ties keep a deterministic order). Returns the number of candidates.
     pub fn sort_candidates(&mut self) -> usize {
+        let count = self.compact_candidates();
+        let list = self.cells.get_mut(..count).unwrap_or(&mut []);
+        heap_sort_descending(list);
+        count
+    }
+
+    /// First step of an incremental [`Self::sort_candidates`]: compacts the non-empty cells to
+    /// the front and returns their number `n`. Then [`Self::heapify_step`] for `start` from
+    /// `n / 2 - 1` down to 0, then [`Self::sort_step`] for `end` from `n - 1` down to 1 give the
+    /// same order as [`Self::sort_candidates`].
+    pub fn compact_candidates(&mut self) -> usize {
         let mut count = 0usize;
         for k in 0..CELL_COUNT {
             let Some(&c) = self.cells.get(k) else { break };
@@ -196,10 +207,27 @@ impl ForstnerDetector {
                 count += 1;
             }
         }
-        let list = self.cells.get_mut(..count).unwrap_or(&mut []);
-        heap_sort_descending(list);
         self.candidate_count = count;
         count
+    }
+
+    /// One heap-building step of the incremental sort (see [`Self::compact_candidates`]).
+    pub fn heapify_step(&mut self, start: usize) {
+        let n = self.candidate_count;
+        if let Some(list) = self.cells.get_mut(..n) {
+            sift_down(list, start, n);
+        }
+    }
+
+    /// One sort-down step of the incremental sort (see [`Self::compact_candidates`]).
+    pub fn sort_step(&mut self, end: usize) {
+        let n = self.candidate_count;
+        if let Some(list) = self.cells.get_mut(..n) {
+            if end < n {
+                list.swap(0, end);
+                sift_down(list, 0, end);
+            }
+        }
     }
 
     /// The sorted candidates (after [`Self::sort_candidates`]).
@@ -255,6 +283,35 @@ pub fn heap_sort_descending(list: &mut [Candidate]) {
         list.swap(0, end);
         sift_down(list, 0, end);
     }
+}
+
+/// Greedy selection continued over another chunk of the sorted candidates: `out[..count]`
+/// holds the features kept so far; returns the new count (see [`select_with_min_distance`]).
+pub fn select_more(
+    candidates: &[Candidate],
+    min_distance_px: f32,
+    out: &mut [(u16, u16)],
+    count: usize,
+) -> usize {
+    let min_d2 = min_distance_px * min_distance_px;
+    let mut count = count.min(out.len());
+    for c in candidates {
+        if count >= out.len() {
+            break;
+        }
+        let far = out.get(..count).unwrap_or(&[]).iter().all(|&(x, y)| {
+            let dx = f32::from(x) - f32::from(c.x);
+            let dy = f32::from(y) - f32::from(c.y);
+            dx * dx + dy * dy >= min_d2
+        });
+        if far {
+            if let Some(slot) = out.get_mut(count) {
+                *slot = (c.x, c.y);
+                count += 1;
+            }
+        }
+    }
+    count
 }
 
 /// Greedy selection (H04 sec. 2): walks the sorted candidates and keeps each one at least

@@ -2,13 +2,14 @@
 //! features) and advances one update by a bounded number of work items per
 //! [`VisualOdometry::step`], so the executive can run it in the slack of its minor frames.
 //!
-//! Work items (each bounded, see `docs/vo.md`): image check (1), track and stereo match one
-//! previous feature (1 each), one least-median-of-squares hypothesis (1 each), one
+//! Work items (each bounded, see `docs/vo.md`): image check (2: left, right), track and stereo
+//! match one previous feature (1 each), one least-median-of-squares hypothesis (1 each), one
 //! maximum-likelihood iteration (1 each), one image row of the Forstner operator (1 each, 464
-//! rows), sort and select the features (1), stereo match one new feature (1 each), finish (1).
+//! rows), compact the candidates (1), sort them (chunks of 64 heap steps), select the features
+//! (chunks of 64 candidates), stereo match one new feature (1 each), finish (1).
 //! The sequence of items depends only on the input, so the number of steps is deterministic.
 
-use super::features::{select_with_min_distance, ForstnerDetector, END_ROW, FIRST_ROW};
+use super::features::{select_more, ForstnerDetector, CELL_COUNT, END_ROW, FIRST_ROW};
 use super::image::{Image, Template};
 use super::motion::{
     finish_estimate, inlier_gate, mark_inliers, ml_iteration, relative_pose, CameraMount,
@@ -19,6 +20,9 @@ use super::track::{refine_warp, search_window, Affine2, WarpModel};
 use super::{VoConfig, VoError, VoOutput, VoQuality, TEMPLATE_PIXELS};
 use crate::types::{Mat3, RelativePose, Vec3};
 use rover_hal::{StereoCalibration, StereoFrame};
+
+/// Heap steps or candidates handled by one work item of the feature sort and selection.
+const SORT_CHUNK: usize = 64;
 
 /// Iterations of the maximum-likelihood rounds are capped at this many per round.
 const MAX_ML_ITERATIONS: u8 = 50;
@@ -44,11 +48,15 @@ impl Default for KeyFeature {
 enum Phase {
     Idle,
     Check,
+    CheckRight { left_sum: u64 },
     Track { next: usize },
     Hypotheses { done: u16 },
     Refine { round: u8, iteration: u8 },
     Detect { row: usize },
     Select,
+    Heapify { next: usize },
+    SortDown { end: usize },
+    Choose { next: usize },
     StereoNew { next: usize },
     Finish,
 }
@@ -259,7 +267,8 @@ impl<const N: usize> VisualOdometry<N> {
             + usize::from(super::MAX_HYPOTHESES)
             + (usize::from(ML_ROUNDS) + 1) * usize::from(MAX_ML_ITERATIONS)
             + END_ROW
-            + 8;
+            + 3 * CELL_COUNT / SORT_CHUNK
+            + 16;
         for _ in 0..bound {
             if let Progress::Finished(result) = self.step(frame, 64) {
                 return result;
@@ -279,11 +288,15 @@ impl<const N: usize> VisualOdometry<N> {
     fn work_item(&mut self, left: &Image, right: &Image) -> Option<Result<VoOutput, VoError>> {
         match self.phase {
             Phase::Idle => return Some(Err(VoError::NotStarted)),
-            Phase::Check => {
-                let checks = left.check(&self.config).and_then(|sum| {
-                    right.check(&self.config)?;
-                    Ok(sum)
-                });
+            Phase::Check => match left.check(&self.config) {
+                Ok(left_sum) => self.phase = Phase::CheckRight { left_sum },
+                Err(e) => {
+                    self.key_valid = false;
+                    return Some(Err(e));
+                }
+            },
+            Phase::CheckRight { left_sum } => {
+                let checks = right.check(&self.config).map(|_| left_sum);
                 match checks {
                     Ok(sum) if self.key_valid && sum == self.key_checksum => {
                         self.key_valid = false;
@@ -338,13 +351,51 @@ impl<const N: usize> VisualOdometry<N> {
                 }
             }
             Phase::Select => {
-                self.detector.sort_candidates();
-                let count = select_with_min_distance(
-                    self.detector.candidates(),
+                // Sort and select in bounded chunks (at most SORT_CHUNK heap steps or
+                // candidates per item), the same operations in the same order as one sort.
+                let n = self.detector.compact_candidates();
+                self.selected_count = 0;
+                self.phase = Phase::Heapify { next: n / 2 };
+            }
+            Phase::Heapify { next } => {
+                let stop = next.saturating_sub(SORT_CHUNK);
+                for start in (stop..next).rev() {
+                    self.detector.heapify_step(start);
+                }
+                self.phase = if stop == 0 {
+                    Phase::SortDown {
+                        end: self.detector.candidates().len(),
+                    }
+                } else {
+                    Phase::Heapify { next: stop }
+                };
+            }
+            Phase::SortDown { end } => {
+                let stop = end.saturating_sub(SORT_CHUNK).max(1);
+                for e in (stop..end).rev() {
+                    self.detector.sort_step(e);
+                }
+                self.phase = if stop <= 1 {
+                    Phase::Choose { next: 0 }
+                } else {
+                    Phase::SortDown { end: stop }
+                };
+            }
+            Phase::Choose { next } => {
+                let candidates = self.detector.candidates();
+                let stop = (next + SORT_CHUNK).min(candidates.len());
+                let chunk = candidates.get(next..stop).unwrap_or(&[]);
+                let count = select_more(
+                    chunk,
                     self.config.min_distance_px,
                     &mut self.selected,
+                    self.selected_count,
                 );
                 self.selected_count = count;
+                if stop < candidates.len() && count < self.selected.len() {
+                    self.phase = Phase::Choose { next: stop };
+                    return None;
+                }
                 self.quality.features = count as u16;
                 self.key_valid = false;
                 self.key_count = 0;
