@@ -40,6 +40,7 @@ mod fusion;
 pub mod gate;
 mod propagate;
 mod relative_pose;
+pub mod replay;
 pub mod state;
 mod sun_sensor;
 mod zupt;
@@ -50,6 +51,7 @@ mod tests;
 pub use clone::CloneHandle;
 pub use gate::{GateDecision, CHI2_95};
 pub use propagate::PropagationStep;
+pub use replay::Recorder;
 pub use state::{CoreCov, Cov, NominalState, CLONE_DIM, CORE_DIM, DIM, MAX_CLONES};
 pub use sun_sensor::SunUpdate;
 
@@ -231,6 +233,18 @@ impl Ekf {
         self.hold = None;
         self.fault = false;
         Ok(())
+    }
+
+    /// Make this filter a copy of `other`, in place (field by field: no 12 KB temporary on the
+    /// stack, unlike `clone_from`).
+    pub fn copy_from(&mut self, other: &Ekf) {
+        self.config = other.config;
+        self.x = other.x;
+        self.p.copy_from(&other.p);
+        self.clones = other.clones;
+        self.next_serial = other.next_serial;
+        self.hold = other.hold;
+        self.fault = other.fault;
     }
 
     /// The nominal (estimated) state.

@@ -31,7 +31,7 @@
 //! is zero. The EKF, gate and VO still run and are reported, so the downhill bias between the
 //! VO-aided estimate and the kinematic pose is visible.
 
-use crate::estimation::{CloneHandle, CoreCov, Ekf, EkfConfig, EstError, NominalState};
+use crate::estimation::{CloneHandle, CoreCov, Ekf, EkfConfig, EstError, NominalState, Recorder};
 use crate::guidance::{
     Guidance, GuidanceCommand, GuidanceConfig, GuidanceError, Path, Point2, Pose2, SlipVector,
 };
@@ -197,6 +197,8 @@ pub struct NavCounters {
     pub vo_updates: u32,
     /// VO updates fused into the EKF.
     pub vo_fused: u32,
+    /// Of those, applied at capture time and replayed to the present ([`Recorder`]).
+    pub vo_replayed: u32,
     /// VO attempts that failed (after the first keyframe).
     pub vo_failures: u32,
     /// VO relative poses fused with `d_m^2 > vo_warn_d2` (the estimate had drifted).
@@ -263,6 +265,8 @@ pub struct Navigator {
     vo: Option<VisualOdometry<VO_FEATURES>>,
     calibration: StereoCalibration,
     key_clone: Option<CloneHandle>,
+    /// Filter operations since the pending capture, for the exact late VO update.
+    recorder: Recorder,
     stereo: StereoStage,
     guidance: Option<Guidance<MAX_WAYPOINTS>>,
     slip: SlipVector,
@@ -338,6 +342,7 @@ impl Navigator {
             vo: None,
             calibration: *calibration,
             key_clone: None,
+            recorder: Recorder::new(),
             stereo: StereoStage::Idle,
             guidance: Some(guidance),
             slip: SlipVector::default(),
@@ -465,8 +470,10 @@ impl Navigator {
             self.accumulate_alignment(s);
             return;
         }
-        if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
-            if let Err(e) = ekf.propagate(s) {
+        if self.ekf_running {
+            let result = self.ekf.propagate(s);
+            self.recorder.propagate(s);
+            if let Err(e) = result {
                 self.ekf_error(e);
             }
         }
@@ -613,10 +620,12 @@ impl Navigator {
             rp.covariance[(3, 3)] += (f * step) * (f * step);
             rp.covariance[(4, 4)] += (f * step) * (f * step);
             rp.covariance[(2, 2)] += (f * yaw) * (f * yaw) + 1.0e-8;
+            self.recorder.relative_pose(&rp, false);
             ekf.update_relative_pose(&rp, false)
         } else if holding {
             ekf.gate_relative_pose(&rp)
         } else {
+            self.recorder.relative_pose(&rp, true);
             ekf.update_relative_pose(&rp, true)
         };
         match result {
@@ -654,7 +663,9 @@ impl Navigator {
         }
         if self.is_stopped(j) {
             if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
-                match ekf.update_zero_velocity(t_us) {
+                let result = ekf.update_zero_velocity(t_us);
+                self.recorder.zero_velocity(t_us);
+                match result {
                     Ok(()) => self.counters.zupts = self.counters.zupts.saturating_add(1),
                     Err(e) => self.ekf_error(e),
                 }
@@ -663,7 +674,9 @@ impl Navigator {
         self.release(Some(start));
         self.interval = None;
         if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
-            match ekf.clone_at(t_us) {
+            let result = ekf.clone_at(t_us);
+            self.recorder.clone_at(t_us);
+            match result {
                 Ok(h) => self.interval = Some(h),
                 Err(_) => {
                     self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
@@ -680,7 +693,9 @@ impl Navigator {
             self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
             return;
         }
-        match ekf.clone_at(t_us) {
+        let result = ekf.clone_at(t_us);
+        self.recorder.clone_at(t_us);
+        match result {
             Ok(h) => self.interval = Some(h),
             Err(_) => self.counters.kin_errors = self.counters.kin_errors.saturating_add(1),
         }
@@ -698,6 +713,7 @@ impl Navigator {
 
     fn release(&mut self, handle: Option<CloneHandle>) {
         if let (Some(h), Some(ekf)) = (handle, self.ekf_running.then_some(&mut self.ekf)) {
+            self.recorder.release(h.t_us());
             if ekf.release(h).is_err() {
                 self.counters.ekf_errors = self.counters.ekf_errors.saturating_add(1);
             }
@@ -796,6 +812,9 @@ impl Navigator {
         match ekf.clone_at(t_us) {
             Ok(h) => {
                 self.stereo = StereoStage::Capturing { clone: Some(h) };
+                // Record from here on, so that the VO result can be applied at capture time
+                // exactly (replay) however late it arrives.
+                self.recorder.begin(&self.ekf);
                 true
             }
             Err(_) => {
@@ -813,6 +832,7 @@ impl Navigator {
 
     /// The capture was lost (camera error or timeout): its clone is released.
     pub fn capture_lost(&mut self) {
+        self.recorder.end();
         let clone = match self.stereo {
             StereoStage::Capturing { clone } | StereoStage::Processing { clone, .. } => clone,
             StereoStage::Idle => None,
@@ -968,7 +988,16 @@ impl Navigator {
         // VO is fused without the gate: it rejects its own outliers (LMedS, H04 sec. 2) and it
         // is the measurement that corrects an estimate slip has pulled away; a large distance
         // is counted for the ground.
-        match ekf.update_relative_pose(rp, false) {
+        // Applied at capture time and replayed to now when the recording since the capture is
+        // complete (exact); otherwise at the capture clones (exact there, first order now).
+        let result = if self.recorder.active() {
+            self.counters.vo_replayed = self.counters.vo_replayed.saturating_add(1);
+            self.recorder.apply_late(ekf, rp, false)
+        } else {
+            self.recorder.end();
+            ekf.update_relative_pose(rp, false)
+        };
+        match result {
             Ok(d) => {
                 self.counters.vo_fused = self.counters.vo_fused.saturating_add(1);
                 if d.d2 > self.config.vo_warn_d2 {
@@ -985,7 +1014,9 @@ impl Navigator {
         let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
         };
-        match ekf.update_sun(reading) {
+        let result = ekf.update_sun(reading);
+        self.recorder.sun(reading);
+        match result {
             Ok(u) if u.applied => {
                 self.counters.sun_applied = self.counters.sun_applied.saturating_add(1)
             }

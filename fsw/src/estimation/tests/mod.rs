@@ -483,6 +483,96 @@ fn est_6_late_vo_equals_update_at_capture() {
     assert!(d.fixed_rows::<3>(I_BG).norm() < 1e-9 && d.fixed_rows::<3>(I_BA).norm() < 1e-9);
 }
 
+/// EST-6b: with a [`super::Recorder`] started at the capture, the late VO update restores the
+/// filter at capture time, applies the update there and replays what happened since (IMU
+/// samples, a kinematic interval with its clone and release): the current state and covariance
+/// equal, to 1e-9, those of the filter that applied the same update at capture time.
+#[test]
+fn est_6b_late_vo_by_replay_equals_update_at_capture() {
+    let motion = Motion::drive(0.1);
+    let mut rng = ChaCha8Rng::seed_from_u64(61);
+    let mut truth = Truth::new(
+        motion,
+        5_000,
+        Vector3::new(3e-5, -2e-5, 4e-5),
+        Vector3::new(2e-3, -1e-3, 3e-3),
+    );
+    let sc = harness::Scenario::drive();
+    let ekf = harness::init_filter(&sc, &truth, &mut rng);
+    let mut samples = std::vec::Vec::new();
+    let mut truth_poses = std::vec::Vec::new();
+    for _ in 0..600 {
+        truth.advance(&mut rng);
+        samples.push(truth.imu(&mut rng));
+        truth_poses.push(truth.pose);
+    }
+    let (capture0, capture1, kin0, kin1, arrival) = (100usize, 300, 320, 330, 400);
+    let vo = relative_pose(
+        &truth_poses[capture0],
+        &truth_poses[capture1],
+        &[2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3],
+        [true; 6],
+        Vector3::new(0.004, 0.0, 0.0),
+        &mut rng,
+    );
+    let kin = relative_pose(
+        &truth_poses[kin0],
+        &truth_poses[kin1],
+        &[1e-3, 1e-3, 1e-3, 1e-3, 1e-3, 1e-3],
+        [true, true, true, true, true, false],
+        Vector3::zeros(),
+        &mut rng,
+    );
+    // Live filter with a recorder; the reference applies VO at capture time.
+    let mut live = ekf.clone();
+    let mut reference = ekf.clone();
+    let mut recorder = super::Recorder::new();
+    for (k, s) in samples.iter().enumerate().take(arrival + 1) {
+        live.propagate(s).unwrap();
+        reference.propagate(s).unwrap();
+        if recorder.active() {
+            recorder.propagate(s);
+        }
+        if k == capture0 || k == capture1 {
+            live.clone_at(s.t_us).unwrap();
+            reference.clone_at(s.t_us).unwrap();
+        }
+        if k == capture1 {
+            recorder.begin(&live);
+            reference.update_relative_pose(&vo, false).unwrap();
+        }
+        if k == kin0 {
+            for f in [&mut live, &mut reference] {
+                f.clone_at(s.t_us).unwrap();
+            }
+            recorder.clone_at(s.t_us);
+        }
+        if k == kin1 {
+            for f in [&mut live, &mut reference] {
+                f.update_relative_pose(&kin, true).unwrap();
+                let h = f.clone_handle(kin.t0_us).unwrap();
+                f.release(h).unwrap();
+            }
+            recorder.relative_pose(&kin, true);
+            recorder.release(kin.t0_us);
+        }
+    }
+    assert!(recorder.active() && !recorder.overflowed());
+    let d = recorder.apply_late(&mut live, &vo, false).unwrap();
+    assert!(d.applied);
+    let diff = core_diff(live.state(), reference.state());
+    std::println!("late VO by replay vs at-capture: {:?}", diff.as_slice());
+    assert!(diff.norm() <= 1e-9, "state differs: {diff:?}");
+    let dp = (live.covariance() - reference.covariance()).amax();
+    assert!(dp <= 1e-9, "covariance differs by {dp}");
+    assert_eq!(live.clone_count(), reference.clone_count());
+    assert!(!recorder.active());
+    // Without a recording the late update is refused and the filter is unchanged.
+    let before = live.state().p_n;
+    assert!(recorder.apply_late(&mut live, &vo, false).is_err());
+    assert_eq!(live.state().p_n, before);
+}
+
 /// EST-7: chi-square table (H04 eq. 46; kinematic odometry 5 dof, 11.07).
 #[test]
 fn est_7_chi_square_table() {
