@@ -118,6 +118,24 @@ fn flag(b: bool) -> Option<f64> {
     Some(if b { 1.0 } else { 0.0 })
 }
 
+/// Requirement: the rover reached the goal within the scenario's tolerance.
+const GOAL_REACHED: Check = req(
+    "goal reached",
+    |s| flag(s.goal_reached),
+    Compare::AtLeast,
+    1.0,
+    "",
+);
+
+/// Goal (issue 7): EKF final error at most 0.5 % of the distance.
+const EKF_HALF_PERCENT: Check = goal(
+    "EKF error / distance",
+    |s| s.error_pct.ekf,
+    Compare::AtMost,
+    0.5,
+    "%",
+);
+
 /// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
 pub const CASES: [Case; 7] = [
     Case {
@@ -196,20 +214,8 @@ pub const CASES: [Case; 7] = [
                 2.0,
                 "deg",
             ),
-            req(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
-            goal(
-                "EKF error / distance",
-                |s| s.error_pct.ekf,
-                Compare::AtMost,
-                0.5,
-                "%",
-            ),
+            GOAL_REACHED,
+            EKF_HALF_PERCENT,
         ],
     },
     Case {
@@ -240,13 +246,7 @@ pub const CASES: [Case; 7] = [
         no_slip_comp: false,
         title: "20 deg sand cross slope: heavy slip, the gate rejects kinematics",
         checks: &[
-            req(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
+            GOAL_REACHED,
             req(
                 "gate rejection fraction",
                 |s| s.slip.gate_reject_fraction,
@@ -269,13 +269,7 @@ pub const CASES: [Case; 7] = [
         no_slip_comp: false,
         title: "10 deg slope with black frames, IMU dropout, NaN joints and no sun: fallbacks",
         checks: &[
-            req(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
+            GOAL_REACHED,
             req(
                 "cross-track max",
                 |s| Some(s.cross_track_m.max),
@@ -318,22 +312,7 @@ pub const CASES: [Case; 7] = [
         scenario: "dunes-long",
         no_slip_comp: false,
         title: "over 50 m across 15-25 deg sandy dunes",
-        checks: &[
-            req(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
-            goal(
-                "EKF error / distance",
-                |s| s.error_pct.ekf,
-                Compare::AtMost,
-                0.5,
-                "%",
-            ),
-        ],
+        checks: &[GOAL_REACHED, EKF_HALF_PERCENT],
     },
 ];
 

@@ -321,25 +321,7 @@ pub fn select_with_min_distance(
     min_distance_px: f32,
     out: &mut [(u16, u16)],
 ) -> usize {
-    let min_d2 = min_distance_px * min_distance_px;
-    let mut count = 0usize;
-    for c in candidates {
-        if count >= out.len() {
-            break;
-        }
-        let far = out.get(..count).unwrap_or(&[]).iter().all(|&(x, y)| {
-            let dx = f32::from(x) - f32::from(c.x);
-            let dy = f32::from(y) - f32::from(c.y);
-            dx * dx + dy * dy >= min_d2
-        });
-        if far {
-            if let Some(slot) = out.get_mut(count) {
-                *slot = (c.x, c.y);
-                count += 1;
-            }
-        }
-    }
-    count
+    select_more(candidates, min_distance_px, out, 0)
 }
 
 #[cfg(test)]
