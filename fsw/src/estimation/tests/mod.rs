@@ -394,14 +394,18 @@ fn est_5_clone_window_reference_counting() {
     assert!(ekf.clone_handle(5_000).is_none());
 }
 
-/// EST-6: a VO result that arrives frames after its capture, applied at the capture clones,
-/// gives the same clone states, residual and `d_m^2` (to 1e-9) as the same update applied at
-/// capture time; the current state receives the correction through the cross-covariance and
-/// differs from "update at capture, then propagate" only at second order.
-#[test]
-fn est_6_late_vo_equals_update_at_capture() {
+/// A filter initialised on a 0.1 m/s drive and 600 IMU samples (3 s) of it with their true
+/// poses (EST-6, EST-6b).
+fn late_vo_drive(
+    seed: u64,
+) -> (
+    Ekf,
+    std::vec::Vec<ImuSample>,
+    std::vec::Vec<truth::TruePose>,
+    ChaCha8Rng,
+) {
     let motion = Motion::drive(0.1);
-    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut truth = Truth::new(
         motion,
         5_000,
@@ -417,6 +421,16 @@ fn est_6_late_vo_equals_update_at_capture() {
         samples.push(truth.imu(&mut rng));
         truth_poses.push(truth.pose);
     }
+    (ekf, samples, truth_poses, rng)
+}
+
+/// EST-6: a VO result that arrives frames after its capture, applied at the capture clones,
+/// gives the same clone states, residual and `d_m^2` (to 1e-9) as the same update applied at
+/// capture time; the current state receives the correction through the cross-covariance and
+/// differs from "update at capture, then propagate" only at second order.
+#[test]
+fn est_6_late_vo_equals_update_at_capture() {
+    let (ekf, samples, truth_poses, mut rng) = late_vo_drive(6);
     let (capture0, capture1, arrival) = (100usize, 300usize, 340usize);
     let poses = [truth_poses[capture0], truth_poses[capture1]];
     let mut late = ekf.clone();
@@ -489,23 +503,7 @@ fn est_6_late_vo_equals_update_at_capture() {
 /// equal, to 1e-9, those of the filter that applied the same update at capture time.
 #[test]
 fn est_6b_late_vo_by_replay_equals_update_at_capture() {
-    let motion = Motion::drive(0.1);
-    let mut rng = ChaCha8Rng::seed_from_u64(61);
-    let mut truth = Truth::new(
-        motion,
-        5_000,
-        Vector3::new(3e-5, -2e-5, 4e-5),
-        Vector3::new(2e-3, -1e-3, 3e-3),
-    );
-    let sc = harness::Scenario::drive();
-    let ekf = harness::init_filter(&sc, &truth, &mut rng);
-    let mut samples = std::vec::Vec::new();
-    let mut truth_poses = std::vec::Vec::new();
-    for _ in 0..600 {
-        truth.advance(&mut rng);
-        samples.push(truth.imu(&mut rng));
-        truth_poses.push(truth.pose);
-    }
+    let (ekf, samples, truth_poses, mut rng) = late_vo_drive(61);
     let (capture0, capture1, kin0, kin1, arrival) = (100usize, 300, 320, 330, 400);
     let vo = relative_pose(
         &truth_poses[capture0],
