@@ -183,7 +183,7 @@ pub enum EstError {
     Faulted,
 }
 
-/// The error-state EKF with its clone window (H04 sec. 4). About 12 KB, all inline.
+/// The error-state EKF with its clone window (H04 sec. 4). About 9 KB, all inline.
 #[derive(Debug, Clone)]
 pub struct Ekf {
     pub(crate) config: EkfConfig,
@@ -235,7 +235,7 @@ impl Ekf {
         Ok(())
     }
 
-    /// Make this filter a copy of `other`, in place (field by field: no 12 KB temporary on the
+    /// Make this filter a copy of `other`, in place (field by field: no 9 KB temporary on the
     /// stack, unlike `clone_from`).
     pub fn copy_from(&mut self, other: &Ekf) {
         self.config = other.config;

@@ -4,7 +4,7 @@
 //! Applied at the capture clones (eq. 41-45), a late relative pose gives the clone states of an
 //! update at capture time exactly, but the current state only to first order (it receives the
 //! correction through the cross-covariance, linearised along the uncorrected trajectory). A
-//! [`Recorder`] makes it exact: at the capture it keeps a copy of the filter (about 13 KB),
+//! [`Recorder`] makes it exact: at the capture it keeps a copy of the filter (about 9 KB),
 //! then records every operation applied to the filter until the result arrives (IMU samples,
 //! relative poses with their gating, zero-velocity and sun updates, clones and releases, in
 //! order, fixed capacities). [`Recorder::apply_late`] restores the copy, applies the late

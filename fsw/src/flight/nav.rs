@@ -256,7 +256,7 @@ pub struct Navigator {
     mode: NavMode,
     align: Alignment,
     /// The filter; meaningful once `ekf_running` (alignment done). Kept inline and reset in
-    /// place so that starting it does not move 12 KB through the stack.
+    /// place so that starting it does not move 9 KB through the stack.
     ekf: Ekf,
     ekf_running: bool,
     odometry: KinematicOdometry,
