@@ -127,9 +127,12 @@ impl NavConfig {
             accel_bias_sigma_m_s2: 1.0e-2,
             odometry: OdometryConfig::default(),
             // The EKF prior predicts each feature within a few pixels over a 1 s step, so the
-            // tracking window is 8 px, not the stand-alone default of 24 px (9x less work).
+            // tracking window is 8 px, not the stand-alone default of 24 px (9x less work), and
+            // the stereo search of a tracked feature covers +-8 px around the disparity of the
+            // predicted point instead of all 128 disparities.
             vo: VoConfig {
                 search_radius_px: 8,
+                track_disparity_margin_px: 8,
                 ..VoConfig::default()
             },
             vo_enabled: true,

@@ -45,9 +45,7 @@ pub struct Candidate {
 /// window rows, and the best candidate per grid cell.
 #[derive(Debug, Clone)]
 pub struct ForstnerDetector {
-    col_xx: [i32; IMAGE_WIDTH_PX],
-    col_yy: [i32; IMAGE_WIDTH_PX],
-    col_xy: [i32; IMAGE_WIDTH_PX],
+    columns: ColumnSums,
     cells: [Candidate; CELL_COUNT],
     candidate_count: usize,
 }
@@ -55,53 +53,81 @@ pub struct ForstnerDetector {
 impl Default for ForstnerDetector {
     fn default() -> Self {
         Self {
-            col_xx: [0; IMAGE_WIDTH_PX],
-            col_yy: [0; IMAGE_WIDTH_PX],
-            col_xy: [0; IMAGE_WIDTH_PX],
+            columns: [[0; 3]; IMAGE_WIDTH_PX],
             cells: [Candidate::default(); CELL_COUNT],
             candidate_count: 0,
         }
     }
 }
 
-/// Adds `sign` times the gradient products of image row `y` to the column sums.
-fn accumulate_row(
-    image: &Image,
-    y: usize,
-    sign: i32,
-    col_xx: &mut [i32; IMAGE_WIDTH_PX],
-    col_yy: &mut [i32; IMAGE_WIDTH_PX],
-    col_xy: &mut [i32; IMAGE_WIDTH_PX],
-) {
-    let (Some(up), Some(mid), Some(down)) = (
-        y.checked_sub(1).and_then(|r| image.row(r)),
-        image.row(y),
-        image.row(y + 1),
-    ) else {
+/// The rows a central-difference gradient row `y` needs, cut to the interior columns
+/// `1..width-1`: left and right neighbours in row `y`, the pixels above and below. `None` at the
+/// first and last rows.
+fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[&'a [u8]; 4]> {
+    let up = image.row(y.checked_sub(1)?)?;
+    let mid = image.row(y)?;
+    let down = image.row(y + 1)?;
+    let n = IMAGE_WIDTH_PX - 2;
+    Some([
+        mid.get(..n)?,
+        mid.get(2..n + 2)?,
+        up.get(1..n + 1)?,
+        down.get(1..n + 1)?,
+    ])
+}
+
+/// Central-difference gradients `(gx, gy)` of the interior pixels of image row `y` (columns
+/// 1..width-1), `None` at the first and last rows.
+fn row_gradients<'a>(image: &Image<'a>, y: usize) -> Option<impl Iterator<Item = (i32, i32)> + 'a> {
+    let [l, r, u, d] = gradient_rows(image, y)?;
+    Some(
+        l.iter()
+            .zip(r)
+            .zip(u.iter().zip(d))
+            .map(|((&l, &r), (&u, &d))| (i32::from(r) - i32::from(l), i32::from(d) - i32::from(u))),
+    )
+}
+
+/// The column sums of the gradient products, `[xx, yy, xy]` per column.
+type ColumnSums = [[i32; 3]; IMAGE_WIDTH_PX];
+
+/// Adds the gradient products of image row `y` to the column sums.
+fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
+    let Some(g) = row_gradients(image, y) else {
         return;
     };
-    let columns = col_xx
-        .iter_mut()
-        .zip(col_yy.iter_mut())
-        .zip(col_xy.iter_mut())
-        .skip(1);
-    let gx_iter = mid.iter().zip(mid.iter().skip(2));
-    let gy_iter = up.iter().zip(down.iter()).skip(1);
-    for (((sxx, syy), sxy), ((&l, &r), (&u, &d))) in columns.zip(gx_iter.zip(gy_iter)) {
-        let gx = i32::from(r) - i32::from(l);
-        let gy = i32::from(d) - i32::from(u);
-        *sxx += sign * gx * gx;
-        *syy += sign * gy * gy;
-        *sxy += sign * gx * gy;
+    for (s, (gx, gy)) in sums.iter_mut().skip(1).zip(g) {
+        s[0] += gx * gx;
+        s[1] += gy * gy;
+        s[2] += gx * gy;
+    }
+}
+
+/// Moves the window down one row: adds the products of row `add`, removes those of row
+/// `remove` (one pass over the sums).
+fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
+    let (Some([al, ar, au, ad]), Some([rl, rr, ru, rd])) =
+        (gradient_rows(image, add), gradient_rows(image, remove))
+    else {
+        return;
+    };
+    let added = al.iter().zip(ar).zip(au.iter().zip(ad));
+    let removed = rl.iter().zip(rr).zip(ru.iter().zip(rd));
+    for (s, (((&al, &ar), (&au, &ad)), ((&rl, &rr), (&ru, &rd)))) in
+        sums.iter_mut().skip(1).zip(added.zip(removed))
+    {
+        let (ax, ay) = (i32::from(ar) - i32::from(al), i32::from(ad) - i32::from(au));
+        let (rx, ry) = (i32::from(rr) - i32::from(rl), i32::from(rd) - i32::from(ru));
+        s[0] += ax * ax - rx * rx;
+        s[1] += ay * ay - ry * ry;
+        s[2] += ax * ay - rx * ry;
     }
 }
 
 impl ForstnerDetector {
     /// Clears the cells and the running sums; the next row to score is [`FIRST_ROW`].
     pub fn reset(&mut self) {
-        self.col_xx = [0; IMAGE_WIDTH_PX];
-        self.col_yy = [0; IMAGE_WIDTH_PX];
-        self.col_xy = [0; IMAGE_WIDTH_PX];
+        self.columns = [[0; 3]; IMAGE_WIDTH_PX];
         self.cells = [Candidate::default(); CELL_COUNT];
         self.candidate_count = 0;
     }
@@ -113,72 +139,70 @@ impl ForstnerDetector {
         if y == FIRST_ROW {
             self.reset();
             for r in (FIRST_ROW - WINDOW_HALF)..=(FIRST_ROW + WINDOW_HALF) {
-                accumulate_row(
-                    image,
-                    r,
-                    1,
-                    &mut self.col_xx,
-                    &mut self.col_yy,
-                    &mut self.col_xy,
-                );
+                add_row(image, r, &mut self.columns);
             }
         } else {
-            let (cxx, cyy, cxy) = (&mut self.col_xx, &mut self.col_yy, &mut self.col_xy);
-            accumulate_row(image, y - WINDOW_HALF - 1, -1, cxx, cyy, cxy);
-            accumulate_row(image, y + WINDOW_HALF, 1, cxx, cyy, cxy);
+            slide_rows(
+                image,
+                y + WINDOW_HALF,
+                y - WINDOW_HALF - 1,
+                &mut self.columns,
+            );
         }
         let cell_row = y / GRID_PX;
         let window = 2 * WINDOW_HALF + 1;
+        let (min_interest, min_roundness) = (
+            f64::from(config.min_interest),
+            f64::from(config.min_roundness),
+        );
+        let cells = self
+            .cells
+            .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
+            .unwrap_or(&mut []);
         let (mut nxx, mut nyy, mut nxy) = (0i64, 0i64, 0i64);
-        for x in 0..IMAGE_WIDTH_PX - BORDER_PX {
-            let (Some(&a), Some(&b), Some(&c)) =
-                (self.col_xx.get(x), self.col_yy.get(x), self.col_xy.get(x))
-            else {
-                break;
-            };
+        // The window sums over columns x-4..=x (centred on x-2): first columns 0..=3, then per
+        // pixel column x in and column x-5 out (the window at x = 4 is centred on column 2,
+        // inside the border, and is not scored).
+        let end = IMAGE_WIDTH_PX - BORDER_PX;
+        for &[a, b, c] in self.columns.iter().take(window) {
             nxx += i64::from(a);
             nyy += i64::from(b);
             nxy += i64::from(c);
-            if x >= window {
-                let old = x - window;
-                nxx -= i64::from(self.col_xx.get(old).copied().unwrap_or(0));
-                nyy -= i64::from(self.col_yy.get(old).copied().unwrap_or(0));
-                nxy -= i64::from(self.col_xy.get(old).copied().unwrap_or(0));
+        }
+        let entering = self.columns.get(window..end).unwrap_or(&[]);
+        let leaving = self.columns.get(..end - window).unwrap_or(&[]);
+        for (x, (&[a, b, c], &[oa, ob, oc])) in (window..).zip(entering.iter().zip(leaving)) {
+            nxx += i64::from(a) - i64::from(oa);
+            nyy += i64::from(b) - i64::from(ob);
+            nxy += i64::from(c) - i64::from(oc);
+            let centre = x - WINDOW_HALF;
+            if centre < BORDER_PX {
+                continue;
             }
-            // The window now covers columns x-4..=x, centred on x-2.
-            let centre = match x.checked_sub(WINDOW_HALF) {
-                Some(c) if c >= BORDER_PX => c,
-                _ => continue,
-            };
             let trace = nxx + nyy;
-            if trace <= 0 {
-                continue;
-            }
             let det = nxx * nyy - nxy * nxy;
-            if det <= 0 {
+            if trace <= 0 || det <= 0 {
                 continue;
             }
-            // Thresholds without divisions: w >= min_interest, q >= min_roundness, and w above
-            // the cell's best so far; the division runs only for a new best.
+            let Some(cell) = cells.get_mut(centre / GRID_PX) else {
+                continue;
+            };
+            // Thresholds without divisions; the test against the cell's best comes first (most
+            // pixels fail it), the division runs only for a new best.
             let (det_f, trace_f) = (det as f64, trace as f64);
-            if det_f < f64::from(config.min_interest) * trace_f {
+            if !(det_f > f64::from(cell.interest) * trace_f)
+                || det_f < min_interest * trace_f
+                || 4.0 * det_f < min_roundness * trace_f * trace_f
+            {
                 continue;
             }
-            if 4.0 * det_f < f64::from(config.min_roundness) * trace_f * trace_f {
-                continue;
-            }
-            let index = cell_row * GRID_COLS + centre / GRID_PX;
-            if let Some(cell) = self.cells.get_mut(index) {
-                if det_f > f64::from(cell.interest) * trace_f {
-                    let interest = (det_f / trace_f) as f32;
-                    if interest > cell.interest {
-                        *cell = Candidate {
-                            interest,
-                            x: centre as u16,
-                            y: y as u16,
-                        };
-                    }
-                }
+            let interest = (det_f / trace_f) as f32;
+            if interest > cell.interest {
+                *cell = Candidate {
+                    interest,
+                    x: centre as u16,
+                    y: y as u16,
+                };
             }
         }
     }
@@ -364,6 +388,63 @@ mod tests {
         }
         let sorted = det.candidates();
         assert!(sorted.windows(2).all(|w| w[0].interest >= w[1].interest));
+    }
+
+    #[test]
+    fn vo_1_running_sums_equal_the_direct_window_sums() {
+        // A noisy random image: the detector's cells equal the best pixel per cell scored by
+        // direct 5x5 sums of the gradient products (the definition).
+        let mut state = 0x1234_5678_9abc_def0u64;
+        let img: Vec<u8> = (0..IMAGE_PIXELS)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 56) as u8
+            })
+            .collect();
+        let image = Image::new(&img).unwrap();
+        let config = VoConfig {
+            min_interest: 2000.0,
+            ..VoConfig::default()
+        };
+        let mut det = Box::new(ForstnerDetector::default());
+        for y in FIRST_ROW..END_ROW {
+            det.process_row(&image, y, &config);
+        }
+        let px = |x: usize, y: usize| i64::from(img[y * IMAGE_WIDTH_PX + x]);
+        let mut cells = vec![Candidate::default(); CELL_COUNT];
+        for y in FIRST_ROW..END_ROW {
+            for x in BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF {
+                let (mut nxx, mut nyy, mut nxy) = (0i64, 0i64, 0i64);
+                for wy in y - 2..=y + 2 {
+                    for wx in x - 2..=x + 2 {
+                        let gx = px(wx + 1, wy) - px(wx - 1, wy);
+                        let gy = px(wx, wy + 1) - px(wx, wy - 1);
+                        nxx += gx * gx;
+                        nyy += gy * gy;
+                        nxy += gx * gy;
+                    }
+                }
+                let (det_f, trace_f) = ((nxx * nyy - nxy * nxy) as f64, (nxx + nyy) as f64);
+                let w = det_f / trace_f;
+                let q = 4.0 * det_f / (trace_f * trace_f);
+                let cell = &mut cells[(y / GRID_PX) * GRID_COLS + x / GRID_PX];
+                if w >= f64::from(config.min_interest)
+                    && q >= f64::from(config.min_roundness)
+                    && (w as f32) > cell.interest
+                {
+                    *cell = Candidate {
+                        interest: w as f32,
+                        x: x as u16,
+                        y: y as u16,
+                    };
+                }
+            }
+        }
+        let found = cells.iter().filter(|c| c.interest > 0.0).count();
+        assert!(found > 1000, "{found} cells");
+        assert_eq!(det.cells[..], cells[..]);
     }
 
     #[test]

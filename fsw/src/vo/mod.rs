@@ -68,6 +68,12 @@ pub struct VoConfig {
     pub min_disparity_px: u16,
     /// Largest stereo disparity searched, pixels (at most [`MAX_DISPARITY_PX`]).
     pub max_disparity_px: u16,
+    /// Stereo: the full disparity range is scanned every this many pixels, then the two
+    /// neighbours of the best (1: every disparity; 2 halves the correlation work).
+    pub stereo_coarse_step: u8,
+    /// Stereo of a tracked feature: half width of the disparity window around the disparity
+    /// predicted by the motion prior, pixels (0: scan the full range).
+    pub track_disparity_margin_px: u16,
     /// Minimum normalised cross-correlation of a stereo or tracking match (-1..1).
     pub min_correlation: f32,
     /// A stereo match is ambiguous when another disparity more than 2 px away scores within this
@@ -117,6 +123,8 @@ impl Default for VoConfig {
             min_distance_px: 20.0,
             min_disparity_px: 1,
             max_disparity_px: 128,
+            stereo_coarse_step: 2,
+            track_disparity_margin_px: 0,
             min_correlation: 0.8,
             uniqueness_margin: 0.02,
             max_row_offset_px: 1.5,
@@ -172,6 +180,7 @@ impl VoConfig {
             && self.min_disparity_px >= 1
             && self.min_disparity_px < self.max_disparity_px
             && usize::from(self.max_disparity_px) <= MAX_DISPARITY_PX
+            && (1..=4).contains(&self.stereo_coarse_step)
             && (-1.0..1.0).contains(&self.min_correlation)
             && self.uniqueness_margin >= 0.0
             && self.max_row_offset_px > 0.0

@@ -455,8 +455,12 @@ impl<const N: usize> VisualOdometry<N> {
         if !(shift <= self.config.max_refine_shift_px) {
             return;
         }
+        // Disparity of the predicted point: the stereo search of a tracked feature only covers a
+        // window around it (the prior already placed the feature within the tracking radius).
+        let predicted_disparity = self.camera.fx_px * self.camera.baseline_m / predicted.z;
+        let window = (self.config.track_disparity_margin_px > 0).then_some(predicted_disparity);
         let Ok((current, _)) =
-            match_and_triangulate(&self.camera, left, right, xt, yt, &self.config)
+            match_and_triangulate(&self.camera, left, right, (xt, yt), window, &self.config)
         else {
             return;
         };
@@ -550,7 +554,7 @@ impl<const N: usize> VisualOdometry<N> {
         };
         let (xl, yl) = (f64::from(x), f64::from(y));
         let Ok((_, (xr, yr))) =
-            match_and_triangulate(&self.camera, left, right, xl, yl, &self.config)
+            match_and_triangulate(&self.camera, left, right, (xl, yl), None, &self.config)
         else {
             return;
         };

@@ -4,7 +4,7 @@
 //! All geometry is in the left camera frame `K` (x right, y down, z optical axis); the left
 //! camera centre is `C1 = 0` and the right one `C2 = (baseline, 0, 0)`.
 
-use super::image::{ncc_scan, template_stats, Image};
+use super::image::{ncc, ncc_scan, template_stats, Image};
 use super::track::{refine_warp, Affine2, WarpModel};
 use super::{VoConfig, VoError, MAX_DISPARITY_PX};
 use crate::types::{Mat3, Vec3};
@@ -189,14 +189,62 @@ pub fn accept_point(
 
 /// Stereo matching of the left feature at sub-pixel `(xl, yl)` along its epipolar line (the same
 /// row of the rectified right image): normalised cross-correlation of the template over the
-/// disparities `min_disparity_px..=max_disparity_px`, a uniqueness check, then sub-pixel
-/// refinement of the right position (translation with gain and bias, eq. 10 with a translation
-/// warp) that also measures a residual vertical offset. Returns `(xr, yr)` pixels.
+/// disparities `min_disparity_px..=max_disparity_px` (every `stereo_coarse_step`-th disparity,
+/// then the neighbours of the best), a uniqueness check, then sub-pixel refinement of the right
+/// position (translation with gain and bias, eq. 10 with a translation warp) that also measures
+/// a residual vertical offset. Returns `(xr, yr)` pixels.
 pub fn match_along_row(
     left: &Image,
     right: &Image,
     xl: f64,
     yl: f64,
+    config: &VoConfig,
+) -> Result<(f64, f64), StereoReject> {
+    let range = (config.min_disparity_px, config.max_disparity_px);
+    match_in_range(
+        left,
+        right,
+        xl,
+        yl,
+        range,
+        config.stereo_coarse_step,
+        config,
+    )
+}
+
+/// [`match_along_row`] over the disparities within `config.track_disparity_margin_px` of a
+/// predicted disparity `predicted_px` (pixels, from the motion prior; clipped to the configured
+/// range), every disparity scanned. [`StereoReject::OutOfRange`] when the prediction is not
+/// finite or the window misses the configured range.
+pub fn match_along_row_near(
+    left: &Image,
+    right: &Image,
+    xl: f64,
+    yl: f64,
+    predicted_px: f64,
+    config: &VoConfig,
+) -> Result<(f64, f64), StereoReject> {
+    let margin = f64::from(config.track_disparity_margin_px);
+    let (lo, hi) = (predicted_px - margin, predicted_px + margin);
+    let (d_min, d_max) = (config.min_disparity_px, config.max_disparity_px);
+    if !(hi >= f64::from(d_min) && lo <= f64::from(d_max)) {
+        return Err(StereoReject::OutOfRange);
+    }
+    // Both ends are finite and within [d_min, d_max] after the clamps.
+    let lo = libm::floor(lo).max(f64::from(d_min)) as u16;
+    let hi = libm::ceil(hi).min(f64::from(d_max)) as u16;
+    match_in_range(left, right, xl, yl, (lo, hi), 1, config)
+}
+
+/// Matching over the disparities `range.0..=range.1` scanned every `step` (then the two
+/// neighbours of the best); see [`match_along_row`].
+fn match_in_range(
+    left: &Image,
+    right: &Image,
+    xl: f64,
+    yl: f64,
+    range: (u16, u16),
+    step: u8,
     config: &VoConfig,
 ) -> Result<(f64, f64), StereoReject> {
     if !(xl.is_finite() && yl.is_finite()) {
@@ -206,33 +254,46 @@ pub fn match_along_row(
     let yi = libm::round(yl) as i32;
     let template = left.template(xi, yi).ok_or(StereoReject::OutOfImage)?;
     let stats = template_stats(&template);
-    let mut scores = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
-    let d_min = usize::from(config.min_disparity_px);
-    let d_max = usize::from(config.max_disparity_px).min(MAX_DISPARITY_PX);
-    // Scan the right row from x = xi - d_max up to xi - d_min; scan[k] is disparity d_max - k.
+    let step = usize::from(step.max(1));
+    let d_min = usize::from(range.0);
+    let d_max = usize::from(range.1).min(MAX_DISPARITY_PX);
+    // Scan the right row from x = xi - d_max towards xi - d_min; scan[k] is disparity
+    // d_max - k * step.
     let mut scan = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
-    let count = d_max.saturating_sub(d_min) + 1;
+    let count = d_max.saturating_sub(d_min) / step + 1;
     if let Some(window) = scan.get_mut(..count) {
-        ncc_scan(right, &template, stats, yi, xi - d_max as i32, 1, window);
+        ncc_scan(right, &template, stats, yi, xi - d_max as i32, step, window);
     }
+    let disparity = |k: usize| d_max.saturating_sub(k * step);
     let mut best = (f32::NEG_INFINITY, 0usize);
     for (k, &score) in scan.iter().take(count).enumerate() {
-        let d = d_max - k;
-        if let Some(slot) = scores.get_mut(d) {
-            *slot = score;
-        }
         if score > best.0 {
-            best = (score, d);
+            best = (score, disparity(k));
+        }
+    }
+    if step > 1 {
+        // The peak lies within step / 2 of the best sample: try its neighbours.
+        let centre = best.1;
+        for d in centre.saturating_sub(1)..=(centre + 1).min(d_max) {
+            if d == centre || d < d_min {
+                continue;
+            }
+            if let Some(score) = ncc(right, &template, stats, xi - d as i32, yi) {
+                if score > best.0 {
+                    best = (score, d);
+                }
+            }
         }
     }
     let (best_score, best_d) = best;
     if !(best_score >= config.min_correlation) {
         return Err(StereoReject::WeakCorrelation);
     }
-    let rival = scores
+    let rival = scan
         .iter()
+        .take(count)
         .enumerate()
-        .filter(|(d, _)| d.abs_diff(best_d) > 2)
+        .filter(|&(k, _)| disparity(k).abs_diff(best_d) > 2)
         .map(|(_, &s)| s)
         .fold(f32::NEG_INFINITY, f32::max);
     if rival > best_score - config.uniqueness_margin {
@@ -253,17 +314,21 @@ pub fn match_along_row(
     Ok((xr, yr))
 }
 
-/// Matches and triangulates one left feature: [`match_along_row`], [`triangulate`],
-/// [`accept_point`]. Returns the point and the right pixel.
+/// Matches and triangulates one left feature: [`match_along_row`] (or [`match_along_row_near`]
+/// when a predicted disparity in pixels is given), [`triangulate`], [`accept_point`]. Returns the
+/// point and the right pixel.
 pub fn match_and_triangulate(
     cam: &PinholeStereo,
     left: &Image,
     right: &Image,
-    xl: f64,
-    yl: f64,
+    (xl, yl): (f64, f64),
+    predicted_disparity_px: Option<f64>,
     config: &VoConfig,
 ) -> Result<(StereoPoint, (f64, f64)), StereoReject> {
-    let (xr, yr) = match_along_row(left, right, xl, yl, config)?;
+    let (xr, yr) = match predicted_disparity_px {
+        Some(d) => match_along_row_near(left, right, xl, yl, d, config)?,
+        None => match_along_row(left, right, xl, yl, config)?,
+    };
     let point = triangulate(cam, [xl, yl, xr, yr], config.sigma_px)?;
     accept_point(cam, &point, config)?;
     Ok((point, (xr, yr)))

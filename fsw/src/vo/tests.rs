@@ -508,3 +508,74 @@ fn vo_15_update_probe() {
         assert!(out.unwrap().pose.is_some());
     }
 }
+
+#[test]
+fn vo_2_coarse_and_windowed_stereo_search_agree_with_the_full_scan() {
+    // Rendered pair: the stereo match of each grid point by the exhaustive scan (every
+    // disparity), by the default coarse-to-fine scan, and by a +-8 px window around the
+    // exhaustive disparity (what a tracked feature's prediction gives).
+    use super::stereo::{match_along_row, match_along_row_near};
+    let cal = hazcam();
+    let (l, r) = render_pair(&cal, &RoverPose::new(0.0, 0.0, 0.0, Vec3::zeros()));
+    let (left, right) = (
+        image::Image::new(&l).unwrap(),
+        image::Image::new(&r).unwrap(),
+    );
+    let exhaustive = VoConfig {
+        stereo_coarse_step: 1,
+        ..VoConfig::default()
+    };
+    let windowed = VoConfig {
+        track_disparity_margin_px: 8,
+        ..VoConfig::default()
+    };
+    let (mut matched, mut coarse_same, mut window_same) = (0, 0, 0);
+    for y in (40..440).step_by(20) {
+        for x in (150..620).step_by(20) {
+            let (xl, yl) = (f64::from(x), f64::from(y));
+            let Ok(full) = match_along_row(&left, &right, xl, yl, &exhaustive) else {
+                continue;
+            };
+            matched += 1;
+            let same = |m: Result<(f64, f64), stereo::StereoReject>| {
+                m.is_ok_and(|(xr, yr)| (xr - full.0).abs() < 1e-6 && (yr - full.1).abs() < 1e-6)
+            };
+            coarse_same += usize::from(same(match_along_row(
+                &left,
+                &right,
+                xl,
+                yl,
+                &VoConfig::default(),
+            )));
+            let d = xl - full.0;
+            window_same += usize::from(same(match_along_row_near(
+                &left,
+                &right,
+                xl,
+                yl,
+                d + 3.0,
+                &windowed,
+            )));
+            // A prediction 30 px off misses the true disparity.
+            assert!(!same(match_along_row_near(
+                &left,
+                &right,
+                xl,
+                yl,
+                d + 30.0,
+                &windowed
+            )));
+        }
+    }
+    println!("VO-2 stereo search: {matched} matched, coarse same {coarse_same}, window same {window_same}");
+    assert!(matched >= 200, "{matched}");
+    assert!(
+        coarse_same * 100 >= matched * 97,
+        "{coarse_same} of {matched}"
+    );
+    assert_eq!(window_same, matched);
+    assert_eq!(
+        match_along_row_near(&left, &right, 300.0, 200.0, f64::NAN, &windowed),
+        Err(stereo::StereoReject::OutOfRange)
+    );
+}

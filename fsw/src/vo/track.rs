@@ -85,72 +85,28 @@ pub fn refine_warp(
     let mut warp = init;
     let mut gain = 1.0f64;
     let mut bias = 0.0f64;
-    let half = TEMPLATE_HALF as f64;
     let mut residual_rms = f64::INFINITY;
     for _ in 0..iterations.max(1) {
-        // Parameters: [a, b, c, d, e, f, gain, bias]; the translation model uses only
-        // [c, f, gain, bias] and accumulates a 4x4 system.
-        let mut upper = [0.0f64; 36];
-        let mut g8 = SVector::<f64, 8>::zeros();
-        let mut h4 = SMatrix::<f64, 4, 4>::zeros();
-        let mut g4 = SVector::<f64, 4>::zeros();
-        let mut sum_sq = 0.0;
-        for (k, &t) in template.iter().enumerate() {
-            let u = (k % TEMPLATE_SIDE) as f64 - half;
-            let v = (k / TEMPLATE_SIDE) as f64 - half;
-            let (x2, y2) = warp.apply(u, v);
-            let (value, gx, gy) = image.bilinear(x2, y2)?;
-            let residual = gain * value + bias - f64::from(t);
-            sum_sq += residual * residual;
-            let (jx, jy) = (gain * gx, gain * gy);
-            match model {
-                WarpModel::Affine => {
-                    let j = SVector::<f64, 8>::from([
-                        jx * u,
-                        jx * v,
-                        jx,
-                        jy * u,
-                        jy * v,
-                        jy,
-                        value,
-                        1.0,
-                    ]);
-                    // Upper triangle only (36 of 64 products).
-                    let mut k = 0;
-                    for r in 0..8 {
-                        for c in r..8 {
-                            upper[k] += j[r] * j[c];
-                            k += 1;
-                        }
-                    }
-                    g8 += j * residual;
-                }
-                WarpModel::Translation => {
-                    let j = SVector::<f64, 4>::from([jx, jy, value, 1.0]);
-                    h4.ger(1.0, &j, &j, 1.0);
-                    g4 += j * residual;
-                }
-            }
-        }
-        residual_rms = libm::sqrt(sum_sq / template.len() as f64);
-        let delta = match model {
+        // Parameters: [a, b, c, d, e, f, gain, bias]; the translation model estimates only
+        // [c, f, gain, bias] from a 4x4 system.
+        let (delta, sum_sq) = match model {
             WarpModel::Affine => {
-                let mut h8 = SMatrix::<f64, 8, 8>::zeros();
-                let mut k = 0;
-                for r in 0..8 {
-                    for c in r..8 {
-                        h8[(r, c)] = upper[k];
-                        h8[(c, r)] = upper[k];
-                        k += 1;
-                    }
-                }
-                h8.cholesky()?.solve(&(-g8))
+                let system = affine_normal_equations(template, image, &warp, gain, bias)?;
+                let h = SMatrix::<f64, 8, 8>::from_fn(|r, c| system.h[r][c]);
+                let g = SVector::<f64, 8>::from(system.g);
+                (h.cholesky()?.solve(&(-g)), system.sum_sq)
             }
             WarpModel::Translation => {
-                let ds = h4.cholesky()?.solve(&(-g4));
-                SVector::<f64, 8>::from([0.0, 0.0, ds[0], 0.0, 0.0, ds[1], ds[2], ds[3]])
+                let system = translation_normal_equations(template, image, &warp, gain, bias)?;
+                let h = SMatrix::<f64, 4, 4>::from_fn(|r, c| system.h[r][c]);
+                let g = SVector::<f64, 4>::from(system.g);
+                let ds = h.cholesky()?.solve(&(-g));
+                let delta =
+                    SVector::<f64, 8>::from([0.0, 0.0, ds[0], 0.0, 0.0, ds[1], ds[2], ds[3]]);
+                (delta, system.sum_sq)
             }
         };
+        residual_rms = libm::sqrt(sum_sq / template.len() as f64);
         if !delta.iter().all(|v| v.is_finite()) {
             return None;
         }
@@ -179,6 +135,181 @@ pub fn refine_warp(
         residual_rms,
         gain,
     })
+}
+
+/// Gauss-Newton normal equations `H delta = -g` of eq. 10 at one warp (full matrix `h`,
+/// gradient `g`), and the sum of squared residuals, grey levels^2.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NormalEquations<const P: usize> {
+    /// `H = sum J J^T`.
+    pub h: [[f64; P]; P],
+    /// `g = sum J r`.
+    pub g: [f64; P],
+    /// `sum r^2`.
+    pub sum_sq: f64,
+}
+
+/// Sums of a per-pixel quantity `p` over the template weighted by the monomials of the
+/// template coordinates: `[sum p, sum p u, sum p v, sum p u^2, sum p u v, sum p v^2]`, built
+/// from per-row sums `sum_u p`, `sum_u p u`, `sum_u p u^2` (so the per-pixel work does not grow
+/// with the number of monomials).
+#[derive(Debug, Clone, Copy, Default)]
+struct Moments {
+    s: f64,
+    su: f64,
+    sv: f64,
+    suu: f64,
+    suv: f64,
+    svv: f64,
+}
+
+impl Moments {
+    /// Adds the row sums `r = [sum p, sum p u, sum p u^2]` of template row `v`.
+    #[inline(always)]
+    fn add_row(&mut self, r: [f64; 3], v: f64) {
+        self.s += r[0];
+        self.su += r[1];
+        self.suu += r[2];
+        self.sv += v * r[0];
+        self.suv += v * r[1];
+        self.svv += v * v * r[0];
+    }
+}
+
+/// Eq. 10 normal equations of the affine warp (eq. 9) with gain and bias, at `warp`: the
+/// Jacobian of the residual `gain * I2(x2, y2) + bias - I1` per template pixel `(u, v)` is
+/// `J = [jx u, jx v, jx, jy u, jy v, jy, I2, 1]` with `(jx, jy) = gain * grad I2`. The 36
+/// distinct entries of `sum J J^T` are sums of 11 per-pixel products times monomials in
+/// `(u, v)`, accumulated per template row ([`Moments`]). `None` if the warped template leaves
+/// the image.
+pub fn affine_normal_equations(
+    template: &TemplateF,
+    image: &Image,
+    warp: &Affine2,
+    gain: f64,
+    bias: f64,
+) -> Option<NormalEquations<8>> {
+    let half = TEMPLATE_HALF as f64;
+    // Per-pixel products with their u-moments: jx^2, jx jy, jy^2 (up to u^2); jx I2, jy I2,
+    // jx, jy, jx r, jy r (up to u); I2^2, I2, I2 r, r, r^2 (plain sums).
+    let (mut xx, mut xy, mut yy) = (Moments::default(), Moments::default(), Moments::default());
+    let (mut xi, mut yi, mut x1, mut y1) = (
+        Moments::default(),
+        Moments::default(),
+        Moments::default(),
+        Moments::default(),
+    );
+    let (mut xr, mut yr) = (Moments::default(), Moments::default());
+    let (mut ii, mut i1, mut ir, mut r1, mut rr) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (row, t_row) in template.chunks_exact(TEMPLATE_SIDE).enumerate() {
+        let v = row as f64 - half;
+        let mut rows = [[0.0f64; 3]; 3];
+        let mut rows1 = [[0.0f64; 3]; 6];
+        for (col, &t) in t_row.iter().enumerate() {
+            let u = col as f64 - half;
+            let (x2, y2) = warp.apply(u, v);
+            let (value, gx, gy) = image.bilinear(x2, y2)?;
+            let residual = gain * value + bias - f64::from(t);
+            let (jx, jy) = (gain * gx, gain * gy);
+            for (acc, p) in rows.iter_mut().zip([jx * jx, jx * jy, jy * jy]) {
+                let pu = p * u;
+                acc[0] += p;
+                acc[1] += pu;
+                acc[2] += pu * u;
+            }
+            for (acc, p) in
+                rows1
+                    .iter_mut()
+                    .zip([jx * value, jy * value, jx, jy, jx * residual, jy * residual])
+            {
+                acc[0] += p;
+                acc[1] += p * u;
+            }
+            ii += value * value;
+            i1 += value;
+            ir += value * residual;
+            r1 += residual;
+            rr += residual * residual;
+        }
+        let [rxx, rxy, ryy] = rows;
+        xx.add_row(rxx, v);
+        xy.add_row(rxy, v);
+        yy.add_row(ryy, v);
+        let [rxi, ryi, rx1, ry1, rxr, ryr] = rows1;
+        xi.add_row(rxi, v);
+        yi.add_row(ryi, v);
+        x1.add_row(rx1, v);
+        y1.add_row(ry1, v);
+        xr.add_row(rxr, v);
+        yr.add_row(ryr, v);
+    }
+    let n = template.len() as f64;
+    // Upper triangle, J = [jx u, jx v, jx, jy u, jy v, jy, I2, 1].
+    let upper = [
+        [xx.suu, xx.suv, xx.su, xy.suu, xy.suv, xy.su, xi.su, x1.su],
+        [0.0, xx.svv, xx.sv, xy.suv, xy.svv, xy.sv, xi.sv, x1.sv],
+        [0.0, 0.0, xx.s, xy.su, xy.sv, xy.s, xi.s, x1.s],
+        [0.0, 0.0, 0.0, yy.suu, yy.suv, yy.su, yi.su, y1.su],
+        [0.0, 0.0, 0.0, 0.0, yy.svv, yy.sv, yi.sv, y1.sv],
+        [0.0, 0.0, 0.0, 0.0, 0.0, yy.s, yi.s, y1.s],
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ii, i1],
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, n],
+    ];
+    let mut h = [[0.0; 8]; 8];
+    for r in 0..8 {
+        for c in 0..8 {
+            h[r][c] = if c >= r { upper[r][c] } else { upper[c][r] };
+        }
+    }
+    Some(NormalEquations {
+        h,
+        g: [xr.su, xr.sv, xr.s, yr.su, yr.sv, yr.s, ir, r1],
+        sum_sq: rr,
+    })
+}
+
+/// Eq. 10 normal equations of a translation warp (`(c, f)` only) with gain and bias:
+/// `J = [jx, jy, I2, 1]`. `None` if the template leaves the image.
+pub fn translation_normal_equations(
+    template: &TemplateF,
+    image: &Image,
+    warp: &Affine2,
+    gain: f64,
+    bias: f64,
+) -> Option<NormalEquations<4>> {
+    let mut s = [0.0f64; 10];
+    let (mut g, mut sum_sq) = ([0.0f64; 4], 0.0);
+    image.grid_bilinear(warp.c, warp.f, |k, value, gx, gy| {
+        let t = template.get(k).copied().unwrap_or(0.0);
+        let residual = gain * value + bias - f64::from(t);
+        let (jx, jy) = (gain * gx, gain * gy);
+        let products = [
+            jx * jx,
+            jx * jy,
+            jx * value,
+            jx,
+            jy * jy,
+            jy * value,
+            jy,
+            value * value,
+            value,
+        ];
+        for (acc, p) in s.iter_mut().zip(products) {
+            *acc += p;
+        }
+        for (acc, j) in g.iter_mut().zip([jx, jy, value, 1.0]) {
+            *acc += j * residual;
+        }
+        sum_sq += residual * residual;
+    })?;
+    let n = template.len() as f64;
+    let h = [
+        [s[0], s[1], s[2], s[3]],
+        [s[1], s[4], s[5], s[6]],
+        [s[2], s[5], s[7], s[8]],
+        [s[3], s[6], s[8], n],
+    ];
+    Some(NormalEquations { h, g, sum_sq })
 }
 
 /// Correlation search: the integer position within `radius` pixels of `(x0, y0)` where the
@@ -296,6 +427,75 @@ mod tests {
         if let Some(rt) = rt {
             assert!(rt.residual_rms > r.residual_rms);
         }
+    }
+
+    /// The normal equations by the textbook sum over pixels of `J J^T` and `J r`.
+    fn direct_sums(
+        t: &TemplateF,
+        image: &Image,
+        w: &Affine2,
+        gain: f64,
+        bias: f64,
+    ) -> ([[f64; 8]; 8], [f64; 8], f64) {
+        let (mut h, mut g, mut ss) = ([[0.0; 8]; 8], [0.0; 8], 0.0);
+        for (k, &tv) in t.iter().enumerate() {
+            let u = (k % TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
+            let v = (k / TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
+            let (x, y) = w.apply(u, v);
+            let (value, gx, gy) = image.bilinear(x, y).unwrap();
+            let r = gain * value + bias - f64::from(tv);
+            let (jx, jy) = (gain * gx, gain * gy);
+            let j = [jx * u, jx * v, jx, jy * u, jy * v, jy, value, 1.0];
+            for ((row, ga), ja) in h.iter_mut().zip(g.iter_mut()).zip(j) {
+                for (hab, jb) in row.iter_mut().zip(j) {
+                    *hab += ja * jb;
+                }
+                *ga += ja * r;
+            }
+            ss += r * r;
+        }
+        (h, g, ss)
+    }
+
+    #[test]
+    fn vo_5_normal_equations_equal_the_direct_sums() {
+        let img = render(|x, y| (x, y));
+        let i = Image::new(&img).unwrap();
+        let t = i.template_f(200.3, 150.7).unwrap();
+        let w = Affine2 {
+            a: 1.05,
+            b: 0.1,
+            c: 203.4,
+            d: -0.07,
+            e: 0.93,
+            f: 148.2,
+        };
+        let (gain, bias) = (1.1, -4.0);
+        let (h, g, ss) = direct_sums(&t, &i, &w, gain, bias);
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+        let affine = affine_normal_equations(&t, &i, &w, gain, bias).unwrap();
+        for (a, (row, expected)) in affine.h.iter().zip(&h).enumerate() {
+            for (b, (&x, &y)) in row.iter().zip(expected).enumerate() {
+                assert!(close(x, y), "H[{a}][{b}]");
+            }
+            assert!(close(affine.g[a], g[a]), "g[{a}]");
+        }
+        assert!(close(affine.sum_sq, ss));
+        // The translation system is the [c, f, gain, bias] block of the affine one.
+        let shift = Affine2::translation(w.c, w.f);
+        let (h, g, ss) = direct_sums(&t, &i, &shift, gain, bias);
+        let tr = translation_normal_equations(&t, &i, &shift, gain, bias).unwrap();
+        let idx = [2, 5, 6, 7];
+        for (a, &ia) in idx.iter().enumerate() {
+            for (b, &ib) in idx.iter().enumerate() {
+                assert!(close(tr.h[a][b], h[ia][ib]), "H[{a}][{b}]");
+            }
+            assert!(close(tr.g[a], g[ia]), "g[{a}]");
+        }
+        assert!(close(tr.sum_sq, ss));
+        assert!(
+            affine_normal_equations(&t, &i, &Affine2::translation(3.0, 3.0), 1.0, 0.0).is_none()
+        );
     }
 
     #[test]
