@@ -7,21 +7,6 @@ use fsw::vo::{VisualOdometry, VoConfig};
 use rover_hal::{StereoCalibration, StereoFrame, IMAGE_HEIGHT_PX, IMAGE_PIXELS, IMAGE_WIDTH_PX};
 use std::hint::black_box;
 
-fn hazcam() -> StereoCalibration {
-    let fx = 320.0 / (39.75f64).to_radians().tan();
-    let fy = 240.0 / (32.0f64).to_radians().tan();
-    let (s, c) = (45f64).to_radians().sin_cos();
-    StereoCalibration {
-        fx_px: fx,
-        fy_px: fy,
-        cx_px: 319.5,
-        cy_px: 239.5,
-        baseline_m: 0.084,
-        rot_rover_from_camera: [[0.0, -s, c], [1.0, 0.0, 0.0], [0.0, c, s]],
-        pos_camera_in_rover_m: [0.2, 0.0, -0.6],
-    }
-}
-
 /// Albedo: a lattice of random grey levels (2 cm cells) smoothed by bilinear interpolation.
 fn albedo(x: f64, y: f64) -> f64 {
     let cell = |i: i64, j: i64| {
@@ -78,7 +63,7 @@ fn render(cal: &StereoCalibration, forward_m: f64, yaw_rad: f64) -> (Vec<u8>, Ve
 }
 
 fn bench_vo(c: &mut Criterion) {
-    let cal = hazcam();
+    let cal = fsw::vo::rocky8_hazcam();
     let (l0, r0) = render(&cal, 0.0, 0.0);
     let (l1, r1) = render(&cal, 0.25, 0.02);
     let f0 = StereoFrame {

@@ -129,22 +129,11 @@ impl Mobility for StillMobility {
 }
 
 /// Rocky 8 hazcam calibration (REFERENCE.md): 640x480, 79.5 x 64.0 deg FOV, 8.4 cm baseline,
-/// pitched 45 deg down, mounted 0.2 m ahead of and 0.6 m above the rover reference point.
+/// pitched 45 deg down, mounted 0.2 m ahead of and 0.6 m above the rover reference point. The
+/// flight code's definition ([`fsw::vo::rocky8_hazcam`]), so the simulated cameras and the
+/// tests cannot drift apart.
 pub fn hazcam_calibration() -> StereoCalibration {
-    let fx = 320.0 / (39.75f64).to_radians().tan();
-    let fy = 240.0 / (32.0f64).to_radians().tan();
-    let (s, c) = (45f64).to_radians().sin_cos();
-    // Camera z (optical axis) = forward and down at 45 deg; camera x = rover right (+y_R);
-    // camera y = image down = z_K x x_K.
-    StereoCalibration {
-        fx_px: fx,
-        fy_px: fy,
-        cx_px: 319.5,
-        cy_px: 239.5,
-        baseline_m: 0.084,
-        rot_rover_from_camera: [[0.0, -s, c], [1.0, 0.0, 0.0], [0.0, c, s]],
-        pos_camera_in_rover_m: [0.2, 0.0, -0.6],
-    }
+    fsw::vo::rocky8_hazcam()
 }
 
 /// The capture protocol of a simulated stereo camera (trigger, poll, frame, release): a capture

@@ -53,6 +53,29 @@ pub const MAX_SEARCH_RADIUS_PX: usize = 48;
 /// Largest number of least-median-of-squares hypotheses.
 pub const MAX_HYPOTHESES: u16 = 1024;
 
+/// The nominal Rocky 8 hazcam pair (REFERENCE.md): 640x480 rectified images, 79.5 x 64.0 deg
+/// field of view (`f_x = 320 / tan(39.75 deg)`, `f_y = 240 / tan(32 deg)`, pixels), principal
+/// point at the image centre `(319.5, 239.5)`, 8.4 cm baseline along the camera `x`, optical
+/// axis 45 deg below the rover's forward axis, left camera 0.2 m ahead of and 0.6 m above the
+/// rover reference point. Camera frame `K`: x right (= rover `y`), y image down, z optical axis.
+/// The one definition shared by the simulator, the tests and the benchmarks; on the rover the
+/// camera device reports its own calibration.
+pub fn rocky8_hazcam() -> rover_hal::StereoCalibration {
+    let deg = core::f64::consts::PI / 180.0;
+    let fx = 320.0 / libm::tan(39.75 * deg);
+    let fy = 240.0 / libm::tan(32.0 * deg);
+    let (s, c) = libm::sincos(45.0 * deg);
+    rover_hal::StereoCalibration {
+        fx_px: fx,
+        fy_px: fy,
+        cx_px: 319.5,
+        cy_px: 239.5,
+        baseline_m: 0.084,
+        rot_rover_from_camera: [[0.0, -s, c], [1.0, 0.0, 0.0], [0.0, c, s]],
+        pos_camera_in_rover_m: [0.2, 0.0, -0.6],
+    }
+}
+
 /// Tuning of the visual odometry (units in the names). [`VoConfig::default`] suits the Rocky 8
 /// hazcams (640x480, 8.4 cm baseline) at 20-30 cm steps.
 #[derive(Debug, Clone, Copy, PartialEq)]

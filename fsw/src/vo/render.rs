@@ -6,22 +6,9 @@ use crate::types::{Mat3, Quat, Vec3};
 use rover_hal::{StereoCalibration, IMAGE_HEIGHT_PX, IMAGE_PIXELS, IMAGE_WIDTH_PX};
 use std::vec::Vec;
 
-/// Rocky 8 hazcam calibration (REFERENCE.md; same as the simulator's): 640x480,
-/// 79.5 x 64.0 deg FOV, 8.4 cm baseline, 45 deg down, 0.2 m ahead and 0.6 m above the rover
-/// reference point.
+/// Rocky 8 hazcam calibration ([`super::rocky8_hazcam`]).
 pub fn hazcam() -> StereoCalibration {
-    let fx = 320.0 / (39.75f64).to_radians().tan();
-    let fy = 240.0 / (32.0f64).to_radians().tan();
-    let (s, c) = (45f64).to_radians().sin_cos();
-    StereoCalibration {
-        fx_px: fx,
-        fy_px: fy,
-        cx_px: 319.5,
-        cy_px: 239.5,
-        baseline_m: 0.084,
-        rot_rover_from_camera: [[0.0, -s, c], [1.0, 0.0, 0.0], [0.0, c, s]],
-        pos_camera_in_rover_m: [0.2, 0.0, -0.6],
-    }
+    super::rocky8_hazcam()
 }
 
 /// A rover pose in the world frame (the rover frame at the first image): `v_W = rot v_R + pos`.
