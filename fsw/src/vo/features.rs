@@ -159,29 +159,33 @@ impl ForstnerDetector {
             .cells
             .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
             .unwrap_or(&mut []);
-        let (mut nxx, mut nyy, mut nxy) = (0i64, 0i64, 0i64);
+        // Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
+        // window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so
+        // det and trace are exact in f64.
+        let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
         // The window sums over columns x-4..=x (centred on x-2): first columns 0..=3, then per
         // pixel column x in and column x-5 out (the window at x = 4 is centred on column 2,
         // inside the border, and is not scored).
         let end = IMAGE_WIDTH_PX - BORDER_PX;
         for &[a, b, c] in self.columns.iter().take(window) {
-            nxx += i64::from(a);
-            nyy += i64::from(b);
-            nxy += i64::from(c);
+            nxx += a;
+            nyy += b;
+            nxy += c;
         }
         let entering = self.columns.get(window..end).unwrap_or(&[]);
         let leaving = self.columns.get(..end - window).unwrap_or(&[]);
         for (x, (&[a, b, c], &[oa, ob, oc])) in (window..).zip(entering.iter().zip(leaving)) {
-            nxx += i64::from(a) - i64::from(oa);
-            nyy += i64::from(b) - i64::from(ob);
-            nxy += i64::from(c) - i64::from(oc);
+            nxx += a - oa;
+            nyy += b - ob;
+            nxy += c - oc;
             let centre = x - WINDOW_HALF;
             if centre < BORDER_PX {
                 continue;
             }
-            let trace = nxx + nyy;
-            let det = nxx * nyy - nxy * nxy;
-            if trace <= 0 || det <= 0 {
+            let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
+            let trace_f = fxx + fyy;
+            let det_f = fxx * fyy - fxy * fxy;
+            if !(trace_f > 0.0 && det_f > 0.0) {
                 continue;
             }
             let Some(cell) = cells.get_mut(centre / GRID_PX) else {
@@ -189,7 +193,6 @@ impl ForstnerDetector {
             };
             // Thresholds without divisions; the test against the cell's best comes first (most
             // pixels fail it), the division runs only for a new best.
-            let (det_f, trace_f) = (det as f64, trace as f64);
             if !(det_f > f64::from(cell.interest) * trace_f)
                 || det_f < min_interest * trace_f
                 || 4.0 * det_f < min_roundness * trace_f * trace_f
