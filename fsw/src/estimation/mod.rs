@@ -51,7 +51,7 @@ mod tests;
 pub use clone::CloneHandle;
 pub use gate::{GateDecision, CHI2_95};
 pub use propagate::PropagationStep;
-pub use replay::Recorder;
+pub use replay::{Recorder, ReplayProgress};
 pub use state::{CoreCov, Cov, NominalState, CLONE_DIM, CORE_DIM, DIM, MAX_CLONES};
 pub use sun_sensor::SunUpdate;
 

@@ -12,6 +12,13 @@
 //! that would have applied the measurement at capture time, bit for bit. Gated relative poses are
 //! gated again by the corrected filter, as they would have been.
 //!
+//! The replay can also run in slices ([`Recorder::start_late`], then [`Recorder::replay_step`]
+//! until it is done), so that no single call costs a whole second of propagation: the late
+//! measurement is applied to the snapshot, the recorded operations are replayed on the snapshot
+//! a few at a time while the live filter goes on (its new operations are recorded and replayed
+//! too), and once the snapshot has caught up it is copied into the live filter. The result is
+//! the same, bit for bit, as [`Recorder::apply_late`] at that moment.
+//!
 //! Capacity: [`REPLAY_IMU`] IMU samples (1.28 s at 200 Hz) and [`REPLAY_MEASUREMENTS`] other
 //! operations. When a capacity is exceeded the recording is abandoned ([`Recorder::overflowed`])
 //! and the caller applies the measurement at the clones instead (first-order exact).
@@ -62,6 +69,22 @@ pub struct Recorder {
     ops: [Op; REPLAY_OPS],
     op_count: usize,
     overflowed: bool,
+    /// Replay in progress on the snapshot: next operation, IMU sample and measurement.
+    cursor: Option<(usize, usize, usize)>,
+}
+
+/// State of a sliced replay ([`Recorder::replay_step`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReplayProgress {
+    /// No replay in progress.
+    Idle,
+    /// Operations remain; call again.
+    Working,
+    /// The snapshot caught up and is now the live filter; the recording has ended.
+    Done,
+    /// The recording overflowed before the replay caught up: the late measurement is lost and
+    /// the live filter is unchanged (the recording has ended).
+    Abandoned,
 }
 
 impl Default for Recorder {
@@ -82,6 +105,7 @@ impl Recorder {
             ops: [Op::Imu; REPLAY_OPS],
             op_count: 0,
             overflowed: false,
+            cursor: None,
         }
     }
 
@@ -96,6 +120,7 @@ impl Recorder {
         self.measurement_count = 0;
         self.op_count = 0;
         self.overflowed = false;
+        self.cursor = None;
     }
 
     /// True while a recording is in progress (and has not overflowed).
@@ -112,6 +137,13 @@ impl Recorder {
     pub fn end(&mut self) {
         self.snapshot = None;
         self.overflowed = false;
+        self.cursor = None;
+    }
+
+    /// True while a sliced replay is in progress ([`Self::start_late`] was called and
+    /// [`Self::replay_step`] has not finished it).
+    pub fn replaying(&self) -> bool {
+        self.snapshot.is_some() && self.cursor.is_some()
     }
 
     fn push_op(&mut self, op: Op) -> bool {
@@ -187,37 +219,77 @@ impl Recorder {
     /// Errors: no recording or an overflowed one ([`EstError::NoStateAtTime`]; `ekf` is then
     /// unchanged), or the filter's own errors on `m` (the replay still runs, so `ekf` is the
     /// recorded filter again). Operations that fail during the replay fail as they did live.
+    /// The same as [`Self::start_late`] followed by [`Self::replay_step`] without a limit.
     pub fn apply_late(
         &mut self,
         ekf: &mut Ekf,
         m: &RelativePose,
         gated: bool,
     ) -> Result<GateDecision, EstError> {
-        let Some(snapshot) = self.snapshot.as_ref().filter(|_| !self.overflowed) else {
+        let decision = self.start_late(m, gated);
+        if self.cursor.is_some() {
+            let _ = self.replay_step(ekf, usize::MAX);
+        }
+        decision
+    }
+
+    /// First part of a sliced late update: applies `m` (gated or not) to the snapshot, at capture
+    /// time, and starts the replay; the recording goes on. Returns the decision of `m`.
+    /// Errors: no recording, an overflowed one or a replay already started
+    /// ([`EstError::NoStateAtTime`]; the recording is then ended), or the filter's own errors
+    /// on `m` (the replay still runs, as in [`Self::apply_late`]).
+    pub fn start_late(&mut self, m: &RelativePose, gated: bool) -> Result<GateDecision, EstError> {
+        let ready = !self.overflowed && self.cursor.is_none();
+        let Some(snapshot) = self.snapshot.as_mut().filter(|_| ready) else {
             self.end();
             return Err(EstError::NoStateAtTime { t_us: m.t1_us });
         };
-        ekf.copy_from(snapshot);
-        let decision = ekf.update_relative_pose(m, gated);
-        let (mut i, mut k) = (0usize, 0usize);
-        for op in self.ops.get(..self.op_count).unwrap_or(&[]) {
-            match op {
+        let decision = snapshot.update_relative_pose(m, gated);
+        self.cursor = Some((0, 0, 0));
+        decision
+    }
+
+    /// Replays at most `max_ops` recorded operations on the snapshot (at least one). When the
+    /// snapshot has caught up with the recording it is copied into `ekf` (the live filter) and
+    /// the recording ends ([`ReplayProgress::Done`]).
+    pub fn replay_step(&mut self, ekf: &mut Ekf, max_ops: usize) -> ReplayProgress {
+        let Some((mut op, mut i, mut k)) = self.cursor else {
+            return ReplayProgress::Idle;
+        };
+        if self.overflowed {
+            self.end();
+            return ReplayProgress::Abandoned;
+        }
+        let Some(snapshot) = self.snapshot.as_mut() else {
+            self.end();
+            return ReplayProgress::Idle;
+        };
+        let stop = op.saturating_add(max_ops.max(1)).min(self.op_count);
+        for kind in self.ops.get(op..stop).unwrap_or(&[]) {
+            match kind {
                 Op::Imu => {
                     if let Some(s) = self.imu.get(i) {
-                        let _ = ekf.propagate(s);
+                        let _ = snapshot.propagate(s);
                     }
                     i += 1;
                 }
                 Op::Measurement => {
                     if let Some(Some(meas)) = self.measurements.get(k) {
-                        replay_one(ekf, meas);
+                        replay_one(snapshot, meas);
                     }
                     k += 1;
                 }
             }
+            op += 1;
         }
-        self.end();
-        decision
+        if op >= self.op_count {
+            ekf.copy_from(snapshot);
+            self.end();
+            ReplayProgress::Done
+        } else {
+            self.cursor = Some((op, i, k));
+            ReplayProgress::Working
+        }
     }
 }
 

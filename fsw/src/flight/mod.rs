@@ -442,8 +442,9 @@ impl<P: Platform> Work<'_, P> {
     }
 
     fn trigger_stereo(&mut self) {
-        if self.nav.vo_busy() {
-            // VO still works on the last frame: this capture is skipped (the frame is held).
+        if self.nav.vo_busy() || self.nav.replaying() {
+            // VO still works on the last frame (the frame is held), or its result is still
+            // being replayed: this capture is skipped.
             self.nav.capture_skipped();
             return;
         }
@@ -476,6 +477,9 @@ impl<P: Platform> Work<'_, P> {
     }
 
     fn poll_stereo(&mut self, quantum: u32) -> u32 {
+        if self.nav.replaying() {
+            return self.nav.replay_step();
+        }
         if self.nav.vo_busy() {
             let (used, done) = match self.devices.camera.frame() {
                 Ok(frame) => self.nav.vo_step(&frame, quantum),

@@ -31,7 +31,9 @@
 //! is zero. The EKF, gate and VO still run and are reported, so the downhill bias between the
 //! VO-aided estimate and the kinematic pose is visible.
 
-use crate::estimation::{CloneHandle, CoreCov, Ekf, EkfConfig, EstError, NominalState, Recorder};
+use crate::estimation::{
+    CloneHandle, CoreCov, Ekf, EkfConfig, EstError, NominalState, Recorder, ReplayProgress,
+};
 use crate::guidance::{
     Guidance, GuidanceCommand, GuidanceConfig, GuidanceError, Path, Point2, Pose2, SlipVector,
 };
@@ -97,6 +99,11 @@ pub struct NavConfig {
     pub vo_timeout_cycles: u32,
     /// Slip allowance of the VO-loss fallback, as a fraction of the kinematic step.
     pub vo_loss_slip_fraction: f64,
+    /// Recorded filter operations replayed per background slice when a VO result is applied at
+    /// its capture time ([`Recorder::replay_step`]): bounds the slice (an IMU propagation is
+    /// about 10 000 instructions on the rover CPU, an update up to 95 000) while the replay
+    /// still catches up within a few dozen frames.
+    pub replay_ops_per_slice: u16,
     /// Guidance settings.
     pub guidance: GuidanceConfig,
     /// Minor frames without a checked IMU sample after which the rover is stopped.
@@ -141,6 +148,7 @@ impl NavConfig {
             slip_hold_cycles: 20,
             vo_timeout_cycles: 60,
             vo_loss_slip_fraction: 0.3,
+            replay_ops_per_slice: 16,
             guidance: GuidanceConfig::rocky8(xy),
             imu_timeout_frames: 20,
             joints_timeout_cycles: 10,
@@ -202,6 +210,8 @@ pub struct NavCounters {
     pub vo_fused: u32,
     /// Of those, applied at capture time and replayed to the present ([`Recorder`]).
     pub vo_replayed: u32,
+    /// Of those, lost because the recording overflowed before the sliced replay caught up.
+    pub vo_replay_lost: u32,
     /// VO attempts that failed (after the first keyframe).
     pub vo_failures: u32,
     /// VO relative poses fused with `d_m^2 > vo_warn_d2` (the estimate had drifted).
@@ -442,11 +452,38 @@ impl Navigator {
         matches!(self.stereo, StereoStage::Processing { .. })
     }
 
-    /// True when a capture may be triggered (VO enabled and idle, estimator running).
+    /// True while a VO result is being replayed from its capture time in background slices
+    /// ([`Self::replay_step`]); no capture is started meanwhile.
+    pub fn replaying(&self) -> bool {
+        self.recorder.replaying()
+    }
+
+    /// Background: replays up to [`NavConfig::replay_ops_per_slice`] recorded filter
+    /// operations of a late VO update; when the replay has caught up, the replayed filter
+    /// becomes the live one (bit-identical to a one-shot replay then). Returns the operations
+    /// budget used (0 when no replay is in progress).
+    pub fn replay_step(&mut self) -> u32 {
+        if !self.recorder.replaying() {
+            return 0;
+        }
+        if !self.ekf_running {
+            self.recorder.end();
+            return 1;
+        }
+        let ops = self.config.replay_ops_per_slice.max(1);
+        if self.recorder.replay_step(&mut self.ekf, usize::from(ops)) == ReplayProgress::Abandoned {
+            self.counters.vo_replay_lost = self.counters.vo_replay_lost.saturating_add(1);
+        }
+        u32::from(ops)
+    }
+
+    /// True when a capture may be triggered (VO enabled and idle, no replay in progress,
+    /// estimator running).
     pub fn wants_capture(&self) -> bool {
         self.vo.is_some()
             && self.ekf_running
             && matches!(self.stereo, StereoStage::Idle)
+            && !self.recorder.replaying()
             && self.mode != NavMode::Safed
     }
 
@@ -835,7 +872,9 @@ impl Navigator {
 
     /// The capture was lost (camera error or timeout): its clone is released.
     pub fn capture_lost(&mut self) {
-        self.recorder.end();
+        if !self.recorder.replaying() {
+            self.recorder.end();
+        }
         let clone = match self.stereo {
             StereoStage::Capturing { clone } | StereoStage::Processing { clone, .. } => clone,
             StereoStage::Idle => None,
@@ -992,10 +1031,12 @@ impl Navigator {
         // is the measurement that corrects an estimate slip has pulled away; a large distance
         // is counted for the ground.
         // Applied at capture time and replayed to now when the recording since the capture is
-        // complete (exact); otherwise at the capture clones (exact there, first order now).
+        // complete (exact); otherwise at the capture clones (exact there, first order now). The
+        // replay runs in background slices (replay_step): the live filter takes the result when
+        // the replay has caught up.
         let result = if self.recorder.active() {
             self.counters.vo_replayed = self.counters.vo_replayed.saturating_add(1);
-            self.recorder.apply_late(ekf, rp, false)
+            self.recorder.start_late(rp, false)
         } else {
             self.recorder.end();
             ekf.update_relative_pose(rp, false)

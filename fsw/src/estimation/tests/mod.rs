@@ -571,6 +571,99 @@ fn est_6b_late_vo_by_replay_equals_update_at_capture() {
     assert_eq!(live.state().p_n, before);
 }
 
+/// EST-6c: the sliced replay (a few operations per call while the live filter goes on) gives
+/// the same filter, bit for bit, as the one-shot replay at the moment it catches up; an
+/// overflowed recording is abandoned and leaves the live filter alone.
+#[test]
+fn est_6c_sliced_replay_equals_one_shot_replay() {
+    let (ekf, samples, truth_poses, mut rng) = late_vo_drive(62);
+    let (capture0, capture1, arrival) = (100usize, 300, 400);
+    let vo = relative_pose(
+        &truth_poses[capture0],
+        &truth_poses[capture1],
+        &[2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3],
+        [true; 6],
+        Vector3::new(0.004, 0.0, 0.0),
+        &mut rng,
+    );
+    let mut live = ekf.clone();
+    let mut recorder = super::Recorder::new();
+    for (k, s) in samples.iter().enumerate().take(arrival + 1) {
+        live.propagate(s).unwrap();
+        recorder.propagate(s);
+        if k == capture0 || k == capture1 {
+            live.clone_at(s.t_us).unwrap();
+        }
+        if k == capture1 {
+            recorder.begin(&live);
+        }
+    }
+    let (mut one_shot, mut one_shot_recorder) = (live.clone(), recorder.clone());
+    let (mut filter, mut overflow_recorder) = (live.clone(), recorder.clone());
+    let d = recorder.start_late(&vo, false).unwrap();
+    assert!(d.applied && recorder.replaying());
+    // A second start is refused (and ends that recording).
+    let mut twice = recorder.clone();
+    assert!(twice.start_late(&vo, false).is_err() && !twice.active());
+    let mut caught_up = None;
+    for (k, s) in samples.iter().enumerate().skip(arrival + 1).take(60) {
+        for (f, r) in [
+            (&mut live, &mut recorder),
+            (&mut one_shot, &mut one_shot_recorder),
+        ] {
+            f.propagate(s).unwrap();
+            r.propagate(s);
+        }
+        if k == arrival + 10 {
+            // A live measurement while the replay runs: recorded, and replayed too.
+            for (f, r) in [
+                (&mut live, &mut recorder),
+                (&mut one_shot, &mut one_shot_recorder),
+            ] {
+                f.clone_at(s.t_us).unwrap();
+                r.clone_at(s.t_us);
+            }
+        }
+        match recorder.replay_step(&mut live, 7) {
+            super::ReplayProgress::Working => {}
+            super::ReplayProgress::Done => {
+                caught_up = Some(k);
+                break;
+            }
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+    let k = caught_up.expect("the replay catches up");
+    assert!(k > arrival + 10, "{k}: the replay took several slices");
+    one_shot_recorder
+        .apply_late(&mut one_shot, &vo, false)
+        .unwrap();
+    assert_eq!(live.state(), one_shot.state());
+    assert_eq!(live.covariance(), one_shot.covariance());
+    assert!(!recorder.active() && !recorder.replaying());
+    assert_eq!(
+        recorder.replay_step(&mut live, 7),
+        super::ReplayProgress::Idle
+    );
+    // Overflow while replaying: abandoned, the live filter untouched.
+    overflow_recorder.start_late(&vo, false).unwrap();
+    for s in samples
+        .iter()
+        .skip(arrival + 1)
+        .take(super::replay::REPLAY_IMU)
+    {
+        filter.propagate(s).unwrap();
+        overflow_recorder.propagate(s);
+    }
+    let before = filter.clone();
+    assert_eq!(
+        overflow_recorder.replay_step(&mut filter, 7),
+        super::ReplayProgress::Abandoned
+    );
+    assert_eq!(filter.state(), before.state());
+    assert!(!overflow_recorder.active());
+}
+
 /// EST-7: chi-square table (H04 eq. 46; kinematic odometry 5 dof, 11.07).
 #[test]
 fn est_7_chi_square_table() {
