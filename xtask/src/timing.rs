@@ -52,6 +52,9 @@ struct Measured {
     exec: Vec<(String, u64, u64, u64)>,
     exec_tasks: Vec<(String, u64, u64, u64)>,
     vo: BTreeMap<String, u64>,
+    vo_items: Vec<(String, Stat)>,
+    vo_cost: BTreeMap<String, u64>,
+    background_quantum: u64,
     stack: BTreeMap<String, u64>,
     replay_insns: u64,
     replay_end: String,
@@ -100,6 +103,13 @@ fn parse(text: &str) -> Result<Measured> {
                 .exec_tasks
                 .push((name.to_string(), x.parse()?, a.parse()?, b.parse()?)),
             ["timing", "vo", rest @ ..] => m.vo = pairs(rest),
+            ["timing", "vo_item", name, rest @ ..] => {
+                m.vo_items.push((name.to_string(), stat(rest)))
+            }
+            ["timing", "vo_cost", name, c] => {
+                m.vo_cost.insert(name.to_string(), c.parse()?);
+            }
+            ["timing", "background", "quantum", q] => m.background_quantum = q.parse()?,
             ["timing", "stack", rest @ ..] => m.stack = pairs(rest),
             ["timing", "replay", "frames", _, "insns", i] => m.replay_insns = i.parse()?,
             ["replay", "end", ..] => m.replay_end = line.to_string(),
@@ -590,12 +600,41 @@ fn document(
         m.vo.get("work_items_max").copied().unwrap_or(0)
     )?;
 
+    writeln!(d, "### VO work items\n")?;
+    writeln!(
+        d,
+        "The same updates run one work item per call, by kind (`fsw::vo::WorkKind`). The \
+         background slot runs items until their configured costs (`VoConfig::work_cost`, units \
+         of 10,000 instructions) reach `background_quantum` = {} units per frame, so a slice \
+         is at most the quantum plus one item; the configured cost of a kind should cover its \
+         largest item.\n",
+        m.background_quantum
+    )?;
+    writeln!(
+        d,
+        "| kind | items | min | max | mean | configured cost | max / cost |"
+    )?;
+    writeln!(d, "|---|---:|---:|---:|---:|---:|---:|")?;
+    for (name, s) in &m.vo_items {
+        let cost = m.vo_cost.get(name).copied().unwrap_or(0).max(1) * 10_000;
+        writeln!(
+            d,
+            "| {name} | {} | {} | {} | {} | {} | {:.2} |",
+            s.n,
+            thousands(s.min),
+            thousands(s.max),
+            thousands(s.mean),
+            thousands(cost),
+            s.max as f64 / cost as f64
+        )?;
+    }
+    writeln!(d)?;
+
     writeln!(d, "## Whole minor frames of the flight software (replay)\n")?;
     writeln!(
         d,
         "`Fsw::tick` (executive, device reads and checks, navigation tasks, telemetry, stereo \
-         capture, and the background slot's VO work items: `background_quantum` = 8 items per \
-         frame), by the groups that ran in the frame. Every frame runs RG1 and the background \
+         capture, and the background slot's VO work items and late-update replay), by the groups that ran in the frame. Every frame runs RG1 and the background \
          slot, so the largest frames are those where VO work items are heavy (image check, \
          feature selection, tracking).\n"
     )?;
@@ -641,7 +680,7 @@ fn document(
          group on the replay (its tasks, with the navigation in the loop; whole microseconds of \
          virtual time, rounded up to the next 1000 instructions). Visual odometry is the \
          background entity: one update per stereo pair (1 s), the largest measured, executed \
-         in slices of `background_quantum` work items per frame.\n"
+         in slices of `background_quantum` cost units per frame (see \"VO work items\").\n"
     )?;
     writeln!(
         d,
@@ -727,8 +766,8 @@ fn document(
     writeln!(
         d,
         "\nWorst minor frame of the groups (RG1 + RG2): {} instructions, {} / {} of the 5 ms \
-         frame ({:.1} % / {:.1} %). The largest background slice (VO work items, which include \
-         the replay of a late VO update) adds {} instructions ({} / {}): with it the frame \
+         frame ({:.1} % / {:.1} %). The largest background slice (VO work items up to \
+         the cost quantum, or 16 operations of a late VO update's replay) adds {} instructions ({} / {}): with it the frame \
          takes {:.1} % / {:.1} % of the period.\n",
         thousands(worst_frame),
         fmt_time(secs(worst_frame, CPI[0])),

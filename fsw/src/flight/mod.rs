@@ -144,7 +144,8 @@ pub const SCHEDULE_TASKS: [TaskConfig; TASK_COUNT] = [
 /// Everything the flight software is configured with.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FswConfig {
-    /// Executive settings; `background_quantum` is the number of VO work items per frame.
+    /// Executive settings; `background_quantum` is the VO work per frame in cost units of
+    /// about 10 000 rover-CPU instructions ([`crate::vo::VoConfig::work_cost`]).
     pub exec: ExecConfig,
     /// Navigation settings.
     pub nav: NavConfig,
@@ -152,11 +153,13 @@ pub struct FswConfig {
 
 impl FswConfig {
     /// Defaults for Rocky 8 starting at `position` (m, `N`) heading `yaw_rad` (from north): the
-    /// default executive with 8 VO work items per minor frame (a 25 cm VO update in about 0.5 s).
+    /// default executive with 100 cost units of VO work per minor frame (about 0.5 M
+    /// instructions of work items on average, at most 1.0 M plus one item; a 25 cm VO update in
+    /// about 0.6 s; `docs/timing.md`).
     pub fn rocky8(position: [f64; 3], yaw_rad: f64) -> Self {
         Self {
             exec: ExecConfig {
-                background_quantum: 8,
+                background_quantum: 100,
                 ..ExecConfig::default()
             },
             nav: NavConfig::rocky8(position, yaw_rad),

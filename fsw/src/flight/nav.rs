@@ -14,8 +14,10 @@
 //!   vector, and inverse kinematics (eq. 16-25) gives the motor command.
 //! - **RG3** [`Navigator::capture_started`]: the stereo capture time is cloned (eq. 41).
 //! - **background** [`Navigator::vo_start`], [`Navigator::vo_step`]: VO runs in the frames'
-//!   slack, a bounded number of work items per frame; its relative pose between the previous
-//!   and the current capture clone is fused at those clones, however many frames later it ends.
+//!   slack, work items up to a cost quantum per frame; its relative pose between the previous
+//!   and the current capture clone is applied at capture time by a replay of the recorded
+//!   filter operations ([`Navigator::replay_step`], 16 operations per frame), however many
+//!   frames later it ends.
 //! - **RG4** [`Navigator::sun`]: the sun-sensor heading update (RB sec. 5.1).
 //!
 //! Fallbacks: no IMU for [`NavConfig::imu_timeout_frames`] or no joints for

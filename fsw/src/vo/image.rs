@@ -167,36 +167,77 @@ impl<'a> Image<'a> {
     /// Checks one image for use by the VO: [`VoError::BlankImage`] if the grey-level standard
     /// deviation is below `config.min_image_std`, [`VoError::SaturatedImage`] if more than
     /// `config.max_clipped_fraction` of the pixels are 0 or 255. Samples every 4th pixel of every
-    /// 2nd row. Returns a checksum of the samples (FNV-1a, to detect a repeated frame).
+    /// 2nd row. Returns a checksum of the samples (FNV-1a, to detect a repeated frame). The
+    /// same as [`Self::check_band`] over every band, then [`CheckSums::finish`].
     pub fn check(&self, config: &VoConfig) -> Result<u64, VoError> {
-        let mut sum = 0u64;
-        let mut sum_sq = 0u64;
-        let mut count = 0u64;
-        let mut clipped = 0u64;
-        let mut hash = 0xcbf2_9ce4_8422_2325u64;
-        for y in (0..IMAGE_HEIGHT_PX).step_by(2) {
+        let mut sums = CheckSums::default();
+        for band in 0..CHECK_BANDS {
+            self.check_band(band, &mut sums)?;
+        }
+        sums.finish(config)
+    }
+
+    /// Adds the samples of row band `band` (`0..CHECK_BANDS`, rows
+    /// `band * height / CHECK_BANDS ..`, every 2nd row, every 4th pixel) to `sums`, so that the
+    /// check can run as several bounded work items.
+    pub fn check_band(&self, band: usize, sums: &mut CheckSums) -> Result<(), VoError> {
+        let rows = IMAGE_HEIGHT_PX / CHECK_BANDS;
+        let first = band.saturating_mul(rows);
+        for y in (first..first.saturating_add(rows).min(IMAGE_HEIGHT_PX)).step_by(2) {
             let row = self.row(y).ok_or(VoError::WrongImageSize)?;
             for &p in row.iter().step_by(4) {
-                let v = u64::from(p);
-                sum += v;
-                sum_sq += v * v;
-                count += 1;
-                if p == 0 || p == 255 {
-                    clipped += 1;
-                }
-                hash = (hash ^ v).wrapping_mul(0x0000_0100_0000_01b3);
+                let v = u32::from(p);
+                sums.sum = sums.sum.saturating_add(v);
+                sums.sum_sq = sums.sum_sq.saturating_add(v * v);
+                sums.count = sums.count.saturating_add(1);
+                sums.clipped = sums.clipped.saturating_add(u32::from(p == 0 || p == 255));
+                sums.hash = (sums.hash ^ u64::from(p)).wrapping_mul(0x0000_0100_0000_01b3);
             }
         }
-        let n = count.max(1) as f64;
-        let mean = sum as f64 / n;
-        let variance = (sum_sq as f64 / n - mean * mean).max(0.0);
+        Ok(())
+    }
+}
+
+/// Row bands of the image check ([`Image::check_band`]).
+pub const CHECK_BANDS: usize = 4;
+
+/// Running sums of the image check ([`Image::check_band`]). The sample count, sum and sum of
+/// squares of one 640x480 image fit in `u32` (38 400 samples, at most 2.5e9).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CheckSums {
+    sum: u32,
+    sum_sq: u32,
+    count: u32,
+    clipped: u32,
+    hash: u64,
+}
+
+impl Default for CheckSums {
+    fn default() -> Self {
+        Self {
+            sum: 0,
+            sum_sq: 0,
+            count: 0,
+            clipped: 0,
+            hash: 0xcbf2_9ce4_8422_2325,
+        }
+    }
+}
+
+impl CheckSums {
+    /// The verdict of [`Image::check`] from the sums of all bands: the checksum, or
+    /// [`VoError::BlankImage`] / [`VoError::SaturatedImage`].
+    pub fn finish(&self, config: &VoConfig) -> Result<u64, VoError> {
+        let n = f64::from(self.count.max(1));
+        let mean = f64::from(self.sum) / n;
+        let variance = (f64::from(self.sum_sq) / n - mean * mean).max(0.0);
         if libm::sqrt(variance) < config.min_image_std {
             return Err(VoError::BlankImage);
         }
-        if clipped as f64 > config.max_clipped_fraction * n {
+        if f64::from(self.clipped) > config.max_clipped_fraction * n {
             return Err(VoError::SaturatedImage);
         }
-        Ok(hash)
+        Ok(self.hash)
     }
 }
 

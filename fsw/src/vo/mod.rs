@@ -38,7 +38,7 @@ mod render;
 #[cfg(test)]
 mod tests;
 
-pub use pipeline::{Progress, VisualOdometry};
+pub use pipeline::{Progress, VisualOdometry, WorkKind};
 
 /// Side of the square correlation template, pixels (odd).
 pub const TEMPLATE_SIDE: usize = 11;
@@ -136,6 +136,12 @@ pub struct VoConfig {
     pub min_image_std: f64,
     /// Image check: largest fraction of pixels at 0 or 255.
     pub max_clipped_fraction: f64,
+    /// Cost of one work item of each [`WorkKind`] (indexed by `kind as usize`), in units of
+    /// about 10 000 rover-CPU instructions: the largest item of the kind measured on the
+    /// rover-CPU model (`docs/timing.md`, "VO work items"), rounded up. [`VisualOdometry::step`]
+    /// runs items until their costs reach its quantum, so a background slice stays near the
+    /// quantum whatever the mix of items. Values of 0 count as 1.
+    pub work_cost: [u16; WorkKind::COUNT],
 }
 
 impl Default for VoConfig {
@@ -167,6 +173,7 @@ impl Default for VoConfig {
             min_inliers: 6,
             min_image_std: 3.0,
             max_clipped_fraction: 0.5,
+            work_cost: [30, 52, 9, 26, 11, 12, 19, 1],
         }
     }
 }

@@ -10,7 +10,7 @@
 //! The sequence of items depends only on the input, so the number of steps is deterministic.
 
 use super::features::{select_more, ForstnerDetector, CELL_COUNT, END_ROW, FIRST_ROW};
-use super::image::{Image, Template};
+use super::image::{CheckSums, Image, Template, CHECK_BANDS};
 use super::motion::{
     finish_estimate, inlier_gate, mark_inliers, ml_iteration, relative_pose, CameraMount,
     Correspondence, Lmeds, MotionEstimate, RigidMotion, ML_ROUNDS,
@@ -47,18 +47,95 @@ impl Default for KeyFeature {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
     Idle,
-    Check,
-    CheckRight { left_sum: u64 },
-    Track { next: usize },
-    Hypotheses { done: u16 },
-    Refine { round: u8, iteration: u8 },
-    Detect { row: usize },
+    Check {
+        band: u8,
+        sums: CheckSums,
+    },
+    CheckRight {
+        left_sum: u64,
+        band: u8,
+        sums: CheckSums,
+    },
+    Track {
+        next: usize,
+    },
+    Hypotheses {
+        done: u16,
+    },
+    Refine {
+        round: u8,
+        iteration: u8,
+    },
+    Detect {
+        row: usize,
+    },
     Select,
-    Heapify { next: usize },
-    SortDown { end: usize },
-    Choose { next: usize },
-    StereoNew { next: usize },
+    Heapify {
+        next: usize,
+    },
+    SortDown {
+        end: usize,
+    },
+    Choose {
+        next: usize,
+    },
+    StereoNew {
+        next: usize,
+    },
     Finish,
+}
+
+/// The kinds of work item of an update, in pipeline order (see the module doc), for the cost
+/// accounting of [`VisualOdometry::step`] and timing reports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WorkKind {
+    /// Image checks (left, then right).
+    Check = 0,
+    /// Tracking of one keyframe feature (search, affine refinement, stereo), or the end of
+    /// tracking.
+    Track = 1,
+    /// One least-median-of-squares hypothesis.
+    Hypothesis = 2,
+    /// One maximum-likelihood iteration of eq. 11 (or the final covariance).
+    Refine = 3,
+    /// One image row of the Forstner operator.
+    Detect = 4,
+    /// One chunk of the candidate sort and selection.
+    Select = 5,
+    /// Stereo match and triangulation of one new keyframe feature.
+    Stereo = 6,
+    /// Commit of the keyframe and the output.
+    Finish = 7,
+}
+
+impl WorkKind {
+    /// Number of kinds.
+    pub const COUNT: usize = 8;
+    /// All kinds, in pipeline order.
+    pub const ALL: [WorkKind; Self::COUNT] = [
+        WorkKind::Check,
+        WorkKind::Track,
+        WorkKind::Hypothesis,
+        WorkKind::Refine,
+        WorkKind::Detect,
+        WorkKind::Select,
+        WorkKind::Stereo,
+        WorkKind::Finish,
+    ];
+
+    /// Lower-case name for reports.
+    pub const fn name(self) -> &'static str {
+        match self {
+            WorkKind::Check => "check",
+            WorkKind::Track => "track",
+            WorkKind::Hypothesis => "hypothesis",
+            WorkKind::Refine => "refine",
+            WorkKind::Detect => "detect",
+            WorkKind::Select => "select",
+            WorkKind::Stereo => "stereo",
+            WorkKind::Finish => "finish",
+        }
+    }
 }
 
 /// What [`VisualOdometry::step`] reports.
@@ -222,13 +299,36 @@ impl<const N: usize> VisualOdometry<N> {
         self.estimate = None;
         self.pending = None;
         self.lmeds = Lmeds::new(self.config.lmeds_seed);
-        self.phase = Phase::Check;
+        self.phase = Phase::Check {
+            band: 0,
+            sums: CheckSums::default(),
+        };
         Ok(())
     }
 
-    /// Advances the running update by at most `quantum` work items (at least one). `frame`
-    /// must be the frame given to [`Self::start`] ([`VoError::FrameChanged`] otherwise, which
-    /// abandons the update).
+    /// The kind of the next work item, `None` when no update is running.
+    pub fn next_work(&self) -> Option<WorkKind> {
+        Some(match self.phase {
+            Phase::Idle => return None,
+            Phase::Check { .. } | Phase::CheckRight { .. } => WorkKind::Check,
+            Phase::Track { .. } => WorkKind::Track,
+            Phase::Hypotheses { .. } => WorkKind::Hypothesis,
+            Phase::Refine { .. } => WorkKind::Refine,
+            Phase::Detect { .. } => WorkKind::Detect,
+            Phase::Select
+            | Phase::Heapify { .. }
+            | Phase::SortDown { .. }
+            | Phase::Choose { .. } => WorkKind::Select,
+            Phase::StereoNew { .. } => WorkKind::Stereo,
+            Phase::Finish => WorkKind::Finish,
+        })
+    }
+
+    /// Advances the running update by work items until their costs
+    /// ([`VoConfig::work_cost`], units of about 10 000 rover-CPU instructions) reach `quantum`
+    /// units: at least one item, and the last item may go past the quantum by its own cost.
+    /// The items run depend only on the inputs, never on time. `frame` must be the frame given
+    /// to [`Self::start`] ([`VoError::FrameChanged`] otherwise, which abandons the update).
     pub fn step(&mut self, frame: &StereoFrame, quantum: u32) -> Progress {
         if self.phase == Phase::Idle {
             return Progress::Finished(Err(VoError::NotStarted));
@@ -242,7 +342,15 @@ impl<const N: usize> VisualOdometry<N> {
             self.phase = Phase::Idle;
             return Progress::Finished(Err(VoError::FrameChanged));
         }
-        for _ in 0..quantum.max(1) {
+        // Every item costs at least one unit, so this runs at most `quantum` items.
+        let mut spent = 0u32;
+        while spent < quantum.max(1) {
+            let cost = self
+                .next_work()
+                .and_then(|k| self.config.work_cost.get(k as usize).copied())
+                .unwrap_or(1)
+                .max(1);
+            spent = spent.saturating_add(u32::from(cost));
             self.quality.work_items = self.quality.work_items.saturating_add(1);
             if let Some(result) = self.work_item(&left, &right) {
                 self.phase = Phase::Idle;
@@ -270,7 +378,8 @@ impl<const N: usize> VisualOdometry<N> {
             + 3 * CELL_COUNT / SORT_CHUNK
             + 16;
         for _ in 0..bound {
-            if let Progress::Finished(result) = self.step(frame, 64) {
+            // One item per call whatever the costs: `bound` counts items.
+            if let Progress::Finished(result) = self.step(frame, 1) {
                 return result;
             }
         }
@@ -288,15 +397,53 @@ impl<const N: usize> VisualOdometry<N> {
     fn work_item(&mut self, left: &Image, right: &Image) -> Option<Result<VoOutput, VoError>> {
         match self.phase {
             Phase::Idle => return Some(Err(VoError::NotStarted)),
-            Phase::Check => match left.check(&self.config) {
-                Ok(left_sum) => self.phase = Phase::CheckRight { left_sum },
-                Err(e) => {
-                    self.key_valid = false;
-                    return Some(Err(e));
+            Phase::Check { band, mut sums } => {
+                let checked = left
+                    .check_band(usize::from(band), &mut sums)
+                    .and_then(|()| {
+                        if usize::from(band) + 1 < CHECK_BANDS {
+                            Ok(None)
+                        } else {
+                            sums.finish(&self.config).map(Some)
+                        }
+                    });
+                match checked {
+                    Ok(None) => {
+                        self.phase = Phase::Check {
+                            band: band + 1,
+                            sums,
+                        }
+                    }
+                    Ok(Some(left_sum)) => {
+                        self.phase = Phase::CheckRight {
+                            left_sum,
+                            band: 0,
+                            sums: CheckSums::default(),
+                        }
+                    }
+                    Err(e) => {
+                        self.key_valid = false;
+                        return Some(Err(e));
+                    }
                 }
-            },
-            Phase::CheckRight { left_sum } => {
-                let checks = right.check(&self.config).map(|_| left_sum);
+            }
+            Phase::CheckRight {
+                left_sum,
+                band,
+                mut sums,
+            } => {
+                let checked = right.check_band(usize::from(band), &mut sums);
+                if checked.is_ok() && usize::from(band) + 1 < CHECK_BANDS {
+                    self.phase = Phase::CheckRight {
+                        left_sum,
+                        band: band + 1,
+                        sums,
+                    };
+                    return None;
+                }
+                let checks = checked
+                    .and_then(|()| sums.finish(&self.config))
+                    .map(|_| left_sum);
                 match checks {
                     Ok(sum) if self.key_valid && sum == self.key_checksum => {
                         self.key_valid = false;

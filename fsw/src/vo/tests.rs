@@ -308,21 +308,56 @@ fn vo_4_step_count_is_deterministic_and_quantum_independent() {
     let p1 = RoverPose::new(1f64.to_radians(), 0.0, 0.0, Vec3::new(0.2, 0.0, 0.0));
     let (l0, r0) = render_pair(&cal, &p0);
     let (l1, r1) = render_pair(&cal, &p1);
+    let config = VoConfig::default();
+    let cost = |k: WorkKind| u32::from(config.work_cost[k as usize].max(1));
+    // The kinds of the update's items, one item per call.
+    let mut kinds = Vec::new();
     let mut results = Vec::new();
-    for quantum in [1u32, 7, 1000] {
-        let mut vo = Box::new(VisualOdometry::<100>::new(VoConfig::default(), &cal).unwrap());
+    for quantum in [1u32, 7, 64, 1000] {
+        let mut vo = Box::new(VisualOdometry::<100>::new(config, &cal).unwrap());
         vo.run_to_completion(&frame(&l0, &r0, 10, 0), None).unwrap();
         let f1 = frame(&l1, &r1, 20, 1);
         vo.start(&f1, None).unwrap();
-        let mut calls = 0u32;
+        // Items run per call, and the kind of each call's first item.
+        let mut slices = Vec::new();
+        let mut done = 0u32;
         let out = loop {
-            calls += 1;
-            assert!(calls < 100_000);
-            if let Progress::Finished(r) = vo.step(&f1, quantum) {
-                break r.unwrap();
+            assert!(slices.len() < 100_000);
+            let first = vo.next_work().unwrap();
+            if quantum == 1 {
+                kinds.push(first);
+            }
+            match vo.step(&f1, quantum) {
+                Progress::Finished(r) => {
+                    let out = r.unwrap();
+                    slices.push(out.quality.work_items - done);
+                    break out;
+                }
+                Progress::Working { items } => {
+                    slices.push(items - done);
+                    done = items;
+                }
             }
         };
-        assert_eq!(calls, out.quality.work_items.div_ceil(quantum));
+        assert_eq!(slices.iter().sum::<u32>(), out.quality.work_items);
+        if quantum == 1 {
+            assert!(slices.iter().all(|&n| n == 1));
+        } else {
+            // Each call ran items until their costs reached the quantum: the greedy partition
+            // of the item sequence by cost.
+            let mut next = 0usize;
+            for (k, &n) in slices.iter().enumerate() {
+                let items = &kinds[next..next + n as usize];
+                let spent: u32 = items.iter().map(|&k| cost(k)).sum();
+                let before_last = spent - cost(*items.last().unwrap());
+                assert!(before_last < quantum, "slice {k} ran past its quantum");
+                assert!(
+                    spent >= quantum || k + 1 == slices.len(),
+                    "slice {k} stopped early"
+                );
+                next += n as usize;
+            }
+        }
         results.push(out);
     }
     assert!(

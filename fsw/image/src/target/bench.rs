@@ -20,10 +20,13 @@ use fsw::kinematics::{
     OdometryConfig, SuspensionRates, SuspensionState, VehicleCommand, ROCKY8,
 };
 use fsw::types::{Quat, Vec3};
-use fsw::vo::VisualOdometry;
+use fsw::vo::{Progress, VisualOdometry, WorkKind};
 use rover_hal::{ImuSample, JointState, StereoFrame};
 use rover_replay::tape::{PayloadSource, TapeReader, MAX_WAYPOINTS};
 use rover_replay::{Call, FrameInfo, ImagesRef, Record, TapeError, TapeHeader};
+
+/// Largest number of work items of one VO update (far above the pipeline's bound).
+const MAX_VO_ITEMS: usize = 8192;
 
 /// Feature capacity of the visual odometry.
 pub const VO_FEATURES: usize = 150;
@@ -94,6 +97,8 @@ pub struct Bench {
     capture: Option<CloneHandle>,
     prev_capture: Option<CloneHandle>,
     stats: [Stats; TASKS.len()],
+    /// Instructions per VO work item, by kind (`fsw::vo::WorkKind`).
+    vo_items: [Stats; WorkKind::COUNT],
     vo_summary: VoSummary,
 }
 
@@ -136,6 +141,7 @@ impl Bench {
             capture: None,
             prev_capture: None,
             stats: [Stats::new(); TASKS.len()],
+            vo_items: [Stats::new(); WorkKind::COUNT],
             vo_summary: VoSummary {
                 inliers_min: u16::MAX,
                 ..VoSummary::default()
@@ -170,6 +176,14 @@ impl Bench {
     /// The task statistics, by name.
     pub fn tasks(&self) -> impl Iterator<Item = (&'static str, &Stats)> + '_ {
         TASKS.iter().copied().zip(self.stats.iter())
+    }
+
+    /// Instructions per VO work item, by kind name.
+    pub fn vo_items(&self) -> impl Iterator<Item = (&'static str, &Stats)> + '_ {
+        WorkKind::ALL
+            .iter()
+            .map(|k| k.name())
+            .zip(self.vo_items.iter())
     }
 
     /// Print the visual-odometry outcomes.
@@ -334,8 +348,30 @@ impl Bench {
             sequence: f.sequence,
         };
         let prior = self.vo_prior.take().ok();
+        // Item by item (one work item per `step`), so that each item is measured and
+        // attributed to its kind; the update's cost is the sum.
         let vo = &mut *self.vo;
-        let (r, n) = meter.measure(|| vo.run_to_completion(&frame, prior.as_ref()));
+        let (started, mut n) = meter.measure(|| vo.start(&frame, prior.as_ref()));
+        // An update that never finishes within MAX_VO_ITEMS items counts as an error.
+        let mut r = Err(fsw::vo::VoError::NonFinite);
+        match started {
+            Err(e) => r = Err(e),
+            Ok(()) => {
+                for _ in 0..MAX_VO_ITEMS {
+                    let vo = &mut *self.vo;
+                    let kind = vo.next_work();
+                    let (p, k) = meter.measure(|| vo.step(&frame, 1));
+                    n += k;
+                    if let Some(s) = kind.and_then(|kind| self.vo_items.get_mut(kind as usize)) {
+                        s.add(k, true);
+                    }
+                    if let Progress::Finished(out) = p {
+                        r = out;
+                        break;
+                    }
+                }
+            }
+        }
         self.add(VO, n, r.is_ok());
         let v = &mut self.vo_summary;
         v.updates += 1;

@@ -221,6 +221,17 @@ pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
     for (name, s) in bench.tasks() {
         print_stats("task", name, s);
     }
+    for (name, s) in bench.vo_items() {
+        print_stats("vo_item", name, s);
+    }
+    let flight = fsw::flight::FswConfig::rocky8([0.0; 3], 0.0);
+    for (kind, cost) in fsw::vo::WorkKind::ALL.iter().zip(flight.nav.vo.work_cost) {
+        report(format_args!("timing vo_cost {} {}\n", kind.name(), cost));
+    }
+    report(format_args!(
+        "timing background quantum {}\n",
+        flight.exec.background_quantum
+    ));
     bench.report_vo();
     if let Err(e) = bench_result {
         report(format_args!("fsw-image: bench stopped: {e:?}\n"));
