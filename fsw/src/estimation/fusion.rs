@@ -101,24 +101,26 @@ impl Ekf {
             .cholesky()
             .ok_or(EstError::ResidualCovarianceNotPositive)?;
         let u = inn.u(&self.p);
-        // K' = S^-1 U'  (M x DIM), K = U S^-1.
-        let kt = chol.solve(&u.transpose());
+        // K' = S^-1 U'  (M x DIM), solved in place; K = U S^-1 is read from it as K(i, m) =
+        // K'(m, i), so the gain is never stored twice (the stack frame stays small).
+        let mut kt = u.transpose();
+        chol.solve_mut(&mut kt);
         if kt.iter().any(|v| !v.is_finite()) {
             return Err(EstError::ResidualCovarianceNotPositive);
         }
-        let k = kt.transpose();
-        let dx: ErrorVec = k * inn.r;
+        let dx: ErrorVec = kt.tr_mul(&inn.r);
         // Joseph form P - K U' - U K' + K S K' = P - U K' - K W' with W = U - K S (zero up to
         // rounding), evaluated on the upper triangle and mirrored: exactly symmetric. Rows and
         // columns of released clones are zero in P, hence in U, K and W: they are skipped.
-        let w: SMatrix<f64, DIM, M> = u - k * inn.s;
+        let mut w: SMatrix<f64, DIM, M> = u;
+        w.gemm_tr(-1.0, &kt, &inn.s, 1.0);
         let (live, count) = self.live_indices();
         let live = live.get(..count).unwrap_or(&[]);
         for (b, &j) in live.iter().enumerate() {
             for &i in live.get(..=b).unwrap_or(&[]) {
                 let mut acc = 0.0;
                 for m in 0..M {
-                    acc += u[(i, m)] * k[(j, m)] + k[(i, m)] * w[(j, m)];
+                    acc += u[(i, m)] * kt[(m, j)] + kt[(m, i)] * w[(j, m)];
                 }
                 let v = self.p[(i, j)] - acc;
                 self.p[(i, j)] = v;
