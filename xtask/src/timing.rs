@@ -493,7 +493,7 @@ const TASK_DOC: [(&str, &str, &str); 9] = [
     ),
     (
         "vo_update",
-        "`VisualOdometry::<150>::run_to_completion`",
+        "`VisualOdometry::<150>::start`, then `step` per work item",
         "background: one full update on a 640x480 pair in `.extram`",
     ),
 ];

@@ -182,15 +182,21 @@ impl ForstnerDetector {
             if centre < BORDER_PX {
                 continue;
             }
-            let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
-            let trace_f = fxx + fyy;
-            let det_f = fxx * fyy - fxy * fxy;
-            if !(trace_f > 0.0 && det_f > 0.0) {
-                continue;
-            }
             let Some(cell) = cells.get_mut(centre / GRID_PX) else {
                 continue;
             };
+            // w = det / trace <= trace / 4 (det <= (trace / 2)^2 for a 2x2 normal matrix): a
+            // pixel whose trace is at most four times the cell's best cannot beat it.
+            let trace = nxx + nyy;
+            if !(trace > 0 && f64::from(trace) > 4.0 * f64::from(cell.interest)) {
+                continue;
+            }
+            let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
+            let trace_f = fxx + fyy;
+            let det_f = fxx * fyy - fxy * fxy;
+            if !(det_f > 0.0) {
+                continue;
+            }
             // Thresholds without divisions; the test against the cell's best comes first (most
             // pixels fail it), the division runs only for a new best.
             if !(det_f > f64::from(cell.interest) * trace_f)

@@ -5,7 +5,8 @@
 //! through forward kinematics, kinematic odometry, the Mahalanobis gate and the relative-pose
 //! update over the last RG2 interval (between two clones), guidance on the EKF pose and inverse
 //! kinematics of its command; every stereo pair goes through one full visual-odometry update
-//! (`VisualOdometry::<150>::run_to_completion`, images in `.extram`) and, when it gives a pose,
+//! (`VisualOdometry::<150>::start`, then `step` one work item at a time, each item measured by kind;
+//! images in `.extram`) and, when it gives a pose,
 //! the gate and update between the two capture clones. Updates are applied ungated so that
 //! every update is measured whole.
 
