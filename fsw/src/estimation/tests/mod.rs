@@ -396,6 +396,23 @@ fn est_5_clone_window_reference_counting() {
 
 /// A filter initialised on a 0.1 m/s drive and 600 IMU samples (3 s) of it with their true
 /// poses (EST-6, EST-6b).
+/// The VO relative pose of the late-update tests between two true poses (with a 4 mm bias
+/// along x, so that the update moves the filter).
+fn late_vo_pose(
+    from: &truth::TruePose,
+    to: &truth::TruePose,
+    rng: &mut ChaCha8Rng,
+) -> RelativePose {
+    relative_pose(
+        from,
+        to,
+        &[2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3],
+        [true; 6],
+        Vector3::new(0.004, 0.0, 0.0),
+        rng,
+    )
+}
+
 fn late_vo_drive(
     seed: u64,
 ) -> (
@@ -505,14 +522,7 @@ fn est_6_late_vo_equals_update_at_capture() {
 fn est_6b_late_vo_by_replay_equals_update_at_capture() {
     let (ekf, samples, truth_poses, mut rng) = late_vo_drive(61);
     let (capture0, capture1, kin0, kin1, arrival) = (100usize, 300, 320, 330, 400);
-    let vo = relative_pose(
-        &truth_poses[capture0],
-        &truth_poses[capture1],
-        &[2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3],
-        [true; 6],
-        Vector3::new(0.004, 0.0, 0.0),
-        &mut rng,
-    );
+    let vo = late_vo_pose(&truth_poses[capture0], &truth_poses[capture1], &mut rng);
     let kin = relative_pose(
         &truth_poses[kin0],
         &truth_poses[kin1],
@@ -578,14 +588,7 @@ fn est_6b_late_vo_by_replay_equals_update_at_capture() {
 fn est_6c_sliced_replay_equals_one_shot_replay() {
     let (ekf, samples, truth_poses, mut rng) = late_vo_drive(62);
     let (capture0, capture1, arrival) = (100usize, 300, 400);
-    let vo = relative_pose(
-        &truth_poses[capture0],
-        &truth_poses[capture1],
-        &[2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3],
-        [true; 6],
-        Vector3::new(0.004, 0.0, 0.0),
-        &mut rng,
-    );
+    let vo = late_vo_pose(&truth_poses[capture0], &truth_poses[capture1], &mut rng);
     let mut live = ekf.clone();
     let mut recorder = super::Recorder::new();
     for (k, s) in samples.iter().enumerate().take(arrival + 1) {
