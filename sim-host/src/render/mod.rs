@@ -166,7 +166,7 @@ impl Default for RenderSettings {
             sky_dn: 190.0,
             noise_sigma_dn: 2.0,
             max_range_m: 60.0,
-            mesh_step_px: 6.0,
+            mesh_step_px: 8.0,
             sin_min_grazing: 0.25,
         }
     }

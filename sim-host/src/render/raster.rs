@@ -89,8 +89,9 @@ const EDGE_TOL: f64 = 1e-7;
 /// each row (it varies slowly; it only selects mip levels).
 const STRETCH_KNOT_PX: usize = 16;
 
-/// Pixels per run handed to the albedo function at once.
+/// Pixels per run handed to the albedo function at once (a multiple of [`STRETCH_KNOT_PX`]).
 const BATCH: usize = 64;
+const _: () = assert!(BATCH % STRETCH_KNOT_PX == 0);
 
 /// Pixels that share one 64-bit noise hash (16 bits each).
 const NOISE_GROUP: usize = 4;
@@ -284,19 +285,36 @@ impl Frame {
                 let mut ys = [0.0f64; BATCH];
                 let mut fs = [0.0f64; BATCH];
                 let mut albedos = [0.0f64; BATCH];
+                // Per pixel of a run: the ray's x and y per unit depth and the footprint
+                // stretch (tight loops over the whole run, then used by its ground pixels).
+                let mut ray_x = [0.0f64; BATCH];
+                let mut ray_y = [0.0f64; BATCH];
+                let mut stretch = [0.0f64; BATCH];
                 for run in (0..width).step_by(BATCH) {
                     let end = (run + BATCH).min(width);
+                    for (q, i) in (run..end).enumerate() {
+                        let fi = i as u32 as f64;
+                        ray_x[q] = base[0] + fi * step[0];
+                        ray_y[q] = base[1] + fi * step[1];
+                    }
+                    // Runs start on a knot (BATCH is a multiple of STRETCH_KNOT_PX).
+                    for (segment, out) in
+                        stretch[..end - run].chunks_mut(STRETCH_KNOT_PX).enumerate()
+                    {
+                        let k = run / STRETCH_KNOT_PX + segment;
+                        let (k0, k1) = (knot[k], knot[k + 1]);
+                        for (t, o) in out.iter_mut().enumerate() {
+                            let t = t as u32 as f64 * (1.0 / STRETCH_KNOT_PX as f64);
+                            *o = k0 + t * (k1 - k0);
+                        }
+                    }
                     let mut n = 0;
-                    for (i, &iz) in inv_z.iter().enumerate().take(end).skip(run) {
+                    for (q, &iz) in inv_z[run..end].iter().enumerate() {
                         if iz > 0.0 {
                             let z = f64::from(1.0 / iz);
-                            let fi = i as u32 as f64;
-                            xs[n] = cx + z * (base[0] + fi * step[0]);
-                            ys[n] = cy + z * (base[1] + fi * step[1]);
-                            let k = i / STRETCH_KNOT_PX;
-                            let t = (i % STRETCH_KNOT_PX) as u32 as f64
-                                * (1.0 / STRETCH_KNOT_PX as f64);
-                            fs[n] = z * (knot[k] + t * (knot[k + 1] - knot[k]));
+                            xs[n] = cx + z * ray_x[q];
+                            ys[n] = cy + z * ray_y[q];
+                            fs[n] = z * stretch[q];
                             n += 1;
                         }
                     }
@@ -317,8 +335,9 @@ impl Frame {
                             };
                             let g = gauss[((h >> (16 * q)) & table_mask) as usize];
                             let noise = sigma * f64::from(g);
-                            // Round half up; NaN saturates to 0.
-                            row[i] = ((clean + noise).clamp(0.0, 255.0) + 0.5) as u8;
+                            // Round half up; NaN gives 0 (through i32: the clamped value fits,
+                            // and the conversion is cheaper than the saturating one to u8).
+                            row[i] = ((clean + noise).clamp(0.0, 255.0) + 0.5) as i32 as u8;
                         }
                     }
                 }

@@ -146,6 +146,45 @@ impl Tile {
         (top + fv * (bottom - top)) * (1.0 / 65535.0)
     }
 
+    /// [`Self::bilinear`] at `(x[k] * scale - 0.5, y[k] * scale - 0.5)` for up to [`BATCH`]
+    /// points into `out[k]` (bit-identical to the one-point form). The work runs in passes, the
+    /// coordinate and interpolation passes over whole arrays (which the compiler vectorises)
+    /// and only the texel loads one point at a time.
+    #[inline(always)]
+    fn bilinear_batch(&self, x: &[f64], y: &[f64], scale: f64, out: &mut [f64]) {
+        const MAGIC: f64 = 6_755_399_441_055_744.0;
+        let n = out.len().min(x.len()).min(y.len()).min(BATCH);
+        let (x, y, out) = (&x[..n], &y[..n], &mut out[..n]);
+        let mask = self.size - 1;
+        let mut fu = [0.0f64; BATCH];
+        let mut fv = [0.0f64; BATCH];
+        let mut base = [0usize; BATCH];
+        for k in 0..n {
+            let (u, v) = (x[k] * scale - 0.5, y[k] * scale - 0.5);
+            let tu = (u - 0.5) + MAGIC;
+            let tv = (v - 0.5) + MAGIC;
+            fu[k] = u - (tu - MAGIC);
+            fv[k] = v - (tv - MAGIC);
+            base[k] = self.index(tu.to_bits() as usize & mask, tv.to_bits() as usize & mask);
+        }
+        let mut taps = [[0.0f64; 4]; BATCH];
+        for (t, &b) in taps.iter_mut().zip(&base[..n]) {
+            let q = &self.data[b..b + STRIDE + 2];
+            *t = [
+                f64::from(q[0]),
+                f64::from(q[1]),
+                f64::from(q[STRIDE]),
+                f64::from(q[STRIDE + 1]),
+            ];
+        }
+        for k in 0..n {
+            let [a, b, c, d] = taps[k];
+            let top = a + fu[k] * (b - a);
+            let bottom = c + fu[k] * (d - c);
+            out[k] = (top + fv[k] * (bottom - top)) * (1.0 / 65535.0);
+        }
+    }
+
     /// The next mip level: 2x2 box average.
     fn halve(&self) -> Tile {
         let n = self.size / 2;
@@ -411,19 +450,70 @@ impl AlbedoTexture {
                     details += 1;
                 }
             }
-            for (k, o) in out.iter_mut().enumerate() {
-                *o = self.fine.at_level(usize::from(level[k]), x[k], y[k]);
+            // Lookups in runs of equal level (the level changes slowly along a row), each run
+            // through the tile's batch lookup.
+            let count = out.len();
+            let mut k = 0;
+            while k < count {
+                let lv = usize::from(level[k]);
+                let mut e = k;
+                while e < count && usize::from(level[e]) == lv {
+                    e += 1;
+                }
+                let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
+                tile.bilinear_batch(&x[k..e], &y[k..e], scale, &mut out[k..e]);
+                k = e;
             }
-            for (k, o) in out.iter_mut().enumerate() {
-                let t = blend[k];
-                if t > 0.0 {
-                    *o += t * (self.fine.at_level(usize::from(level[k]) + 1, x[k], y[k]) - *o);
+            // The blend with the next level, for the points with t > 0, gathered.
+            let mut bx = [0.0f64; BATCH];
+            let mut by = [0.0f64; BATCH];
+            let mut bk = [0u8; BATCH];
+            let mut blends = 0;
+            for k in 0..count {
+                if blend[k] > 0.0 {
+                    bx[blends] = x[k];
+                    by[blends] = y[k];
+                    bk[blends] = k as u8;
+                    blends += 1;
                 }
             }
-            for &(k, d, weight) in &detail[..details] {
+            let mut values = [0.0f64; BATCH];
+            let mut j = 0;
+            while j < blends {
+                let lv = usize::from(level[usize::from(bk[j])]) + 1;
+                let mut e = j;
+                while e < blends && usize::from(level[usize::from(bk[e])]) + 1 == lv {
+                    e += 1;
+                }
+                let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
+                tile.bilinear_batch(&bx[j..e], &by[j..e], scale, &mut values[j..e]);
+                j = e;
+            }
+            for (&k, &value) in bk[..blends].iter().zip(&values[..blends]) {
                 let k = usize::from(k);
-                let (u, v) = (cos * x[k] - sin * y[k], sin * x[k] + cos * y[k]);
-                let value = self.detail.at_level(usize::from(d), u, v);
+                let (o, t) = (out[k], blend[k]);
+                out[k] = o + t * (value - o);
+            }
+            // The detail layer, in its rotated coordinates.
+            let detail = &detail[..details];
+            for (j, &(k, _, _)) in detail.iter().enumerate() {
+                let k = usize::from(k);
+                bx[j] = cos * x[k] - sin * y[k];
+                by[j] = sin * x[k] + cos * y[k];
+            }
+            let mut j = 0;
+            while j < detail.len() {
+                let d = usize::from(detail[j].1);
+                let mut e = j;
+                while e < detail.len() && usize::from(detail[e].1) == d {
+                    e += 1;
+                }
+                let (tile, scale) = (&self.detail.levels[d], self.detail.scales[d]);
+                tile.bilinear_batch(&bx[j..e], &by[j..e], scale, &mut values[j..e]);
+                j = e;
+            }
+            for (&(k, _, weight), &value) in detail.iter().zip(&values[..detail.len()]) {
+                let k = usize::from(k);
                 out[k] *= 1.0 + weight * (2.0 * value - 1.0);
             }
             for o in out.iter_mut() {
