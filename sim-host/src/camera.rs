@@ -104,6 +104,9 @@ impl TerrainSurface for BorrowedSurface<'_> {
     fn normal_up(&self, x_m: f64, y_m: f64) -> [f64; 3] {
         self.0.normal_up(x_m, y_m)
     }
+    fn has_edges(&self) -> bool {
+        self.0.has_edges()
+    }
 }
 
 impl StereoRenderer for TexturedRenderer {

@@ -10,6 +10,11 @@ pub trait TerrainSurface: Sync {
     fn height_m(&self, x_m: f64, y_m: f64) -> f64;
     /// Reflectance of the ground at `(x_m, y_m)`, in `[0, 1]`.
     fn albedo(&self, x_m: f64, y_m: f64) -> f64;
+    /// Whether the height has discontinuities (vertical faces of steps and blocks); the wheel
+    /// contact search then looks for edges between its samples. Default: none.
+    fn has_edges(&self) -> bool {
+        false
+    }
     /// Unit upward normal `(n_x, n_y, n_up)` at `(x_m, y_m)`; the default differentiates
     /// `height_m` numerically over 1 cm.
     fn normal_up(&self, x_m: f64, y_m: f64) -> [f64; 3] {

@@ -137,6 +137,84 @@ pub struct TerrainSpec {
     /// Optional rock field.
     #[serde(default)]
     pub rocks: Option<RockField>,
+    /// Placed obstacles (blocks with vertical faces, rocks), on top of base and roughness.
+    #[serde(default)]
+    pub obstacles: Vec<Obstacle>,
+}
+
+/// A placed obstacle. Where obstacles and the rock field overlap, the highest wins.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Obstacle {
+    /// A flat-topped block with vertical faces (a ledge or a slab of bedrock): a rectangle of
+    /// `length_m` along `yaw_deg` (clockwise from north) by `width_m`, centred on `(x_m, y_m)`,
+    /// `height_m` high. Its edges are steps up and down.
+    Block {
+        /// Centre north, m.
+        x_m: f64,
+        /// Centre east, m.
+        y_m: f64,
+        /// Length along `yaw_deg`, m.
+        length_m: f64,
+        /// Width across, m.
+        width_m: f64,
+        /// Height, m.
+        height_m: f64,
+        /// Orientation of the length, degrees clockwise from north.
+        #[serde(default)]
+        yaw_deg: f64,
+    },
+    /// A rock: the smooth cap `h (1 - (d/r)^2)^2` of the rock field, placed by hand.
+    Rock {
+        /// Centre north, m.
+        x_m: f64,
+        /// Centre east, m.
+        y_m: f64,
+        /// Footprint radius, m.
+        radius_m: f64,
+        /// Height, m.
+        height_m: f64,
+    },
+}
+
+impl Obstacle {
+    /// Height of this obstacle at `(x, y)` (0 outside), m.
+    pub fn height_m(&self, x: f64, y: f64) -> f64 {
+        match *self {
+            Obstacle::Block {
+                x_m,
+                y_m,
+                length_m,
+                width_m,
+                height_m,
+                yaw_deg,
+            } => {
+                let (s, c) = yaw_deg.to_radians().sin_cos();
+                let (dx, dy) = (x - x_m, y - y_m);
+                let along = dx * c + dy * s;
+                let across = -dx * s + dy * c;
+                if along.abs() <= 0.5 * length_m && across.abs() <= 0.5 * width_m {
+                    height_m
+                } else {
+                    0.0
+                }
+            }
+            Obstacle::Rock {
+                x_m,
+                y_m,
+                radius_m,
+                height_m,
+            } => {
+                let d2 = ((x - x_m).powi(2) + (y - y_m).powi(2)) / (radius_m * radius_m);
+                if d2 < 1.0 {
+                    let c = 1.0 - d2;
+                    height_m * c * c
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
 }
 
 fn default_rough_wavelength() -> f64 {
@@ -298,8 +376,21 @@ pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
 }
 
 impl TerrainSurface for Terrain {
+    fn has_edges(&self) -> bool {
+        matches!(self.spec.base, BaseShape::Step { .. })
+            || self
+                .spec
+                .obstacles
+                .iter()
+                .any(|o| matches!(o, Obstacle::Block { .. }))
+    }
+
     fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
-        let mut h = self.base_height(x_m, y_m) + self.rock_height(x_m, y_m);
+        let mut top = self.rock_height(x_m, y_m);
+        for o in &self.spec.obstacles {
+            top = top.max(o.height_m(x_m, y_m));
+        }
+        let mut h = self.base_height(x_m, y_m) + top;
         if self.spec.roughness_m > 0.0 {
             h += self.spec.roughness_m
                 * fractal_noise(x_m, y_m, self.spec.roughness_wavelength_m, 3, self.seed);
@@ -335,6 +426,7 @@ mod tests {
                 roughness_m: 0.0,
                 roughness_wavelength_m: 2.0,
                 rocks: None,
+                obstacles: Vec::new(),
             },
             1,
             &[],
@@ -372,6 +464,7 @@ mod tests {
                 half_extent_m: 10.0,
                 keep_clear_m: 0.8,
             }),
+            obstacles: Vec::new(),
         };
         let path = [[0.0, 0.0], [8.0, 0.0]];
         let a = Terrain::new(spec.clone(), 5, &path);

@@ -3,12 +3,13 @@
 //! [`World::step`] advances everything by one minor frame (5 ms) and refreshes the readings the
 //! HAL devices hand to the flight software.
 //!
-//! Motion model per step: motors follow the command; each wheel's ground velocity is its rim
-//! speed along its heading; the body's planar twist `[vx, vy, omega]` in `R` is their least-
-//! squares fit; slip scales `vx` by `1 - s` and adds a downhill crab `|v| tan(alpha)` along
-//! `y_R`; the body moves by that twist on the terrain (horizontal displacement of
-//! `R_WR [vx, vy, 0] dt`); then the placement solver finds height, roll, pitch, rocker and
-//! bogies on the terrain at the new north, east and yaw.
+//! Motion model per step: motors follow the command; each wheel's slip comes from its contact
+//! and load ([`crate::slip`]); the rolling solve ([`crate::vehicle::rolling`]) gives the body
+//! twist and the suspension rates from all wheels on the ground (each axle moves along its
+//! contact tangent at its rim speed less its slip); the body pose and the suspension are
+//! integrated over the step (`R_WR <- R_WR exp(w dt)`, `p <- p + R_WR v dt`); then the
+//! placement solver projects the vehicle back onto the terrain (height, roll, pitch, rocker and
+//! bogies at the integrated north, east and yaw: the holonomic constraint).
 
 use crate::scenario::Scenario;
 use crate::sensors::encoders::EncoderParams;
@@ -18,14 +19,14 @@ use crate::sensors::sun::SunParams;
 use crate::slip::{SlipModel, SlipState};
 use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
-use crate::vehicle::geometry::{perturbed, rocky8, VehicleGeometry, WheelPose, WHEELS};
+use crate::vehicle::contact::WheelContact;
+use crate::vehicle::geometry::{rocky8, TruthGeometry, VehicleGeometry, WheelPose, WHEELS};
 use crate::vehicle::motors::MotorParams;
 use crate::vehicle::placement::{
-    place, place_cached, BodyPose, JointLimits, NormalCache, Placement, PlacementJacobian,
-    Suspension,
+    place, place_cached, BodyPose, JointLimits, Placement, PlacementJacobian, Suspension,
 };
-use fsw::kinematics::RoverGeometry;
-use nalgebra::{Matrix3, Vector3};
+use crate::vehicle::rolling::{solve_rolling, RollingContact, CONTACT_TOLERANCE_M};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -93,15 +94,21 @@ pub struct Truth {
     pub distance_m: f64,
     /// Clearance of each wheel (0 on the ground), m.
     pub clearance_m: [f64; WHEELS],
+    /// Contact angle of each wheel in its wheel plane, rad (0 below the axle, positive ahead).
+    pub contact_angle_rad: [f64; WHEELS],
+    /// Longitudinal slip ratio of each wheel over the last step.
+    pub wheel_slip_ratio: [f64; WHEELS],
+    /// Suspension rates `[beta, rho1, rho2]` over the last step, rad/s.
+    pub suspension_rate_rad_s: [f64; 3],
 }
 
 /// The world.
 pub struct World {
     /// Terrain.
     pub terrain: Terrain,
-    /// The simulator's (true) vehicle geometry: the flight code's Rocky 8 with the per-seed
-    /// dimension errors.
-    pub geometry: RoverGeometry,
+    /// The simulator's (true) vehicle geometry: Rocky 8's published dimensions with the
+    /// per-seed dimension errors.
+    pub geometry: TruthGeometry,
     /// Joint limits.
     pub limits: JointLimits,
     /// Truth state.
@@ -130,7 +137,7 @@ pub struct World {
     sun_every: u64,
     prev_velocity_w: Vector3<f64>,
     jacobian: Option<PlacementJacobian>,
-    normals: NormalCache,
+    contacts: [WheelContact; WHEELS],
     wheels: Option<[WheelPose; WHEELS]>,
     /// Latest IMU sample (before faults).
     pub imu_sample: ImuSample,
@@ -154,7 +161,7 @@ impl World {
         let mut streams = Streams::new(seed);
         let terrain = Terrain::new(scenario.terrain.clone(), seed, &scenario.waypoints);
         let sigma = scenario.sensors.dimension_error_m;
-        let geometry = perturbed(&rocky8(), |_| {
+        let geometry = rocky8().perturbed(|_| {
             let n: f64 = StandardNormal.sample(&mut streams.geometry);
             sigma * n
         });
@@ -173,7 +180,7 @@ impl World {
             pitch_rad: 0.0,
             roll_rad: 0.0,
         };
-        let limits = JointLimits::of(&geometry);
+        let limits = JointLimits::rocky8();
         let steer = [0.0; WHEELS];
         let p = place(
             &geometry,
@@ -192,6 +199,7 @@ impl World {
                 pose: p.pose,
                 suspension: p.suspension,
                 clearance_m: p.clearance_m,
+                contact_angle_rad: p.contacts.map(|c| c.angle_rad),
                 ..Truth::default()
             },
             command: MobilityCommand::default(),
@@ -208,7 +216,7 @@ impl World {
             sun_every: u64::from(200 / scenario.sensors.sun_hz),
             prev_velocity_w: Vector3::zeros(),
             jacobian: None,
-            normals: [None; WHEELS],
+            contacts: p.contacts,
             wheels: None,
             imu_sample: ImuSample::default(),
             joints: JointState::default(),
@@ -263,71 +271,105 @@ impl World {
                     .step(t.wheel_rate_rad_s[i], self.command.wheel_rate_rad_s[i], dt);
             t.wheel_angle_rad[i] += t.wheel_rate_rad_s[i] * dt;
         }
-        // Least-squares body twist from the wheel rim velocities along each wheel's rolling
-        // direction (fsw::kinematics conventions).
-        let xy = self.wheel_xy();
-        let r = self.geometry.wheel_radius_m();
-        let rolling = self.wheel_poses().map(|w| w.map(|p| p.rolling_dir));
-        let (mut ata, mut atb) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
-        for i in 0..WHEELS {
-            let dir = rolling.map_or(Vector3::x(), |d| d[i]);
-            let v = r * self.truth.wheel_rate_rad_s[i];
-            let (vx, vy) = (v * dir.x, v * dir.y);
-            // v_i = [1 0 -y; 0 1 x] [vx vy omega].
-            let rows = [
-                Vector3::new(1.0, 0.0, -xy[i][1]),
-                Vector3::new(0.0, 1.0, xy[i][0]),
-            ];
-            for (row, b) in rows.iter().zip([vx, vy]) {
-                ata += row * row.transpose();
-                atb += row * b;
-            }
-        }
-        let twist = ata
-            .try_inverse()
-            .map(|m| m * atb)
-            .unwrap_or_else(Vector3::zeros);
+        // Contacts of the last placement, in R, with the current steering.
+        self.update_wheels();
+        let Some(wheels) = self.wheels else {
+            return;
+        };
+        let pose0 = self.truth.pose;
+        let rot = pose0.rot_w_from_r();
+        let rot_inv = rot.inverse();
+        let contacts: [RollingContact; WHEELS] = std::array::from_fn(|i| {
+            RollingContact::new(
+                self.truth.clearance_m[i] < CONTACT_TOLERANCE_M,
+                rot_inv * self.contacts[i].normal_w,
+                wheels[i].spin_axis,
+            )
+        });
         // Slip from the slope along the motion and across the body.
-        let rot = self.truth.pose.rot_w_from_r();
         let m = rot_matrix(&rot);
         let (x_r, y_r) = (m.column(0).into_owned(), m.column(1).into_owned());
-        let dir = if twist.x >= 0.0 { 1.0 } else { -1.0 };
+        let forward = (0..WHEELS)
+            .map(|i| self.truth.wheel_rate_rad_s[i] * wheels[i].rolling_dir.x)
+            .sum::<f64>();
+        let dir = if forward >= 0.0 { 1.0 } else { -1.0 };
         let slope_along = (-x_r.z * dir).clamp(-1.0, 1.0).asin();
         let slope_cross = y_r.z.clamp(-1.0, 1.0).asin();
         let slip = self
             .slip
             .step(slope_along, slope_cross, dt, &mut self.streams.slip);
-        let speed = (twist.x * twist.x + twist.y * twist.y).sqrt();
-        let vx = twist.x * (1.0 - slip.slip_ratio);
-        let vy = twist.y * (1.0 - slip.slip_ratio) + speed * slip.slip_angle_rad.tan();
-        let omega = twist.z * (1.0 - slip.slip_ratio.max(0.0));
-        // Move on the terrain and place the vehicle.
-        let v_w = rot * Vector3::new(vx, vy, 0.0);
-        let pose0 = self.truth.pose;
-        let cr = pose0.roll_rad.cos();
-        let cp = pose0.pitch_rad.cos().max(0.2);
-        let mut pose = pose0;
-        pose.pos_m[0] += v_w.x * dt;
-        pose.pos_m[1] += v_w.y * dt;
-        pose.yaw_rad = wrap_pi(pose.yaw_rad + omega * cr / cp * dt);
+        let r = self.geometry.wheel_radius_m();
+        let ground_speed: [f64; WHEELS] = std::array::from_fn(|i| {
+            let rim = r * self.truth.wheel_rate_rad_s[i];
+            if rim >= 0.0 {
+                (1.0 - slip.slip_ratio) * rim
+            } else {
+                (1.0 - slip.slip_ratio.max(0.0)) * rim
+            }
+        });
+        // Downhill sideways slip (positive slip angle: towards the rover's right).
+        let lateral: [f64; WHEELS] = std::array::from_fn(|i| {
+            ground_speed[i].abs() * slip.slip_angle_rad.tan() * wheels[i].spin_axis.y.signum()
+        });
+        let s0 = self.truth.suspension;
+        let twist = solve_rolling(
+            &self.geometry,
+            &wheels,
+            s0.rocker_rad,
+            s0.bogie_rad,
+            &contacts,
+            &ground_speed,
+            &lateral,
+        );
+        // Integrate the body pose and the suspension over the step.
+        let rot_int = rot * Rotation3::from_scaled_axis(twist.w * dt);
+        let v_w = rot * twist.v;
+        let (roll, pitch, yaw) = rot_int.euler_angles();
+        let pose = BodyPose {
+            pos_m: [
+                pose0.pos_m[0] + v_w.x * dt,
+                pose0.pos_m[1] + v_w.y * dt,
+                pose0.pos_m[2] + v_w.z * dt,
+            ],
+            yaw_rad: yaw,
+            pitch_rad: pitch,
+            roll_rad: roll,
+        };
+        let q = twist.suspension_rad_s;
+        let guess = Suspension {
+            rocker_rad: s0.rocker_rad + q[0] * dt,
+            bogie_rad: [s0.bogie_rad[0] + q[1] * dt, s0.bogie_rad[1] + q[2] * dt],
+        };
         let placed: Placement = place_cached(
             &self.geometry,
             &self.terrain,
             &pose,
-            &self.truth.suspension,
+            &guess,
             &self.truth.steer_rad,
             &self.limits,
             &mut self.jacobian,
-            &mut self.normals,
+            Some(self.truth.contact_angle_rad),
         );
         self.placement_iterations += u64::from(placed.iterations);
+        self.contacts = placed.contacts;
         let t = &mut self.truth;
-        t.distance_m += (v_w.x * v_w.x + v_w.y * v_w.y).sqrt() * dt;
+        let moved = [
+            placed.pose.pos_m[0] - pose0.pos_m[0],
+            placed.pose.pos_m[1] - pose0.pos_m[1],
+        ];
+        t.distance_m += (moved[0] * moved[0] + moved[1] * moved[1]).sqrt();
         t.pose = placed.pose;
         t.suspension = placed.suspension;
         t.clearance_m = placed.clearance_m;
+        t.contact_angle_rad = placed.contacts.map(|c| c.angle_rad);
+        t.wheel_slip_ratio = [slip.slip_ratio; WHEELS];
+        t.suspension_rate_rad_s = [
+            (placed.suspension.rocker_rad - s0.rocker_rad) / dt,
+            (placed.suspension.bogie_rad[0] - s0.bogie_rad[0]) / dt,
+            (placed.suspension.bogie_rad[1] - s0.bogie_rad[1]) / dt,
+        ];
         t.slip = slip;
-        t.velocity_r_m_s = [vx, vy];
+        t.velocity_r_m_s = [twist.v.x, twist.v.y];
         t.t_us = t.t_us.saturating_add(FRAME_US);
         self.steps += 1;
         self.update_wheels();
@@ -338,7 +380,7 @@ impl World {
         let velocity_w = (p1 - p0) / dt;
         let accel_w = (velocity_w - self.prev_velocity_w) / dt;
         self.prev_velocity_w = velocity_w;
-        let delta = pose0.rot_w_from_r().inverse() * rot1;
+        let delta = rot_inv * rot1;
         let gyro = delta.scaled_axis() / dt;
         let specific_force = rot1.inverse() * (accel_w - Vector3::new(0.0, 0.0, MARS_GRAVITY_M_S2));
         self.sample_imu(gyro, specific_force, dt);

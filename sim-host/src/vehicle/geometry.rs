@@ -1,17 +1,24 @@
-//! Rocky 8 geometry as the simulator needs it, taken from the flight code's kinematic data
-//! ([`fsw::kinematics::ROCKY8`], H04 Appendix A Table 2): one source of truth.
+//! The truth vehicle's geometry: a Rocky 8 class rocker-bogie written as a side-view linkage,
+//! independently of the flight code's D-H model (`fsw::kinematics`, H04 Table 2).
 //!
-//! The simulator talks to the geometry only through [`VehicleGeometry`]; it is implemented for
-//! the flight code's [`RoverGeometry`]. The simulator's truth vehicle is that geometry with
-//! per-seed dimension errors of a few millimetres ([`perturbed`]), so the flight model is not
-//! perfect.
+//! Only published dimensions are shared with the flight side (H04 Appendix A Table 2 evaluated
+//! at zero joint angles; see `docs/kinematics.md`): wheel radius 0.10 m, track 0.6222 m, axles
+//! at `x` = 0.3930 (front), 0.0005 (middle), -0.3541 (rear) m at axle height `z = 0`, the
+//! rocker pivot at (-0.1420, -0.2022) m and the bogie pivot at (0.1291, -0.1273) m in the
+//! side plane `(x, z)` of each side. The simulator never reads the flight geometry.
 //!
-//! Sign conventions follow `fsw::kinematics`: a positive steering angle turns the wheel to the
-//! right (about `+z_R`); a positive wheel rate rolls the wheel along its rolling direction.
+//! Model: each side is a planar linkage in the plane `y = +-track/2` of `R` (x forward, y
+//! right, z down). The rocker of the right side turns about the lateral axis `+y_R` through its
+//! pivot by `+beta`, the left by `-beta` (the differential). A bogie turns about the lateral
+//! axis through its pivot by its own angle `rho` relative to its rocker. The rear wheels hang on
+//! the rockers, the front and middle wheels on the bogies. Steering axes are the links' `z`
+//! axes through the axle centres (so the axle centre does not move with steering); a positive
+//! steering angle turns the wheel to the right (about `+z_R`). A positive rotation about `+y_R`
+//! lifts the points ahead of the pivot (`z` down). The angle conventions are those the joint
+//! encoders report; the test `sim_2_truth_geometry_matches_flight_convention` checks them
+//! against the flight model (a test may read it; the simulation never does).
 
-use fsw::kinematics::geometry::{wheel_frames, DhRow};
-use fsw::kinematics::{RoverGeometry, SuspensionState, ROCKY8};
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Rotation3, Vector3};
 
 /// Wheel count.
 pub const WHEELS: usize = 6;
@@ -21,10 +28,10 @@ pub const WHEELS: usize = 6;
 pub struct WheelPose {
     /// Axle centre (wheel centre), m.
     pub axle_m: Vector3<f64>,
-    /// Unit spin axis (normal of the wheel plane).
+    /// Unit spin axis (normal of the wheel plane), pointing to the rover's right when the wheel
+    /// is not steered.
     pub spin_axis: Vector3<f64>,
-    /// Unit rolling direction (a positive wheel rate moves the contact point backwards, so the
-    /// rover along this direction).
+    /// Unit rolling direction (a positive wheel rate moves the rover along it on level ground).
     pub rolling_dir: Vector3<f64>,
 }
 
@@ -33,7 +40,7 @@ pub trait VehicleGeometry {
     /// Wheel radius, m.
     fn wheel_radius_m(&self) -> f64;
     /// The six wheels in `R` for rocker `beta`, bogies `[rho1, rho2]` and steering angles, rad.
-    /// `None` if the angles are outside the geometry's limits.
+    /// `None` if an angle is not finite.
     fn wheels(
         &self,
         rocker_rad: f64,
@@ -42,90 +49,217 @@ pub trait VehicleGeometry {
     ) -> Option<[WheelPose; WHEELS]>;
 }
 
-impl VehicleGeometry for RoverGeometry {
+/// Side of wheel `i` (0 right for wheels 1, 3, 5; 1 left for 2, 4, 6).
+pub fn side(i: usize) -> usize {
+    i % 2
+}
+
+/// Whether wheel `i` hangs on a bogie (front and middle wheels).
+pub fn on_bogie(i: usize) -> bool {
+    i < 4
+}
+
+/// Rocky 8 as the simulator's truth vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthGeometry {
+    /// Wheel radius, m.
+    pub wheel_radius_m: f64,
+    /// Rocker pivots `[right, left]` in `R` at zero joint angles, m.
+    pub rocker_pivot_m: [Vector3<f64>; 2],
+    /// Bogie pivots `[right, left]` in `R` at zero joint angles, m.
+    pub bogie_pivot_m: [Vector3<f64>; 2],
+    /// Axle centres of wheels 1..6 in `R` at zero joint angles, m.
+    pub axle_m: [Vector3<f64>; WHEELS],
+}
+
+/// Rotation about the lateral axis `+y_R` by `a` (positive lifts points ahead of the axis).
+fn rot_y(a: f64) -> Matrix3<f64> {
+    *Rotation3::from_axis_angle(&Vector3::y_axis(), a).matrix()
+}
+
+/// Cross product with `+y_R`: the velocity of a point at `d` from a lateral axis turning at a
+/// unit rate.
+fn y_cross(d: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(d.z, 0.0, -d.x)
+}
+
+impl TruthGeometry {
+    /// Rocky 8 at its published dimensions (H04 Appendix A Table 2 at zero joint angles).
+    pub fn rocky8() -> Self {
+        let half_track = 0.3111;
+        let both = |x: f64, z: f64| {
+            [
+                Vector3::new(x, half_track, z),
+                Vector3::new(x, -half_track, z),
+            ]
+        };
+        let axle = |x: f64, i: usize| {
+            let y = if side(i) == 0 {
+                half_track
+            } else {
+                -half_track
+            };
+            Vector3::new(x, y, 0.0)
+        };
+        Self {
+            wheel_radius_m: 0.10,
+            rocker_pivot_m: both(-0.1420, -0.2022),
+            bogie_pivot_m: both(0.1291, -0.1273),
+            axle_m: [
+                axle(0.3930, 0),
+                axle(0.3930, 1),
+                axle(0.0005, 2),
+                axle(0.0005, 3),
+                axle(-0.3541, 4),
+                axle(-0.3541, 5),
+            ],
+        }
+    }
+
+    /// This geometry with every published length shifted by `delta(k)` metres (`k` counts the
+    /// lengths: pivot and axle coordinates in `x` and `z`, the half track of each axle, the
+    /// wheel radius): the per-seed manufacturing errors of the truth vehicle.
+    pub fn perturbed(&self, mut delta: impl FnMut(usize) -> f64) -> Self {
+        let mut g = *self;
+        let mut k = 0;
+        let mut bump = |v: &mut Vector3<f64>, lateral: bool| {
+            v.x += delta(k);
+            v.z += delta(k + 1);
+            k += 2;
+            if lateral {
+                v.y += delta(k).copysign(v.y);
+                k += 1;
+            }
+        };
+        for p in g
+            .rocker_pivot_m
+            .iter_mut()
+            .chain(g.bogie_pivot_m.iter_mut())
+        {
+            bump(p, false);
+        }
+        for a in g.axle_m.iter_mut() {
+            bump(a, true);
+        }
+        g.wheel_radius_m += delta(k);
+        g
+    }
+
+    /// Side-plane rotation of the rocker of side `s` (`+beta` right, `-beta` left).
+    fn rocker_rot(s: usize, rocker_rad: f64) -> Matrix3<f64> {
+        rot_y(if s == 0 { rocker_rad } else { -rocker_rad })
+    }
+
+    /// Current bogie pivot of side `s` in `R`, m.
+    pub fn bogie_pivot(&self, s: usize, rocker_rad: f64) -> Vector3<f64> {
+        let r = Self::rocker_rot(s, rocker_rad);
+        self.rocker_pivot_m[s] + r * (self.bogie_pivot_m[s] - self.rocker_pivot_m[s])
+    }
+
+    /// Current rocker pivot of side `s` in `R`, m (fixed to the body).
+    pub fn rocker_pivot(&self, s: usize) -> Vector3<f64> {
+        self.rocker_pivot_m[s]
+    }
+
+    /// Rotation of the link that carries wheel `i` (rocker for rear wheels, bogie otherwise).
+    fn link_rot(i: usize, rocker_rad: f64, bogie_rad: [f64; 2]) -> Matrix3<f64> {
+        let s = side(i);
+        let beta = if s == 0 { rocker_rad } else { -rocker_rad };
+        if on_bogie(i) {
+            rot_y(beta + bogie_rad[s])
+        } else {
+            rot_y(beta)
+        }
+    }
+
+    /// Axle centre of wheel `i` in `R`, m.
+    pub fn axle(&self, i: usize, rocker_rad: f64, bogie_rad: [f64; 2]) -> Vector3<f64> {
+        let s = side(i);
+        let rocker = Self::rocker_rot(s, rocker_rad);
+        let p0 = self.rocker_pivot_m[s];
+        if on_bogie(i) {
+            let b0 = self.bogie_pivot_m[s];
+            let link = Self::link_rot(i, rocker_rad, bogie_rad);
+            p0 + rocker * (b0 - p0) + link * (self.axle_m[i] - b0)
+        } else {
+            p0 + rocker * (self.axle_m[i] - p0)
+        }
+    }
+
+    /// Derivatives of the axle centre of wheel `i` in `R` with respect to `[beta, rho1, rho2]`
+    /// (columns), m/rad: rotation about the lateral axes through the rocker and bogie pivots.
+    pub fn axle_jacobian(&self, i: usize, rocker_rad: f64, bogie_rad: [f64; 2]) -> Matrix3<f64> {
+        let s = side(i);
+        let a = self.axle(i, rocker_rad, bogie_rad);
+        let sign = if s == 0 { 1.0 } else { -1.0 };
+        let d_beta = y_cross(&(a - self.rocker_pivot_m[s])) * sign;
+        let mut j = Matrix3::zeros();
+        j.set_column(0, &d_beta);
+        if on_bogie(i) {
+            let d_rho = y_cross(&(a - self.bogie_pivot(s, rocker_rad)));
+            j.set_column(1 + s, &d_rho);
+        }
+        j
+    }
+}
+
+impl VehicleGeometry for TruthGeometry {
     fn wheel_radius_m(&self) -> f64 {
         self.wheel_radius_m
     }
 
-    /// Eq. 12 (H04) through [`wheel_frames`]: the axle centre is the origin of `C_i` (Table 2
-    /// rows `C_i` have `d = a = 0`); the wheel plane holds `x_Ci` (rolling) and `z_Ci`.
     fn wheels(
         &self,
         rocker_rad: f64,
         bogie_rad: [f64; 2],
         steer_rad: &[f64; WHEELS],
     ) -> Option<[WheelPose; WHEELS]> {
-        let state = SuspensionState {
-            rocker_rad,
-            bogie_rad,
-            steer_rad: *steer_rad,
-        };
-        let frames = wheel_frames(self, &state).ok()?;
-        Some(frames.map(|f| {
-            let x = f.contact.x_axis();
-            let z = f.contact.z_axis();
+        let finite = rocker_rad.is_finite()
+            && bogie_rad.iter().all(|b| b.is_finite())
+            && steer_rad.iter().all(|s| s.is_finite());
+        if !finite {
+            return None;
+        }
+        Some(std::array::from_fn(|i| {
+            let link = Self::link_rot(i, rocker_rad, bogie_rad);
+            let (sin, cos) = steer_rad[i].sin_cos();
             WheelPose {
-                axle_m: f.contact.pos,
-                spin_axis: z.cross(&x).normalize(),
-                rolling_dir: x,
+                axle_m: self.axle(i, rocker_rad, bogie_rad),
+                rolling_dir: link * Vector3::new(cos, sin, 0.0),
+                spin_axis: link * Vector3::new(-sin, cos, 0.0),
             }
         }))
     }
 }
 
-/// The flight code's Rocky 8 geometry.
-pub fn rocky8() -> RoverGeometry {
-    ROCKY8
-}
-
-/// `geometry` with every non-zero D-H length (`d`, `a`) and the wheel radius shifted by
-/// `delta(k)` metres (`k` counts the lengths): the per-seed dimension errors of the truth
-/// vehicle.
-pub fn perturbed(geometry: &RoverGeometry, mut delta: impl FnMut(usize) -> f64) -> RoverGeometry {
-    let mut g = *geometry;
-    let mut k = 0;
-    let mut bump = |row: &mut DhRow| {
-        for v in [&mut row.d_m, &mut row.a_m] {
-            if *v != 0.0 {
-                *v += delta(k);
-                k += 1;
-            }
-        }
-    };
-    bump(&mut g.rocker);
-    for b in &mut g.bogies {
-        bump(b);
-    }
-    for w in &mut g.wheels {
-        bump(&mut w.steer);
-        bump(&mut w.axle);
-    }
-    g.wheel_radius_m += delta(k);
-    g
+/// Rocky 8 as the truth vehicle at its published dimensions.
+pub fn rocky8() -> TruthGeometry {
+    TruthGeometry::rocky8()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// SIM-2: the flight geometry puts all six axles at `z = 0` with zero joint angles, right
-    /// wheels at `+y`, front wheels ahead, rolling directions forward; a positive rocker angle
-    /// lifts the right front wheel; a positive steering angle turns the wheel right; the
-    /// per-seed dimension errors change the lengths by the drawn amounts.
+    /// SIM-2: zero joint angles put all six axles at `z = 0`, right wheels at `+y`, front
+    /// wheels ahead, rolling directions forward; a positive rocker angle lifts the right front
+    /// wheel and lowers the left front; a positive steering angle turns the wheel right; the
+    /// per-seed dimension errors change the lengths by the drawn amounts; the analytic
+    /// suspension Jacobian equals finite differences.
     #[test]
-    fn sim_2_flight_geometry_layout() {
+    fn sim_2_truth_geometry_layout() {
         let g = rocky8();
         let w = g.wheels(0.0, [0.0, 0.0], &[0.0; 6]).unwrap();
         for (i, p) in w.iter().enumerate() {
-            assert!(p.axle_m.z.abs() < 1e-3, "wheel {} z {}", i + 1, p.axle_m.z);
+            assert!(p.axle_m.z.abs() < 1e-12, "wheel {} z {}", i + 1, p.axle_m.z);
             assert!((p.axle_m.y.abs() - 0.3111).abs() < 1e-9);
             assert_eq!(
                 p.axle_m.y > 0.0,
                 i % 2 == 0,
                 "right wheels are odd-numbered"
             );
-            assert!((p.rolling_dir - Vector3::x()).norm() < 1e-3);
-            assert!(p.spin_axis.y.abs() > 0.999);
+            assert!((p.rolling_dir - Vector3::x()).norm() < 1e-12);
+            assert!((p.spin_axis - Vector3::y()).norm() < 1e-12);
         }
         assert!(w[0].axle_m.x > w[2].axle_m.x && w[2].axle_m.x > w[4].axle_m.x);
         let lifted = g.wheels(0.1, [0.0, 0.0], &[0.0; 6]).unwrap();
@@ -142,10 +276,66 @@ mod tests {
             steered[0].rolling_dir.y > 0.29,
             "positive steering turns right"
         );
-        let p = perturbed(&g, |_| 0.002);
-        let wp = p.wheels(0.0, [0.0, 0.0], &[0.0; 6]).unwrap();
+        let p = g.perturbed(|_| 0.002);
         assert!((p.wheel_radius_m - g.wheel_radius_m - 0.002).abs() < 1e-12);
+        let wp = p.wheels(0.0, [0.0, 0.0], &[0.0; 6]).unwrap();
         assert!((wp[0].axle_m - w[0].axle_m).norm() > 1e-3);
-        assert!(g.wheels(5.0, [0.0, 0.0], &[0.0; 6]).is_none());
+        assert!(g.wheels(f64::NAN, [0.0, 0.0], &[0.0; 6]).is_none());
+        let (beta, rho) = (0.13, [-0.21, 0.17]);
+        for i in 0..WHEELS {
+            let j = g.axle_jacobian(i, beta, rho);
+            let h = 1e-7;
+            let base = g.axle(i, beta, rho);
+            let fd = [
+                (g.axle(i, beta + h, rho) - base) / h,
+                (g.axle(i, beta, [rho[0] + h, rho[1]]) - base) / h,
+                (g.axle(i, beta, [rho[0], rho[1] + h]) - base) / h,
+            ];
+            for (k, col) in fd.iter().enumerate() {
+                assert!((j.column(k) - col).norm() < 1e-6, "wheel {i} column {k}");
+            }
+        }
+    }
+
+    /// SIM-2: the truth geometry reports joint angles in the flight software's convention:
+    /// at the same rocker, bogie and steering angles the axle centres and rolling directions of
+    /// the independent side-view model equal those of the flight D-H model (H04 eq. 12) to the
+    /// 4-digit rounding of Table 2. Only this test reads the flight geometry.
+    #[test]
+    fn sim_2_truth_geometry_matches_flight_convention() {
+        use fsw::kinematics::geometry::wheel_frames;
+        use fsw::kinematics::{SuspensionState, ROCKY8};
+        let g = rocky8();
+        for (beta, rho, steer) in [
+            (0.0, [0.0, 0.0], 0.0),
+            (0.2, [0.0, 0.0], 0.3),
+            (-0.15, [0.3, -0.4], -0.5),
+            (0.4, [-0.6, 0.5], 1.0),
+        ] {
+            let state = SuspensionState {
+                rocker_rad: beta,
+                bogie_rad: rho,
+                steer_rad: [steer; 6],
+            };
+            let frames = wheel_frames(&ROCKY8, &state).unwrap();
+            let ours = g.wheels(beta, rho, &[steer; 6]).unwrap();
+            for i in 0..WHEELS {
+                let f = &frames[i].contact;
+                let axle = Vector3::new(f.pos.x, f.pos.y, f.pos.z);
+                let x = f.x_axis();
+                let roll = Vector3::new(x.x, x.y, x.z);
+                assert!(
+                    (axle - ours[i].axle_m).norm() < 5e-4,
+                    "wheel {} at {beta} {rho:?}: {axle:?} vs {:?}",
+                    i + 1,
+                    ours[i].axle_m
+                );
+                assert!(
+                    (roll - ours[i].rolling_dir).norm() < 2e-3,
+                    "wheel {}",
+                    i + 1
+                );
+            }
+        }
     }
 }

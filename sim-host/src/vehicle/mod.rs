@@ -1,8 +1,11 @@
-//! The simulated vehicle: geometry, placement on the terrain, motors.
+//! The simulated vehicle: geometry, wheel-terrain contact, placement on the terrain, rolling
+//! motion, motors.
 
+pub mod contact;
 pub mod geometry;
 pub mod motors;
 pub mod placement;
+pub mod rolling;
 
 #[cfg(test)]
 mod tests;

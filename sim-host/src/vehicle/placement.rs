@@ -3,16 +3,16 @@
 //!
 //! Unknowns `u = [z, roll, pitch, beta, rho1, rho2]` (the body's north, east and yaw are given
 //! by the motion model). Each wheel is a disc of radius `r` centred on its axle, in the plane
-//! normal to its spin axis; its contact point is the point of the disc furthest along the
-//! terrain's downward normal. The residual of wheel `i` is the height of that point above the
-//! terrain, `e_i(u)`. Newton's method with a finite-difference 6x6 Jacobian drives `e` to zero.
+//! normal to its spin axis; its contact is the rim point of largest penetration
+//! ([`wheel_contact`]: on a step the rim rests on the edge). The residual of wheel `i` is its
+//! clearance `e_i(u)`. Newton's method with a finite-difference 6x6 Jacobian drives `e` to zero.
 //! When a joint would pass its limit it is held at the limit, the remaining unknowns are fitted
 //! in the least-squares sense, and the body is raised until no wheel penetrates the ground (the
 //! wheels that then float are off the ground, as on a real vehicle at its joint limits).
 
+use super::contact::{clearance_at_angle, wheel_contact, WheelContact};
 use super::geometry::{VehicleGeometry, WHEELS};
 use crate::surface::TerrainSurface;
-use fsw::kinematics::RoverGeometry;
 use nalgebra::{Rotation3, SMatrix, SVector, Vector3};
 
 /// Body pose of the rover in the world frame `W` (x north, y east, z down).
@@ -54,12 +54,12 @@ pub struct JointLimits {
 }
 
 impl JointLimits {
-    /// The stops of the truth vehicle: 95 % of the range the flight geometry accepts (no source
-    /// gives Rocky 8's stops; the margin keeps every simulated state inside the flight range).
-    pub fn of(geometry: &RoverGeometry) -> Self {
+    /// The stops of the truth vehicle, an assumption (no source gives Rocky 8's stops): rocker
+    /// +-0.57 rad, bogies +-0.95 rad, inside the range the flight model accepts (+-0.6, +-1.0).
+    pub fn rocky8() -> Self {
         Self {
-            rocker_rad: 0.95 * geometry.limits.rocker_rad,
-            bogie_rad: 0.95 * geometry.limits.bogie_rad,
+            rocker_rad: 0.57,
+            bogie_rad: 0.95,
         }
     }
 }
@@ -71,8 +71,8 @@ pub struct Placement {
     pub pose: BodyPose,
     /// Solved suspension.
     pub suspension: Suspension,
-    /// Wheel contact points in `W`, m.
-    pub contacts_w: [[f64; 3]; WHEELS],
+    /// Wheel contacts in `W` (point, angle, normal, tangent, clearance).
+    pub contacts: [WheelContact; WHEELS],
     /// Height of each wheel above the ground at the end (0 for a touching wheel), m.
     pub clearance_m: [f64; WHEELS],
     /// Newton iterations used.
@@ -83,24 +83,24 @@ pub struct Placement {
 
 type Unknowns = SVector<f64, 6>;
 
-/// Upward terrain normals in `W` under the six axles, with the axle's north/east where each
-/// was evaluated; kept between placements and refreshed when the axle has moved more than
-/// [`NORMAL_REFRESH_M`].
-pub type NormalCache = [Option<([f64; 2], Vector3<f64>)>; WHEELS];
+/// Contact angles held fixed while the Jacobian is taken by finite differences (the envelope
+/// of the rim search: for small pose changes the derivative of the clearance equals the one at
+/// the fixed contact angle).
+type Angles = [f64; WHEELS];
 
-/// Horizontal axle motion after which the terrain normal under it is evaluated again, m.
-pub const NORMAL_REFRESH_M: f64 = 0.002;
-
-/// Residuals `e(u)`. The terrain normal under each axle comes from `normals` (see
-/// [`NormalCache`]).
+/// Residuals `e(u)`: the clearance of each wheel (negative: penetration). With `fixed`, the
+/// clearance at the given contact angles; otherwise the full rim search of
+/// [`wheel_contact`], which also fills `contacts` and `angles`.
+#[allow(clippy::too_many_arguments)]
 fn residuals(
     geometry: &dyn VehicleGeometry,
     terrain: &dyn TerrainSurface,
     pose: &BodyPose,
     u: &Unknowns,
     steer_rad: &[f64; WHEELS],
-    contacts: &mut [[f64; 3]; WHEELS],
-    normals: &mut NormalCache,
+    contacts: &mut [WheelContact; WHEELS],
+    angles: &mut Angles,
+    fixed: bool,
 ) -> Unknowns {
     let pose = BodyPose {
         pos_m: [pose.pos_m[0], pose.pos_m[1], u[0]],
@@ -108,14 +108,10 @@ fn residuals(
         roll_rad: u[1],
         pitch_rad: u[2],
     };
-    let susp = Suspension {
-        rocker_rad: u[3],
-        bogie_rad: [u[4], u[5]],
-    };
     let rot = pose.rot_w_from_r();
     let p = Vector3::from(pose.pos_m);
-    let Some(wheels) = geometry.wheels(susp.rocker_rad, susp.bogie_rad, steer_rad) else {
-        // Outside the geometry's range: a large residual pushes Newton back.
+    let Some(wheels) = geometry.wheels(u[3], [u[4], u[5]], steer_rad) else {
+        // Not finite: a large residual pushes Newton back.
         return Unknowns::repeat(1.0);
     };
     let r = geometry.wheel_radius_m();
@@ -123,37 +119,21 @@ fn residuals(
     for i in 0..WHEELS {
         let c = p + rot * wheels[i].axle_m;
         let s = rot * wheels[i].spin_axis;
-        let up = match normals[i] {
-            Some((xy, n))
-                if (xy[0] - c.x).powi(2) + (xy[1] - c.y).powi(2)
-                    < NORMAL_REFRESH_M * NORMAL_REFRESH_M =>
-            {
-                n
-            }
-            _ => {
-                let n = terrain.normal_up(c.x, c.y);
-                // Upward normal in W (z down).
-                let n = Vector3::new(n[0], n[1], -n[2]);
-                normals[i] = Some(([c.x, c.y], n));
-                n
-            }
-        };
-        let perp = up - s * up.dot(&s);
-        let norm = perp.norm();
-        let dir = if norm > 1e-9 {
-            perp / norm
+        if fixed {
+            e[i] = clearance_at_angle(terrain, &c, &s, r, angles[i]);
         } else {
-            Vector3::new(0.0, 0.0, -1.0)
-        };
-        let contact = c - dir * r;
-        contacts[i] = [contact.x, contact.y, contact.z];
-        e[i] = -contact.z - terrain.height_m(contact.x, contact.y);
+            let hint = angles[i].is_finite().then_some(angles[i]);
+            let k = wheel_contact(terrain, &c, &s, r, hint);
+            contacts[i] = k;
+            angles[i] = k.angle_rad;
+            e[i] = k.clearance_m;
+        }
     }
     e
 }
 
-/// Place the vehicle at the north/east/yaw of `pose`, starting Newton from `guess_pose` and
-/// `guess` (the previous step's solution).
+/// Place the vehicle at the north/east/yaw of `pose`, starting Newton from `pose` (height,
+/// roll, pitch) and `guess` (the previous step's solution).
 pub fn place(
     geometry: &dyn VehicleGeometry,
     terrain: &dyn TerrainSurface,
@@ -163,25 +143,29 @@ pub fn place(
     limits: &JointLimits,
 ) -> Placement {
     place_cached(
-        geometry,
-        terrain,
-        pose,
-        guess,
-        steer_rad,
-        limits,
-        &mut None,
-        &mut [None; WHEELS],
+        geometry, terrain, pose, guess, steer_rad, limits, &mut None, None,
     )
 }
 
 /// Jacobian `d e / d u` kept between placements (chord method).
 pub type PlacementJacobian = SMatrix<f64, 6, 6>;
 
+fn no_contact() -> WheelContact {
+    WheelContact {
+        point_w: Vector3::zeros(),
+        angle_rad: 0.0,
+        normal_w: -Vector3::z(),
+        tangent_w: Vector3::x(),
+        clearance_m: 0.0,
+    }
+}
+
 /// [`place`] reusing the Jacobian of an earlier placement (the chord method: between two 5 ms
-/// steps the configuration barely changes) and the terrain normals under the axles
-/// ([`NormalCache`]). The Jacobian is recomputed by finite differences
-/// when there is none or when an iteration reduces the residual by less than 4x; the solution
-/// is the same (to the 1e-9 m tolerance), only cheaper.
+/// steps the configuration barely changes). The Jacobian is recomputed by finite differences
+/// (at fixed contact angles) when there is none or when an iteration reduces the residual by
+/// less than 4x; the solution is the same (to the 1e-9 m tolerance), only cheaper.
+/// `previous_angles` are the contact angles of the previous placement (followed by the rim
+/// search, see [`wheel_contact`]).
 #[allow(clippy::too_many_arguments)]
 pub fn place_cached(
     geometry: &dyn VehicleGeometry,
@@ -191,7 +175,7 @@ pub fn place_cached(
     steer_rad: &[f64; WHEELS],
     limits: &JointLimits,
     cache: &mut Option<PlacementJacobian>,
-    normals: &mut NormalCache,
+    previous_angles: Option<[f64; WHEELS]>,
 ) -> Placement {
     let mut u = Unknowns::new(
         pose.pos_m[2],
@@ -201,7 +185,8 @@ pub fn place_cached(
         guess.bogie_rad[0],
         guess.bogie_rad[1],
     );
-    let mut contacts = [[0.0; 3]; WHEELS];
+    let mut contacts = [no_contact(); WHEELS];
+    let mut angles = previous_angles.unwrap_or([f64::NAN; WHEELS]);
     let mut iterations = 0;
     let mut free = [true; 6];
     let lim = [
@@ -214,41 +199,40 @@ pub fn place_cached(
     ];
     let h = 1e-7;
     let mut previous = f64::INFINITY;
+    let eval = |u: &Unknowns, contacts: &mut [WheelContact; WHEELS], angles: &mut Angles, fixed| {
+        residuals(
+            geometry, terrain, pose, u, steer_rad, contacts, angles, fixed,
+        )
+    };
+    // Newton on the clearances at fixed contact angles (the envelope of the rim search), with a
+    // full rim search at the start and to confirm convergence: a contact that moves to another
+    // part of the rim (a rock entering ahead of the axle) restarts the iterations there.
+    let mut fixed = previous_angles.is_some_and(|a| a.iter().all(|v| v.is_finite()));
     for _ in 0..40 {
         iterations += 1;
-        let e = residuals(
-            geometry,
-            terrain,
-            pose,
-            &u,
-            steer_rad,
-            &mut contacts,
-            normals,
-        );
+        let e = eval(&u, &mut contacts, &mut angles, fixed);
         let size = e.amax();
         if size < 1e-9 {
+            if fixed {
+                fixed = false;
+                continue;
+            }
             break;
         }
+        fixed = true;
         let stale = size > 0.25 * previous;
         previous = size;
         let mut jac = match cache {
             Some(j) if !stale => *j,
             _ => {
                 let mut j = PlacementJacobian::zeros();
-                let mut scratch = [[0.0; 3]; WHEELS];
+                let mut scratch = [no_contact(); WHEELS];
+                let e0 = eval(&u, &mut scratch, &mut angles, true);
                 for k in 0..6 {
                     let mut up = u;
                     up[k] += h;
-                    let ep = residuals(
-                        geometry,
-                        terrain,
-                        pose,
-                        &up,
-                        steer_rad,
-                        &mut scratch,
-                        normals,
-                    );
-                    j.set_column(k, &((ep - e) / h));
+                    let ep = eval(&up, &mut scratch, &mut angles, true);
+                    j.set_column(k, &((ep - e0) / h));
                 }
                 *cache = Some(j);
                 j
@@ -278,32 +262,16 @@ pub fn place_cached(
             }
         }
     }
-    let mut e = residuals(
-        geometry,
-        terrain,
-        pose,
-        &u,
-        steer_rad,
-        &mut contacts,
-        normals,
-    );
+    let mut e = eval(&u, &mut contacts, &mut angles, false);
     let at_limit = free.iter().any(|f| !f);
     if at_limit {
-        // Raise the body until no wheel penetrates (twice: the contacts move a little).
+        // Raise the body until no wheel penetrates (three passes: the contacts move a little).
         for _ in 0..3 {
             let lowest = e.min();
             if lowest < 0.0 {
                 u[0] += lowest;
             }
-            e = residuals(
-                geometry,
-                terrain,
-                pose,
-                &u,
-                steer_rad,
-                &mut contacts,
-                normals,
-            );
+            e = eval(&u, &mut contacts, &mut angles, false);
         }
     }
     let mut clearance = [0.0; WHEELS];
@@ -321,7 +289,7 @@ pub fn place_cached(
             rocker_rad: u[3],
             bogie_rad: [u[4], u[5]],
         },
-        contacts_w: contacts,
+        contacts,
         clearance_m: clearance,
         iterations,
         at_limit,

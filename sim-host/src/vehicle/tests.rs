@@ -12,6 +12,7 @@ fn terrain(base: BaseShape) -> Terrain {
             roughness_m: 0.0,
             roughness_wavelength_m: 2.0,
             rocks: None,
+            obstacles: Vec::new(),
         },
         0,
         &[],
@@ -37,7 +38,7 @@ fn sim_3_flat_ground() {
         &start(-0.2),
         &Suspension::default(),
         &[0.0; 6],
-        &JointLimits::of(&g),
+        &JointLimits::rocky8(),
     );
     for c in p.clearance_m {
         assert!(c.abs() < 1e-9);
@@ -72,12 +73,13 @@ fn sim_3_step_under_both_front_wheels() {
         &start(-0.1),
         &Suspension::default(),
         &[0.0; 6],
-        &JointLimits::of(&g),
+        &JointLimits::rocky8(),
     );
     for (i, c) in p.clearance_m.iter().enumerate() {
         assert!(c.abs() < 1e-8, "wheel {} clearance {c}", i + 1);
     }
-    for (i, c) in p.contacts_w.iter().enumerate() {
+    for (i, k) in p.contacts.iter().enumerate() {
+        let c = k.point_w;
         let expected = if i < 2 { height } else { 0.0 };
         assert!(
             (-c[2] - expected).abs() < 1e-8,
@@ -131,7 +133,7 @@ fn sim_3_step_under_right_front_wheel() {
         &start(-0.1),
         &Suspension::default(),
         &[0.0; 6],
-        &JointLimits::of(&g),
+        &JointLimits::rocky8(),
     );
     for c in p.clearance_m {
         assert!(c.abs() < 1e-8);
@@ -159,7 +161,7 @@ fn sim_3_planar_slope() {
         &start(-0.1),
         &Suspension::default(),
         &[0.0; 6],
-        &JointLimits::of(&g),
+        &JointLimits::rocky8(),
     );
     for c in p.clearance_m {
         assert!(c.abs() < 1e-8);
