@@ -36,5 +36,6 @@ pub mod sim;
 pub mod slip;
 pub mod surface;
 pub mod terrain;
+pub mod terramechanics;
 pub mod vehicle;
 pub mod world;
