@@ -7,10 +7,13 @@ use crate::sensors::imu::ImuParams;
 use crate::sensors::sun::SunParams;
 use crate::slip::SoilParams;
 use crate::terrain::TerrainSpec;
+use crate::terramechanics::Soil;
 use serde::Deserialize;
 use std::path::Path;
 
-/// Soil: a preset name (`"loose_sand"`, `"firm_soil"`) or explicit parameters.
+/// Soil: a preset name (`"loose_sand"`: Wong's dry sand; `"firm_soil"`: Wong's sandy loam;
+/// `"mars_simulant"`: the DLR Mars soil simulant; see `docs/terramechanics.md`) or explicit
+/// parameters.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(untagged)]
 pub enum SoilSpec {
@@ -21,15 +24,18 @@ pub enum SoilSpec {
 }
 
 impl SoilSpec {
-    /// The soil parameters.
-    pub fn params(&self) -> anyhow::Result<SoilParams> {
+    /// The soil.
+    pub fn params(&self) -> anyhow::Result<Soil> {
         match self {
             SoilSpec::Preset(name) => match name.as_str() {
-                "loose_sand" => Ok(SoilParams::loose_sand()),
-                "firm_soil" => Ok(SoilParams::firm_soil()),
-                other => anyhow::bail!("unknown soil preset {other:?} (loose_sand, firm_soil)"),
+                "loose_sand" => Ok(Soil::dry_sand()),
+                "firm_soil" => Ok(Soil::sandy_loam()),
+                "mars_simulant" => Ok(Soil::mars_dlr_simulant()),
+                other => anyhow::bail!(
+                    "unknown soil preset {other:?} (loose_sand, firm_soil, mars_simulant)"
+                ),
             },
-            SoilSpec::Params(p) => Ok(*p),
+            SoilSpec::Params(p) => Ok(p.soil()),
         }
     }
 }

@@ -16,7 +16,7 @@ use crate::sensors::encoders::EncoderParams;
 use crate::sensors::faults::Faults;
 use crate::sensors::imu::ImuModel;
 use crate::sensors::sun::SunParams;
-use crate::slip::{SlipModel, SlipState};
+use crate::slip::{SlipModel, WheelGround};
 use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
 use crate::vehicle::contact::WheelContact;
@@ -26,7 +26,7 @@ use crate::vehicle::placement::{
     place, place_cached, BodyPose, JointLimits, Placement, PlacementJacobian, Suspension,
 };
 use crate::vehicle::rolling::{solve_rolling, RollingContact, CONTACT_TOLERANCE_M};
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use nalgebra::{Rotation3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -87,7 +87,7 @@ pub struct Truth {
     /// Wheel angles, rad.
     pub wheel_angle_rad: [f64; WHEELS],
     /// Slip over the last step.
-    pub slip: SlipState,
+    pub slip: crate::slip::SlipState,
     /// Ground velocity of the body in `R` over the last step `[vx, vy]`, m/s.
     pub velocity_r_m_s: [f64; 2],
     /// Horizontal distance travelled, m.
@@ -98,6 +98,8 @@ pub struct Truth {
     pub contact_angle_rad: [f64; WHEELS],
     /// Longitudinal slip ratio of each wheel over the last step.
     pub wheel_slip_ratio: [f64; WHEELS],
+    /// Normal load of each wheel over the last step, N.
+    pub wheel_load_n: [f64; WHEELS],
     /// Suspension rates `[beta, rho1, rho2]` over the last step, rad/s.
     pub suspension_rate_rad_s: [f64; 3],
 }
@@ -151,10 +153,6 @@ pub struct World {
     pub placement_iterations: u64,
 }
 
-fn rot_matrix(r: &nalgebra::Rotation3<f64>) -> Matrix3<f64> {
-    *r.matrix()
-}
-
 impl World {
     /// Build the world of `scenario` for `seed`.
     pub fn new(scenario: &Scenario, seed: u64) -> anyhow::Result<Self> {
@@ -165,7 +163,12 @@ impl World {
             let n: f64 = StandardNormal.sample(&mut streams.geometry);
             sigma * n
         });
-        let slip = SlipModel::new(scenario.soil.params()?, scenario.slip, &mut streams.slip);
+        let slip = SlipModel::new(
+            scenario.soil.params()?,
+            geometry.wheel_radius_m(),
+            scenario.slip,
+            &mut streams.slip,
+        );
         let imu = ImuModel::new(scenario.sensors.imu, &mut streams.imu);
         let [start, next] = [scenario.waypoints[0], scenario.waypoints[1]];
         let yaw = (next[1] - start[1]).atan2(next[0] - start[0]);
@@ -286,31 +289,25 @@ impl World {
                 wheels[i].spin_axis,
             )
         });
-        // Slip from the slope along the motion and across the body.
-        let m = rot_matrix(&rot);
-        let (x_r, y_r) = (m.column(0).into_owned(), m.column(1).into_owned());
-        let forward = (0..WHEELS)
-            .map(|i| self.truth.wheel_rate_rad_s[i] * wheels[i].rolling_dir.x)
-            .sum::<f64>();
-        let dir = if forward >= 0.0 { 1.0 } else { -1.0 };
-        let slope_along = (-x_r.z * dir).clamp(-1.0, 1.0).asin();
-        let slope_cross = y_r.z.clamp(-1.0, 1.0).asin();
-        let slip = self
-            .slip
-            .step(slope_along, slope_cross, dt, &mut self.streams.slip);
+        // Per-wheel slip from the loads and the soil.
         let r = self.geometry.wheel_radius_m();
-        let ground_speed: [f64; WHEELS] = std::array::from_fn(|i| {
-            let rim = r * self.truth.wheel_rate_rad_s[i];
-            if rim >= 0.0 {
-                (1.0 - slip.slip_ratio) * rim
-            } else {
-                (1.0 - slip.slip_ratio.max(0.0)) * rim
-            }
+        let ground: [WheelGround; WHEELS] = std::array::from_fn(|i| WheelGround {
+            touching: contacts[i].touching,
+            point: rot_inv * (self.contacts[i].point_w - Vector3::from(pose0.pos_m)),
+            normal: contacts[i].normal,
+            tangent: contacts[i].tangent,
+            spin: contacts[i].spin,
+            rim_speed_m_s: r * self.truth.wheel_rate_rad_s[i],
         });
-        // Downhill sideways slip (positive slip angle: towards the rover's right).
-        let lateral: [f64; WHEELS] = std::array::from_fn(|i| {
-            ground_speed[i].abs() * slip.slip_angle_rad.tan() * wheels[i].spin_axis.y.signum()
-        });
+        let gravity_r = rot_inv * Vector3::z();
+        let (wheel_slip, slip) = self.slip.wheel_slips(
+            &self.geometry,
+            self.truth.suspension.rocker_rad,
+            &ground,
+            &gravity_r,
+        );
+        let ground_speed = wheel_slip.map(|w| w.ground_speed_m_s);
+        let lateral = wheel_slip.map(|w| w.lateral_m_s);
         let s0 = self.truth.suspension;
         let twist = solve_rolling(
             &self.geometry,
@@ -362,7 +359,8 @@ impl World {
         t.suspension = placed.suspension;
         t.clearance_m = placed.clearance_m;
         t.contact_angle_rad = placed.contacts.map(|c| c.angle_rad);
-        t.wheel_slip_ratio = [slip.slip_ratio; WHEELS];
+        t.wheel_slip_ratio = wheel_slip.map(|w| w.slip_ratio);
+        t.wheel_load_n = wheel_slip.map(|w| w.load_n);
         t.suspension_rate_rad_s = [
             (placed.suspension.rocker_rad - s0.rocker_rad) / dt,
             (placed.suspension.bogie_rad[0] - s0.bogie_rad[0]) / dt,
