@@ -48,7 +48,7 @@
 //! `|dtheta_i| < min_drive_increment_rad` keep their angle; angles are clamped to
 //! `+-max_angle_rad`.
 
-use super::forward::contact_velocities;
+use super::forward::{contact_velocities, ContactLeastSquares};
 use super::geometry::{check_suspension, wheel_frames_trusted, RoverGeometry, WheelFrames};
 use super::jacobian::WheelJacobian;
 use super::{KinematicsError, SuspensionRates, SuspensionState};
@@ -258,6 +258,12 @@ pub(crate) fn contact_step_frames(
         }
     });
     let prior: [f64; WHEEL_COUNT] = previous_rad.map(clamp);
+    if gyro_rad.is_none() {
+        // Without the gyro all six body DOF come from the contacts: the eq. 15 test for
+        // collinear contacts applies (the angles add no rotational information).
+        let points = contact_jacobians(frames, radius, &prior).map(|j| j.contact_point_m);
+        ContactLeastSquares::new(&points, wheel_valid)?;
+    }
     let mut delta = prior;
     let mut dp = Vec3::zeros();
     let mut dphi = gyro_rad.unwrap_or_else(Vec3::zeros);
@@ -315,7 +321,6 @@ pub(crate) fn contact_step_frames(
             let d = chol.solve(&(-g3));
             Vec6::new(d.x, d.y, d.z, 0.0, 0.0, 0.0)
         } else {
-            check_pivots(&s, count)?;
             let chol = s.cholesky().ok_or(KinematicsError::Unobservable {
                 valid_wheels: count,
             })?;
@@ -355,18 +360,6 @@ pub(crate) fn contact_step_frames(
         valid_wheels: count,
         residual_rms_m,
     })
-}
-
-/// Collinear contacts leave a rotation unobserved: refuse when the reduced normal matrix has a
-/// rotational diagonal far below its trace (same role as the pivot test of eq. 15).
-fn check_pivots(s: &Mat6, count: u8) -> Result<(), KinematicsError> {
-    let trace = s.trace();
-    if !trace.is_finite() || (3..6).any(|k| s[(k, k)] <= 1e-9 * trace) {
-        return Err(KinematicsError::Unobservable {
-            valid_wheels: count,
-        });
-    }
-    Ok(())
 }
 
 /// Contact-angle kinematic estimator (V99 sec. 6, Balaram 1999): for one joint-reading step,

@@ -342,3 +342,306 @@ fn kin_10_wave_profile_distance_error() {
         assert!(worst < 2.0 * DEG, "{msg}");
     }
 }
+
+fn level_reading(t_us: u64, drive: [f64; 6], steer: [f64; 6]) -> JointState {
+    JointState {
+        t_us,
+        drive_angle_rad: drive,
+        drive_rate_rad_s: [0.0; 6],
+        steer_angle_rad: steer,
+        rocker_rad: 0.0,
+        bogie_rad: [0.0, 0.0],
+        wheel_valid: [true; 6],
+        suspension_valid: true,
+    }
+}
+
+/// KIN-10: on level ground (contacts below the axles, rigid motion) the contact-angle odometry
+/// gives the eq. 15 odometry's pose and covariance to 1e-9, with and without the gyro, and
+/// all angles stay 0: a straight drive, a turn in place and an arc with crab.
+#[test]
+fn kin_10_level_ground_equals_eq15() {
+    let s = super::tests::level();
+    let commands = [(0.1, 0.0, 0.0), (0.0, 0.0, 0.1), (0.08, 0.03, -0.12)];
+    for (x, y, yaw) in commands {
+        let cmd = VehicleCommand {
+            x_dot_m_s: x,
+            y_dot_m_s: y,
+            yaw_rate_rad_s: yaw,
+        };
+        let ik = inverse_kinematics(&ROCKY8, &s, &cmd).unwrap();
+        let steer = ik.command.steer_angle_rad;
+        for gyro in [false, true] {
+            let mut on = KinematicOdometry::new(
+                ROCKY8,
+                OdometryConfig {
+                    contact_angles: true,
+                    ..OdometryConfig::default()
+                },
+            );
+            let mut off = KinematicOdometry::new(ROCKY8, OdometryConfig::default());
+            on.start(&level_reading(0, [0.0; 6], steer)).unwrap();
+            off.start(&level_reading(0, [0.0; 6], steer)).unwrap();
+            let dt = 0.05;
+            let mut drive = [0.0; 6];
+            for k in 1..=100u64 {
+                for (d, r) in drive.iter_mut().zip(ik.command.wheel_rate_rad_s.iter()) {
+                    *d += r * dt;
+                }
+                let r = level_reading(k * 50_000, drive, steer);
+                let g = gyro.then(|| Vec3::new(0.0, 0.0, yaw * dt));
+                on.update_with_gyro(&r, g).unwrap();
+                off.update(&r).unwrap();
+            }
+            let (a, b) = (on.relative_pose().unwrap(), off.relative_pose().unwrap());
+            let dt_err = (a.trans_0_1_m - b.trans_0_1_m).norm();
+            let dr_err = (a.rot_0_1.inverse() * b.rot_0_1).angle();
+            let cov_err = (a.covariance - b.covariance).norm();
+            assert!(
+                dt_err < 1e-9 && dr_err < 1e-9 && cov_err < 1e-9,
+                "cmd {x} {y} {yaw} gyro {gyro}: {dt_err} {dr_err} {cov_err}"
+            );
+            assert!(on.contact_angles_rad().iter().all(|d| d.abs() < 1e-9));
+            assert!(b.trans_0_1_m.norm() > 0.1 || (b.rot_0_1.angle() - 0.5).abs() < 1e-6);
+        }
+    }
+}
+
+/// KIN-10: robustness of the estimator. Non-finite inputs (drive, suspension increments, gyro,
+/// previous angles, config), fewer than three valid wheels, collinear contacts without the
+/// gyro give error values; zero rates give a zero step and keep the angles; invalid wheels are
+/// not read; extreme previous angles are clamped; huge increments do not panic.
+#[test]
+fn kin_10_robustness_errors_and_fallbacks() {
+    let s = super::tests::level();
+    let cfg = ContactConfig::default();
+    let none = SuspensionRates::default();
+    let prev = [0.3, -0.2, 0.0, 0.1, 0.0, 0.0];
+    let ok = [true; 6];
+    let solve = |inc: &SuspensionRates,
+                 drive: &[f64; 6],
+                 valid: &[bool; 6],
+                 gyro: Option<Vec3>,
+                 prev: &[f64; 6],
+                 cfg: &ContactConfig| {
+        contact_kinematics(&ROCKY8, &s, inc, drive, valid, gyro, prev, cfg)
+    };
+    // Zero rates: no motion, angles kept (no information).
+    let sol = solve(&none, &[0.0; 6], &ok, None, &prev, &cfg).unwrap();
+    assert!(sol.body_step.norm() < 1e-12);
+    assert_eq!(sol.contact_angles_rad, prev);
+    assert_eq!(sol.estimated, [false; 6]);
+    let sol = solve(&none, &[0.0; 6], &ok, Some(Vec3::zeros()), &prev, &cfg).unwrap();
+    assert!(sol.body_step.norm() < 1e-12);
+    // Non-finite inputs.
+    let nan = f64::NAN;
+    let mut d = [0.1; 6];
+    d[2] = nan;
+    assert_eq!(
+        solve(&none, &d, &ok, None, &prev, &cfg),
+        Err(KinematicsError::NonFinite)
+    );
+    let inc = SuspensionRates {
+        rocker_rad_s: f64::INFINITY,
+        bogie_rad_s: [0.0; 2],
+    };
+    assert_eq!(
+        solve(&inc, &[0.1; 6], &ok, None, &prev, &cfg),
+        Err(KinematicsError::NonFinite)
+    );
+    assert_eq!(
+        solve(
+            &none,
+            &[0.1; 6],
+            &ok,
+            Some(Vec3::new(0.0, nan, 0.0)),
+            &prev,
+            &cfg
+        ),
+        Err(KinematicsError::NonFinite)
+    );
+    let mut bad_prev = prev;
+    bad_prev[5] = nan;
+    assert_eq!(
+        solve(&none, &[0.1; 6], &ok, None, &bad_prev, &cfg),
+        Err(KinematicsError::NonFinite)
+    );
+    for bad in [
+        ContactConfig {
+            residual_sigma_m: 0.0,
+            ..cfg
+        },
+        ContactConfig {
+            step_sigma_rad: nan,
+            ..cfg
+        },
+        ContactConfig {
+            level_sigma_rad: -1.0,
+            ..cfg
+        },
+    ] {
+        assert_eq!(
+            solve(&none, &[0.1; 6], &ok, None, &prev, &bad),
+            Err(KinematicsError::NonFinite)
+        );
+    }
+    // The level prior can be switched off; zero or too many iterations are clamped.
+    let relaxed = ContactConfig {
+        level_sigma_rad: f64::INFINITY,
+        iterations: 200,
+        ..cfg
+    };
+    let sol = solve(&none, &[0.1; 6], &ok, None, &[0.0; 6], &relaxed).unwrap();
+    assert!((sol.body_step[0] - 0.01).abs() < 1e-12);
+    let once = ContactConfig {
+        iterations: 0,
+        ..cfg
+    };
+    assert!(solve(&none, &[0.1; 6], &ok, None, &[0.0; 6], &once).is_ok());
+    // Invalid wheels are not read (NaN there is ignored); two valid wheels: unobservable.
+    let mut valid = ok;
+    valid[2] = false;
+    let sol = solve(&none, &d, &valid, None, &prev, &cfg).unwrap();
+    assert_eq!(sol.valid_wheels, 5);
+    assert_eq!(sol.contact_angles_rad[2], prev[2]);
+    assert!((sol.body_step[0] - 0.01).abs() < 1e-3);
+    let two = [true, true, false, false, false, false];
+    assert_eq!(
+        solve(&none, &[0.1; 6], &two, None, &prev, &cfg),
+        Err(KinematicsError::Unobservable { valid_wheels: 2 })
+    );
+    assert_eq!(
+        solve(&none, &[0.1; 6], &two, Some(Vec3::zeros()), &prev, &cfg),
+        Err(KinematicsError::Unobservable { valid_wheels: 2 })
+    );
+    // Three nearly collinear contacts (the right side; the 4-digit D-H rounding leaves the
+    // middle contact 0.05 mm off their line): without the gyro the same observability test as
+    // eq. 15 decides; with it the translation is always determined.
+    let right = [true, false, true, false, true, false];
+    let ours = solve(&none, &[0.1; 6], &right, None, &[0.0; 6], &cfg);
+    let eq15 = forward_kinematics(&ROCKY8, &s, &none, &[0.1; 6], &right);
+    assert_eq!(ours.is_ok(), eq15.is_ok());
+    let sol = solve(
+        &none,
+        &[0.1; 6],
+        &right,
+        Some(Vec3::zeros()),
+        &[0.0; 6],
+        &cfg,
+    )
+    .unwrap();
+    assert!((sol.body_step[0] - 0.01).abs() < 1e-9);
+    // Extreme previous angles: clamped to the limit, still finite.
+    let sol = solve(
+        &none,
+        &[0.1; 6],
+        &ok,
+        None,
+        &[10.0, -10.0, 1e300, 0.0, 0.0, 0.0],
+        &cfg,
+    )
+    .unwrap();
+    assert!(sol
+        .contact_angles_rad
+        .iter()
+        .all(|d| d.abs() <= cfg.max_angle_rad + 1e-15));
+    assert!(sol.body_step.iter().all(|x| x.is_finite()));
+    // Huge and contradictory increments: an answer or an error, never a panic.
+    let wild = [1e12, -1e12, 3.0, -7.0, 1e-300, 0.0];
+    for gyro in [None, Some(Vec3::new(1e9, -1e9, 0.5))] {
+        if let Ok(sol) = solve(&inc_of(1e6, -1e6), &wild, &ok, gyro, &prev, &cfg) {
+            assert!(sol.body_step.iter().all(|x| x.is_finite()));
+            assert!(sol.contact_angles_rad.iter().all(|d| d.is_finite()));
+        }
+    }
+    // Out-of-range suspension angles are refused.
+    let mut far = s;
+    far.rocker_rad = 2.0;
+    assert_eq!(
+        contact_kinematics(&ROCKY8, &far, &none, &[0.1; 6], &ok, None, &prev, &cfg),
+        Err(KinematicsError::JointOutOfRange)
+    );
+}
+
+fn inc_of(rocker: f64, bogie: f64) -> SuspensionRates {
+    SuspensionRates {
+        rocker_rad_s: rocker,
+        bogie_rad_s: [bogie, -bogie],
+    }
+}
+
+/// KIN-10: the odometry with contact angles refuses a NaN gyro (ends the interval, angles
+/// kept), ignores the gyro when contact angles are off, and keeps the angles across `take`.
+#[test]
+fn kin_10_odometry_gyro_and_state() {
+    let mut on = KinematicOdometry::new(
+        ROCKY8,
+        OdometryConfig {
+            contact_angles: true,
+            ..OdometryConfig::default()
+        },
+    );
+    on.start(&level_reading(0, [0.0; 6], [0.0; 6])).unwrap();
+    on.update_with_gyro(
+        &level_reading(50_000, [0.1; 6], [0.0; 6]),
+        Some(Vec3::zeros()),
+    )
+    .unwrap();
+    assert_eq!(
+        on.update_with_gyro(
+            &level_reading(100_000, [0.2; 6], [0.0; 6]),
+            Some(Vec3::new(f64::NAN, 0.0, 0.0))
+        ),
+        Err(KinematicsError::NonFinite)
+    );
+    assert_eq!(on.relative_pose(), Err(KinematicsError::NotStarted));
+    let mut off = KinematicOdometry::new(ROCKY8, OdometryConfig::default());
+    off.start(&level_reading(0, [0.0; 6], [0.0; 6])).unwrap();
+    off.update_with_gyro(
+        &level_reading(50_000, [0.1; 6], [0.0; 6]),
+        Some(Vec3::new(f64::NAN, 0.0, 0.0)),
+    )
+    .unwrap();
+    assert!((off.relative_pose().unwrap().trans_0_1_m.x - 0.01).abs() < 1e-12);
+    assert_eq!(off.contact_angles_rad(), [0.0; 6]);
+}
+
+use proptest::prelude::*;
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(1000))]
+    /// KIN-10: arbitrary inputs (NaN, infinities, huge values, any validity, any previous
+    /// angles, with or without the gyro) never panic; an Ok result is finite and its angles
+    /// lie within the clamp.
+    #[test]
+    fn kin_10_arbitrary_inputs_never_panic(
+        angles in proptest::array::uniform9(proptest::num::f64::ANY),
+        incs in proptest::array::uniform9(proptest::num::f64::ANY),
+        prev in proptest::array::uniform6(proptest::num::f64::ANY),
+        valid in proptest::array::uniform6(any::<bool>()),
+        use_gyro in any::<bool>(),
+    ) {
+        let state = SuspensionState {
+            rocker_rad: angles[0],
+            bogie_rad: [angles[1], angles[2]],
+            steer_rad: [angles[3], angles[4], angles[5], angles[6], angles[7], angles[8]],
+        };
+        let rates = SuspensionRates { rocker_rad_s: incs[0], bogie_rad_s: [incs[1], incs[2]] };
+        let drive = [incs[3], incs[4], incs[5], incs[6], incs[7], incs[8]];
+        let gyro = use_gyro.then(|| Vec3::new(incs[0], incs[4], incs[8]));
+        let cfg = ContactConfig::default();
+        let prev = prev.map(|p| if p.is_finite() { p % 4.0 } else { p });
+        for st in [state, super::tests::level()] {
+            if let Ok(sol) =
+                contact_kinematics(&ROCKY8, &st, &rates, &drive, &valid, gyro, &prev, &cfg)
+            {
+                prop_assert!(sol.body_step.iter().all(|x| x.is_finite()));
+                prop_assert!(sol
+                    .contact_angles_rad
+                    .iter()
+                    .all(|d| d.abs() <= cfg.max_angle_rad + 1e-15));
+                prop_assert!(sol.residual_rms_m.is_finite());
+            }
+        }
+    }
+}
