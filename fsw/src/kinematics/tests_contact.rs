@@ -246,11 +246,12 @@ fn kin_10_front_right_climbs_30_deg_ramp() {
             }
         }
         let f = first_on_ramp.unwrap();
+        let run_f = run.est[f + 1][0];
         std::println!(
             "KIN-10 ramp (gyro {gyro}): FR delta est {:.2} deg true {:.2} deg at the foot, \
              last est {:.2} true {:.2}; worst FR error {:.2} deg, others {:.2} deg; \
              error contact {:.2} mm (3D {:.2}) vs eq. 15 {:.2} mm (3D {:.2}) over {:.3} m",
-            run.est[f + 1][0] / DEG,
+            run_f / DEG,
             run.truth[f + 1][0] / DEG,
             run.est[run.steps - 1][0] / DEG,
             run.truth[run.steps - 1][0] / DEG,
@@ -262,7 +263,7 @@ fn kin_10_front_right_climbs_30_deg_ramp() {
             run.err3_old * 1e3,
             run.distance
         );
-        for k in (0..run.steps).filter(|k| *k < 10 || k % 4 == 0) {
+        for k in (0..run.steps).filter(|k| k % 4 == 0) {
             std::println!(
                 "  step {k}: est {:?} truth {:?}",
                 run.est[k].map(|d| (d / DEG * 100.0).round() / 100.0),
@@ -270,21 +271,23 @@ fn kin_10_front_right_climbs_30_deg_ramp() {
             );
         }
         // Without the gyro a body pitch and a front-to-rear gradient of the contact angles are
-        // hard to tell apart (only second-order effects separate them), so the level wheels'
-        // angles drift slowly under the prior: a looser bound there.
-        let other_bound = if gyro { 2.0 } else { 3.5 };
-        assert!(worst_fr < 2.0 * DEG, "FR worst {}", worst_fr / DEG);
+        // hard to tell apart (only second-order effects separate them); the tighter level
+        // prior that keeps the angles from random-walking under encoder noise then pulls them
+        // toward 0 by a few degrees: looser bounds there (documented in docs/kinematics.md).
+        let bound = if gyro { 2.0 } else { 4.0 };
+        assert!(worst_fr < bound * DEG, "FR worst {}", worst_fr / DEG);
         assert!(
-            worst_other < other_bound * DEG,
+            worst_other < bound * DEG,
             "others worst {}",
             worst_other / DEG
         );
-        assert!((run.est[f + 1][0] - 30.0 * DEG).abs() < 2.0 * DEG);
+        let at_foot = if gyro { 2.0 } else { 5.0 };
+        assert!((run.est[f + 1][0] - 30.0 * DEG).abs() < at_foot * DEG);
         // The left wheels' frames barely tilt: their angles stay ~0. The right middle and rear
         // wheel frames tilt with the right bogie and rocker, so level ground shows there as
         // minus that tilt (checked against the truth above).
         for i in [1, 3, 5] {
-            assert!(run.est[run.steps - 1][i].abs() < other_bound * DEG);
+            assert!(run.est[run.steps - 1][i].abs() < bound * DEG);
         }
         assert!(
             run.err3_contact * 4.0 < run.err3_old,
@@ -479,6 +482,10 @@ fn kin_10_robustness_errors_and_fallbacks() {
             level_sigma_rad: -1.0,
             ..cfg
         },
+        ContactConfig {
+            level_sigma_no_gyro_rad: 0.0,
+            ..cfg
+        },
     ] {
         assert_eq!(
             solve(&none, &[0.1; 6], &ok, None, &prev, &bad),
@@ -488,6 +495,7 @@ fn kin_10_robustness_errors_and_fallbacks() {
     // The level prior can be switched off; zero or too many iterations are clamped.
     let relaxed = ContactConfig {
         level_sigma_rad: f64::INFINITY,
+        level_sigma_no_gyro_rad: f64::INFINITY,
         iterations: 200,
         ..cfg
     };
@@ -643,5 +651,59 @@ proptest! {
                 prop_assert!(sol.residual_rms_m.is_finite());
             }
         }
+    }
+}
+
+/// KIN-10: on level ground with encoder noise and slip (each drive increment off by a random
+/// 1 mrad + 2 %, a constant 2 % over-spin of the right middle wheel) over 3 m the angles stay
+/// bounded and the distance error stays at the eq. 15 level, with and without the gyro.
+#[test]
+fn kin_10_level_ground_with_noise_and_slip_stays_bounded() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    for gyro in [true, false] {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(10);
+        let unit = Normal::new(0.0, 1.0).unwrap();
+        let mut on = KinematicOdometry::new(
+            ROCKY8,
+            OdometryConfig {
+                contact_angles: true,
+                ..OdometryConfig::default()
+            },
+        );
+        let mut off = KinematicOdometry::new(ROCKY8, OdometryConfig::default());
+        on.start(&level_reading(0, [0.0; 6], [0.0; 6])).unwrap();
+        off.start(&level_reading(0, [0.0; 6], [0.0; 6])).unwrap();
+        let mut drive = [0.0; 6];
+        let step = 0.05; // 5 mm per step
+        let mut worst: f64 = 0.0;
+        for k in 1..=600u64 {
+            for i in 0..6 {
+                let slip = if i == 2 { 1.02 } else { 1.0 };
+                drive[i] += step * slip + (1e-3 + 0.02 * step) * unit.sample(&mut rng);
+            }
+            let r = level_reading(k * 50_000, drive, [0.0; 6]);
+            on.update_with_gyro(&r, gyro.then(Vec3::zeros)).unwrap();
+            off.update(&r).unwrap();
+            worst = on
+                .contact_angles_rad()
+                .iter()
+                .fold(worst, |w, d| w.max(d.abs()));
+        }
+        let (a, b) = (on.relative_pose().unwrap(), off.relative_pose().unwrap());
+        let msg = std::format!(
+            "KIN-10 level + noise (gyro {gyro}): worst |delta| {:.2} deg; x contact {:.4} m, \
+             eq. 15 {:.4} m (truth 3.0 m at the mean rim travel); z contact {:.4} m",
+            worst / DEG,
+            a.trans_0_1_m.x,
+            b.trans_0_1_m.x,
+            a.trans_0_1_m.z
+        );
+        std::println!("{msg}");
+        assert!(worst < 15.0 * DEG, "{msg}");
+        assert!(
+            (a.trans_0_1_m.x - 3.0).abs() < 0.02 + (b.trans_0_1_m.x - 3.0).abs(),
+            "{msg}"
+        );
     }
 }
