@@ -374,6 +374,14 @@ pub struct WheelFrames {
     pub d_contact_d_bogie: Vec3,
     /// Index of the bogie angle this wheel depends on (`None` for the rear wheels).
     pub bogie: Option<usize>,
+    /// Unit axis `k_beta` in `R` of the rocker joint as it moves this wheel, signed so that any
+    /// point `q` fixed to the wheel's chain moves by `dq/dbeta = k_beta x (q - o)` (`o` on the
+    /// axis); `d_contact_d_rocker = k_beta x (p_contact - o)`. Used by the contact-angle
+    /// estimator ([`super::contact`]) to move the Jacobian columns to another contact point.
+    pub rocker_axis: Vec3,
+    /// Unit axis `k_rho` in `R` of this wheel's bogie joint, same convention as
+    /// [`Self::rocker_axis`] (zero for the rear wheels).
+    pub bogie_axis: Vec3,
 }
 
 /// Frames shared by several wheels: `T_D^R` and `T_rho1^R`, `T_rho2^R`.
@@ -438,13 +446,16 @@ fn wheel_frames_unchecked(
     let contact = frame_a.then(&chain.contact.frame(q));
     let contact_point_m = contact.pos - contact.z_axis() * geometry.wheel_radius_m;
     let d_contact_d_rocker = revolute_rate(&frame_d, rocker_sign, &contact_point_m);
-    let d_contact_d_bogie = match bogie {
-        Some(_) => revolute_rate(
-            &frame_before_steer,
-            chain.steer.joint_sign,
-            &contact_point_m,
+    let (d_contact_d_bogie, bogie_axis) = match bogie {
+        Some(_) => (
+            revolute_rate(
+                &frame_before_steer,
+                chain.steer.joint_sign,
+                &contact_point_m,
+            ),
+            frame_before_steer.z_axis() * chain.steer.joint_sign,
         ),
-        None => Vec3::zeros(),
+        None => (Vec3::zeros(), Vec3::zeros()),
     };
     WheelFrames {
         contact,
@@ -454,6 +465,8 @@ fn wheel_frames_unchecked(
         d_contact_d_rocker,
         d_contact_d_bogie,
         bogie,
+        rocker_axis: frame_d.z_axis() * rocker_sign,
+        bogie_axis,
     }
 }
 

@@ -8,6 +8,8 @@
 //!   [`crate::types::RelativePose`] with covariance (the measurement of H04 sec. 4).
 //! - [`inverse`]: inverse kinematics (eq. 16-25), command `[x_dot y_dot phi_dot]` to steering
 //!   angles and wheel rates, and the speed scaling that respects the wheel-rate limit.
+//! - [`contact`]: contact-angle kinematic estimation (V99 sec. 6, Balaram 1999): body
+//!   displacement and the six wheel/terrain contact angles per step, optionally with the gyro.
 //! - [`planar`]: the common planar (2D) model for comparison (H04 Fig. 17).
 //!
 //! Frames: rover frame `R` x forward, y right, z down (the base frame of the D-H table, no
@@ -18,6 +20,7 @@
 //! See `docs/kinematics.md` for the frame drawing, the resolved ambiguities and the
 //! equation-to-function map.
 
+pub mod contact;
 pub mod forward;
 pub mod geometry;
 pub mod inverse;
@@ -28,8 +31,13 @@ pub mod planar;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]
+mod tests_contact;
+#[cfg(test)]
 mod tests_inverse;
 
+pub use contact::{
+    contact_jacobians, contact_kinematics, ContactConfig, ContactStep, MAX_CONTACT_ITERATIONS,
+};
 pub use forward::{forward_kinematics, forward_kinematics_from_joints, ForwardSolution};
 pub use geometry::{
     wheel_contact_points, wheel_frames, RoverGeometry, WheelFrames, ROCKY8, WHEEL_RADIUS_M,

@@ -10,7 +10,15 @@
 //! in `R0`, the [`RelativePose`] convention) propagates as `P' = F P F^T + G Q G^T` with
 //! `F = [[I, 0], [-[R dp]x, I]]`, `G = diag(R, R)` and `Q` the step covariance from the
 //! encoder noise mapped through the least squares.
+//!
+//! With [`OdometryConfig::contact_angles`] the step comes from the contact-angle estimator
+//! ([`super::contact`], V99 sec. 6): the body displacement and the six contact angles are
+//! solved jointly (optionally with the gyro's rotation increment,
+//! [`KinematicOdometry::update_with_gyro`]); the angles carry over from step to step and the covariance is the same
+//! encoder-noise map evaluated at the solved angles (contact points `c_i(delta_i)`, drive
+//! columns `r t_i(delta_i)`; the angles themselves are treated as known there).
 
+use super::contact::{contact_jacobians, contact_step_frames, ContactConfig};
 use super::forward::{contact_velocities, ContactLeastSquares};
 use super::geometry::{check_suspension, wheel_frames_trusted, RoverGeometry};
 use super::jacobian::WheelJacobian;
@@ -34,6 +42,11 @@ pub struct OdometryConfig {
     /// vertical translation `delta_p_z` (H04: 5 of 6 DOF; the vertical motion of the contacts
     /// is assumed, not measured, see `docs/kinematics.md`).
     pub observed: [bool; 6],
+    /// Estimate the wheel/terrain contact angles with the body displacement (V99 sec. 6,
+    /// [`super::contact`]). Default `false`: the contacts are assumed below the axles (eq. 15).
+    pub contact_angles: bool,
+    /// Tuning of the contact-angle estimator (used only with `contact_angles`).
+    pub contact: ContactConfig,
 }
 
 impl Default for OdometryConfig {
@@ -46,6 +59,8 @@ impl Default for OdometryConfig {
             steer_noise_rad: 1e-2,
             suspension_increment_noise_rad: 1e-3,
             observed: [true, true, true, true, true, false],
+            contact_angles: false,
+            contact: ContactConfig::default(),
         }
     }
 }
@@ -60,6 +75,7 @@ pub struct KinematicOdometry {
     rot_0_k: Quat,
     trans_0_k_m: Vec3,
     covariance: Mat6,
+    contact_rad: [f64; WHEEL_COUNT],
 }
 
 fn skew(v: &Vec3) -> Mat3 {
@@ -88,7 +104,20 @@ impl KinematicOdometry {
             rot_0_k: Quat::identity(),
             trans_0_k_m: Vec3::zeros(),
             covariance: Mat6::zeros(),
+            contact_rad: [0.0; WHEEL_COUNT],
         }
+    }
+
+    /// Current contact-angle estimates `delta_i`, rad, index `wheel - 1` (in each wheel plane,
+    /// positive = contact ahead of the axle; V99 sec. 6). All zero unless
+    /// [`OdometryConfig::contact_angles`] is set. They persist across intervals ([`Self::start`]).
+    pub fn contact_angles_rad(&self) -> [f64; WHEEL_COUNT] {
+        self.contact_rad
+    }
+
+    /// Reset the contact-angle estimates to 0 (contacts below the axles).
+    pub fn reset_contact_angles(&mut self) {
+        self.contact_rad = [0.0; WHEEL_COUNT];
     }
 
     /// Start a new interval at the reading `joints` (time `t0 = joints.t_us`). Errors: the
@@ -114,11 +143,25 @@ impl KinematicOdometry {
     /// dropped for this step. On error the step is not applied; errors other than
     /// [`KinematicsError::TimeNotAdvancing`] also end the interval (call [`Self::start`]).
     pub fn update(&mut self, joints: &JointState) -> Result<(), KinematicsError> {
+        self.update_with_gyro(joints, None)
+    }
+
+    /// [`Self::update`] with the body rotation increment measured by the gyro over the same
+    /// step, `gyro_rad` (rad, rotation vector in `R` at the step start). It is used only with
+    /// [`OdometryConfig::contact_angles`] (then the rotation of the step is the gyro's and the
+    /// kinematics solve the translation and the contact angles); otherwise it is ignored and
+    /// the step is exactly [`Self::update`]'s. A non-finite gyro value is an error
+    /// ([`KinematicsError::NonFinite`], ends the interval) when it is used.
+    pub fn update_with_gyro(
+        &mut self,
+        joints: &JointState,
+        gyro_rad: Option<Vec3>,
+    ) -> Result<(), KinematicsError> {
         let prev = self.last.ok_or(KinematicsError::NotStarted)?;
         if joints.t_us <= prev.t_us {
             return Err(KinematicsError::TimeNotAdvancing);
         }
-        let result = self.step(&prev, joints);
+        let result = self.step(&prev, joints, gyro_rad);
         self.last = match result {
             Ok(()) => Some(*joints),
             Err(_) => None,
@@ -126,7 +169,12 @@ impl KinematicOdometry {
         result
     }
 
-    fn step(&mut self, prev: &JointState, cur: &JointState) -> Result<(), KinematicsError> {
+    fn step(
+        &mut self,
+        prev: &JointState,
+        cur: &JointState,
+        gyro_rad: Option<Vec3>,
+    ) -> Result<(), KinematicsError> {
         if !(prev.suspension_valid && cur.suspension_valid) {
             return Err(KinematicsError::SuspensionInvalid);
         }
@@ -166,16 +214,36 @@ impl KinematicOdometry {
             }
         });
         let frames = wheel_frames_trusted(&self.geometry, &state);
-        let jacobians =
-            frames.map(|f| WheelJacobian::from_frames(&f, self.geometry.wheel_radius_m));
-        let points = frames.map(|f| f.contact_point_m);
-        let lsq = ContactLeastSquares::new(&points, &valid)?;
-        let step = lsq.solve(&contact_velocities(&jacobians, &increments, &drive));
+        let radius = self.geometry.wheel_radius_m;
+        let (step, jacobians, lsq, contact) = if self.config.contact_angles {
+            let sol = contact_step_frames(
+                &self.geometry,
+                &frames,
+                &increments,
+                &drive,
+                &valid,
+                gyro_rad,
+                &self.contact_rad,
+                &self.config.contact,
+            )?;
+            let jacobians = contact_jacobians(&frames, radius, &sol.contact_angles_rad);
+            let lsq = ContactLeastSquares::new(&jacobians.map(|j| j.contact_point_m), &valid)?;
+            (sol.body_step, jacobians, lsq, Some(sol.contact_angles_rad))
+        } else {
+            let jacobians = frames.map(|f| WheelJacobian::from_frames(&f, radius));
+            let points = frames.map(|f| f.contact_point_m);
+            let lsq = ContactLeastSquares::new(&points, &valid)?;
+            let step = lsq.solve(&contact_velocities(&jacobians, &increments, &drive));
+            (step, jacobians, lsq, None)
+        };
         if step.iter().any(|x| !x.is_finite()) {
             return Err(KinematicsError::NonFinite);
         }
         let q = self.step_covariance(&lsq, &jacobians, &frames, &drive, &valid);
         self.compose(&step, &q);
+        if let Some(angles) = contact {
+            self.contact_rad = angles;
+        }
         Ok(())
     }
 
