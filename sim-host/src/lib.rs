@@ -34,6 +34,7 @@ pub mod sensors;
 pub mod sil;
 pub mod sim;
 pub mod slip;
+pub mod slip_lumped;
 pub mod surface;
 pub mod terrain;
 pub mod terramechanics;

@@ -78,6 +78,13 @@ enum Command {
         /// has nothing to track.
         #[arg(long)]
         no_render: bool,
+        /// The terrain produces no slip (every axle moves at its wheel's rim speed).
+        #[arg(long)]
+        no_slip: bool,
+        /// Slip model of the truth: `lumped` (default) or `terramechanics` (per wheel,
+        /// docs/terramechanics.md).
+        #[arg(long)]
+        slip_model: Option<String>,
     },
     /// Record the HAL call tape of a scenario segment (with rendered stereo images) for replay
     /// on the host or the rover CPU (docs/timing.md).
@@ -201,6 +208,8 @@ struct RunRequest {
     json: bool,
     sim_counter: bool,
     no_render: bool,
+    no_slip: bool,
+    slip_model: Option<String>,
     quiet: bool,
 }
 
@@ -233,6 +242,8 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
             json: false,
             sim_counter: false,
             no_render: false,
+            no_slip: false,
+            slip_model: None,
             quiet: true,
         })?;
         results.push((label, dir, summary));
@@ -296,9 +307,22 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
         json,
         sim_counter,
         no_render,
+        no_slip,
+        slip_model,
         quiet,
     } = req;
-    let scenario = Scenario::load(&path)?;
+    let mut scenario = Scenario::load(&path)?;
+    if no_slip {
+        scenario.slip = false;
+    }
+    match slip_model.as_deref() {
+        None => {}
+        Some("lumped") => scenario.slip_model = sim_host::scenario::SlipModelKind::Lumped,
+        Some("terramechanics") => {
+            scenario.slip_model = sim_host::scenario::SlipModelKind::Terramechanics;
+        }
+        Some(other) => anyhow::bail!("unknown slip model {other:?} (lumped, terramechanics)"),
+    }
     let seed_used = seed.unwrap_or(scenario.seed);
     let renderer: Option<Box<dyn sim_host::camera::StereoRenderer>> = (!no_render).then(|| {
         let sun = &scenario.sensors.sun;
@@ -502,6 +526,8 @@ fn main() -> anyhow::Result<()> {
             json,
             sim_counter,
             no_render,
+            no_slip,
+            slip_model,
         }) => run_scenario(RunRequest {
             path: scenario,
             seed,
@@ -511,6 +537,8 @@ fn main() -> anyhow::Result<()> {
             json,
             sim_counter,
             no_render,
+            no_slip,
+            slip_model,
             quiet: false,
         })
         .map(|_| ()),

@@ -6,26 +6,58 @@ use crate::sensors::faults::FaultSpec;
 use crate::sensors::imu::ImuParams;
 use crate::sensors::sun::SunParams;
 use crate::slip::SoilParams;
+use crate::slip_lumped::LumpedSoil;
 use crate::terrain::TerrainSpec;
 use crate::terramechanics::Soil;
 use serde::Deserialize;
 use std::path::Path;
 
-/// Soil: a preset name (`"loose_sand"`: Wong's dry sand; `"firm_soil"`: Wong's sandy loam;
-/// `"mars_simulant"`: the DLR Mars soil simulant; see `docs/terramechanics.md`) or explicit
-/// parameters.
+/// Soil: a preset name (`"loose_sand"`, `"firm_soil"`, and for the terramechanics model also
+/// `"mars_simulant"`) or explicit parameters of either model. For the terramechanics model
+/// `loose_sand` is Wong's dry sand, `firm_soil` Wong's sandy loam and `mars_simulant` the DLR
+/// Mars soil simulant (`docs/terramechanics.md`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(untagged)]
 pub enum SoilSpec {
     /// A named preset.
     Preset(String),
-    /// Explicit parameters.
-    Params(SoilParams),
+    /// Explicit parameters of the lumped model.
+    Lumped(LumpedSoil),
+    /// Explicit Bekker and shear parameters (terramechanics model).
+    Bekker(SoilParams),
+}
+
+/// Which slip model the truth uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SlipModelKind {
+    /// One slip ratio and angle for the vehicle from the slopes ([`crate::slip_lumped`]).
+    #[default]
+    Lumped,
+    /// Per-wheel slip from loads and Bekker-Wong terramechanics ([`crate::slip`]).
+    Terramechanics,
 }
 
 impl SoilSpec {
-    /// The soil.
-    pub fn params(&self) -> anyhow::Result<Soil> {
+    /// The soil of the lumped model.
+    pub fn lumped(&self) -> anyhow::Result<LumpedSoil> {
+        match self {
+            SoilSpec::Preset(name) => match name.as_str() {
+                "loose_sand" => Ok(LumpedSoil::loose_sand()),
+                "firm_soil" => Ok(LumpedSoil::firm_soil()),
+                other => anyhow::bail!(
+                    "unknown soil preset {other:?} for the lumped model (loose_sand, firm_soil)"
+                ),
+            },
+            SoilSpec::Lumped(p) => Ok(*p),
+            SoilSpec::Bekker(_) => {
+                anyhow::bail!("Bekker soil parameters need slip_model = \"terramechanics\"")
+            }
+        }
+    }
+
+    /// The soil of the terramechanics model.
+    pub fn bekker(&self) -> anyhow::Result<Soil> {
         match self {
             SoilSpec::Preset(name) => match name.as_str() {
                 "loose_sand" => Ok(Soil::dry_sand()),
@@ -35,7 +67,10 @@ impl SoilSpec {
                     "unknown soil preset {other:?} (loose_sand, firm_soil, mars_simulant)"
                 ),
             },
-            SoilSpec::Params(p) => Ok(p.soil()),
+            SoilSpec::Bekker(p) => Ok(p.soil()),
+            SoilSpec::Lumped(_) => {
+                anyhow::bail!("lumped soil parameters need slip_model = \"lumped\"")
+            }
         }
     }
 }
@@ -113,6 +148,9 @@ pub struct Scenario {
     /// Slip model on/off.
     #[serde(default = "default_true")]
     pub slip: bool,
+    /// Which slip model the truth uses (default: lumped).
+    #[serde(default)]
+    pub slip_model: SlipModelKind,
     /// Terrain.
     pub terrain: TerrainSpec,
     /// Soil.
@@ -166,7 +204,10 @@ impl Scenario {
         for hz in [self.sensors.encoder_hz, self.sensors.sun_hz] {
             anyhow::ensure!(hz > 0 && 200 % hz == 0, "sensor rates must divide 200 Hz");
         }
-        self.soil.params()?;
+        match self.slip_model {
+            SlipModelKind::Lumped => self.soil.lumped().map(|_| ())?,
+            SlipModelKind::Terramechanics => self.soil.bekker().map(|_| ())?,
+        }
         Ok(())
     }
 

@@ -86,6 +86,9 @@ pub struct Record {
     pub cross_track_m: f64,
     /// Distance travelled, m.
     pub distance_m: f64,
+    /// Averaged wheel odometry distance, m (diagnostic baseline of V99 sec. 6: the mean drive
+    /// encoder increment times the nominal wheel radius, times the cosine of the true pitch).
+    pub wheel_average_m: f64,
     /// Flight estimates at this time (`None` before the flight software is aligned).
     pub est: Option<Estimates>,
 }
@@ -489,6 +492,7 @@ fn record<P: Platform>(w: &World, path: &[[f64; 2]], fsw: &Fsw<P>) -> Record {
         slip_angle_rad: t.slip.slip_angle_rad,
         cross_track_m: cross,
         distance_m: t.distance_m,
+        wheel_average_m: w.wheel_average_m,
         est: estimates(fsw),
     }
 }

@@ -12,11 +12,13 @@
 //! bogies at the integrated north, east and yaw: the holonomic constraint).
 
 use crate::scenario::Scenario;
+use crate::scenario::SlipModelKind;
 use crate::sensors::encoders::EncoderParams;
 use crate::sensors::faults::Faults;
 use crate::sensors::imu::ImuModel;
 use crate::sensors::sun::SunParams;
-use crate::slip::{SlipModel, WheelGround};
+use crate::slip::{SlipModel, SlipState, WheelGround, WheelSlip};
+use crate::slip_lumped::LumpedSlip;
 use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
 use crate::vehicle::contact::WheelContact;
@@ -104,6 +106,15 @@ pub struct Truth {
     pub suspension_rate_rad_s: [f64; 3],
 }
 
+/// The slip model of a run.
+#[derive(Debug, Clone)]
+pub enum Slip {
+    /// Vehicle-level slip from the slopes.
+    Lumped(LumpedSlip),
+    /// Per-wheel terramechanics.
+    Terramechanics(SlipModel),
+}
+
 /// The world.
 pub struct World {
     /// Terrain.
@@ -121,7 +132,7 @@ pub struct World {
     pub flight_command: Option<MobilityCommand>,
     steer_motor: MotorParams,
     drive_motor: MotorParams,
-    slip: SlipModel,
+    slip: Slip,
     imu: ImuModel,
     /// Encoder model.
     pub encoders: EncoderParams,
@@ -151,7 +162,15 @@ pub struct World {
     pub steps: u64,
     /// Newton iterations of the placement solver, summed over all steps (diagnostics).
     pub placement_iterations: u64,
+    /// Averaged wheel odometry, m: the mean increment of the six drive encoders (as read)
+    /// times the nominal wheel radius (0.10 m, published) times the cosine of the true pitch;
+    /// the pitch-compensated baseline of V99 sec. 6 (diagnostics, not seen by the flight
+    /// software).
+    pub wheel_average_m: f64,
 }
+
+/// Nominal wheel radius of the averaged wheel odometry, m (the published Rocky 8 figure).
+const NOMINAL_WHEEL_RADIUS_M: f64 = 0.10;
 
 impl World {
     /// Build the world of `scenario` for `seed`.
@@ -163,12 +182,19 @@ impl World {
             let n: f64 = StandardNormal.sample(&mut streams.geometry);
             sigma * n
         });
-        let slip = SlipModel::new(
-            scenario.soil.params()?,
-            geometry.wheel_radius_m(),
-            scenario.slip,
-            &mut streams.slip,
-        );
+        let slip = match scenario.slip_model {
+            SlipModelKind::Lumped => Slip::Lumped(LumpedSlip::new(
+                scenario.soil.lumped()?,
+                scenario.slip,
+                &mut streams.slip,
+            )),
+            SlipModelKind::Terramechanics => Slip::Terramechanics(SlipModel::new(
+                scenario.soil.bekker()?,
+                geometry.wheel_radius_m(),
+                scenario.slip,
+                &mut streams.slip,
+            )),
+        };
         let imu = ImuModel::new(scenario.sensors.imu, &mut streams.imu);
         let [start, next] = [scenario.waypoints[0], scenario.waypoints[1]];
         let yaw = (next[1] - start[1]).atan2(next[0] - start[0]);
@@ -226,6 +252,7 @@ impl World {
             sun_reading: SunReading::default(),
             steps: 0,
             placement_iterations: 0,
+            wheel_average_m: 0.0,
         };
         world.update_wheels();
         world.sample_imu(Vector3::zeros(), Vector3::zeros(), 0.0);
@@ -235,7 +262,7 @@ impl World {
     }
 
     /// The slip model (soil parameters after the per-seed draw).
-    pub fn slip_model(&self) -> &SlipModel {
+    pub fn slip_model(&self) -> &Slip {
         &self.slip
     }
 
@@ -300,13 +327,32 @@ impl World {
             rim_speed_m_s: r * self.truth.wheel_rate_rad_s[i],
         });
         let gravity_r = rot_inv * Vector3::z();
-        let (wheel_slip, slip) = self.slip.wheel_slips(
-            &self.geometry,
-            self.truth.suspension.rocker_rad,
-            &ground,
-            &gravity_r,
-        );
+        let (wheel_slip, slip) = match &mut self.slip {
+            Slip::Terramechanics(m) => m.wheel_slips(
+                &self.geometry,
+                self.truth.suspension.rocker_rad,
+                &ground,
+                &gravity_r,
+            ),
+            Slip::Lumped(m) => {
+                // Slopes along the motion and across the body, from gravity in R.
+                let forward: f64 = ground.iter().map(|g| g.rim_speed_m_s).sum();
+                let dir = if forward >= 0.0 { 1.0 } else { -1.0 };
+                let slope_along = (-gravity_r.x * dir).clamp(-1.0, 1.0).asin();
+                let slope_cross = gravity_r.y.clamp(-1.0, 1.0).asin();
+                let state = m.step(slope_along, slope_cross, dt, &mut self.streams.slip);
+                (lumped_wheels(&ground, &state), state)
+            }
+        };
         let ground_speed = wheel_slip.map(|w| w.ground_speed_m_s);
+        let slip_factor: [f64; WHEELS] = std::array::from_fn(|i| {
+            let rim = ground[i].rim_speed_m_s;
+            if rim.abs() > 1e-9 {
+                ground_speed[i] / rim
+            } else {
+                1.0
+            }
+        });
         let lateral = wheel_slip.map(|w| w.lateral_m_s);
         let s0 = self.truth.suspension;
         let twist = solve_rolling(
@@ -316,6 +362,7 @@ impl World {
             s0.bogie_rad,
             &contacts,
             &ground_speed,
+            &slip_factor,
             &lateral,
         );
         // Integrate the body pose and the suspension over the step.
@@ -345,7 +392,8 @@ impl World {
             &self.truth.steer_rad,
             &self.limits,
             &mut self.jacobian,
-            Some(self.truth.contact_angle_rad),
+            Some(&self.contacts),
+            true,
         );
         self.placement_iterations += u64::from(placed.iterations);
         self.contacts = placed.contacts;
@@ -426,6 +474,14 @@ impl World {
             j.drive_rate_rad_s[i] = e.drive_rate(t.wheel_rate_rad_s[i], rng);
             j.steer_angle_rad[i] = e.steer_angle(t.steer_rad[i], rng);
         }
+        let mean_increment = (0..WHEELS)
+            .map(|i| j.drive_angle_rad[i] - self.joints.drive_angle_rad[i])
+            .sum::<f64>()
+            / WHEELS as f64;
+        if self.steps > 0 {
+            self.wheel_average_m +=
+                mean_increment * NOMINAL_WHEEL_RADIUS_M * t.pose.pitch_rad.cos();
+        }
         j.rocker_rad = e.suspension_angle(t.suspension.rocker_rad, rng);
         j.bogie_rad = [
             e.suspension_angle(t.suspension.bogie_rad[0], rng),
@@ -443,6 +499,30 @@ impl World {
             sun_in_view: in_view,
         };
     }
+}
+
+/// Every wheel on the ground gets the vehicle's slip ratio and slip angle (the lumped model):
+/// the axle moves at `(1 - s)` times its rim speed (`1 - max(s, 0)` backwards) and sideways at
+/// `tan(alpha)` times that, towards the rover's right for a positive angle.
+fn lumped_wheels(ground: &[WheelGround; WHEELS], state: &SlipState) -> [WheelSlip; WHEELS] {
+    std::array::from_fn(|i| {
+        let g = &ground[i];
+        let rim = g.rim_speed_m_s;
+        let s = state.slip_ratio;
+        let speed = if rim >= 0.0 {
+            (1.0 - s) * rim
+        } else {
+            (1.0 - s.max(0.0)) * rim
+        };
+        WheelSlip {
+            load_n: 0.0,
+            slip_ratio: s,
+            slip_angle_rad: state.slip_angle_rad,
+            saturated: false,
+            ground_speed_m_s: speed,
+            lateral_m_s: speed.abs() * state.slip_angle_rad.tan() * g.spin.y.signum(),
+        }
+    })
 }
 
 /// Wrap an angle to `(-pi, pi]`.

@@ -29,6 +29,16 @@ pub struct AttitudeErrors {
     pub vo: Option<f64>,
 }
 
+/// Error of the distance travelled (path length of the estimate against the true horizontal
+/// path length), % of the true distance (V99 sec. 6).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct DistanceErrors {
+    /// Flight 3D kinematic odometry (with contact-angle estimation).
+    pub kin3d: Option<f64>,
+    /// Averaged wheel odometry, pitch-compensated (simulator-side baseline).
+    pub wheel_average: f64,
+}
+
 /// Cross-track error of the true path, m.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct CrossTrack {
@@ -88,6 +98,8 @@ pub struct Summary {
     pub final_error_m: PerEstimate,
     /// Final position error / distance x 100.
     pub error_pct: PerEstimate,
+    /// Distance-travelled error of the kinematic estimates, %.
+    pub distance_error_pct: DistanceErrors,
     /// Largest attitude error, deg.
     pub max_attitude_error_deg: AttitudeErrors,
     /// Cross-track error of the truth against the path.
@@ -175,6 +187,28 @@ fn per_estimate(f: impl Fn(Trajectory) -> Option<f64>) -> PerEstimate {
     }
 }
 
+/// Distance errors of the 3D kinematic odometry and of the averaged wheel odometry.
+fn distance_errors(run: &RunResult) -> DistanceErrors {
+    let truth = run.distance_m.max(1e-9);
+    let points: Vec<[f64; 3]> = run
+        .records
+        .iter()
+        .filter_map(|r| r.est.map(|e| e.kin3d.0))
+        .collect();
+    let kin3d = (points.len() > 1).then(|| {
+        let length: f64 = points
+            .windows(2)
+            .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+            .sum();
+        100.0 * (length - truth).abs() / truth
+    });
+    let wheel = run.records.last().map_or(0.0, |r| r.wheel_average_m);
+    DistanceErrors {
+        kin3d,
+        wheel_average: 100.0 * (wheel - truth).abs() / truth,
+    }
+}
+
 /// Build the summary of `run`.
 pub fn summarise(run: &RunResult) -> Summary {
     let n = run.records.len().max(1) as f64;
@@ -216,6 +250,7 @@ pub fn summarise(run: &RunResult) -> Summary {
         error_pct: per_estimate(|w| {
             final_error(run, w).map(|e| 100.0 * e / run.distance_m.max(1e-9))
         }),
+        distance_error_pct: distance_errors(run),
         max_attitude_error_deg: AttitudeErrors {
             ekf: max_attitude_error(run, Trajectory::Ekf),
             vo: max_attitude_error(run, Trajectory::Vo),

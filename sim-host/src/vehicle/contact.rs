@@ -22,7 +22,8 @@ use std::f64::consts::FRAC_PI_2;
 /// Contact of one wheel.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WheelContact {
-    /// Contact point in `W`, m.
+    /// Contact point in `W`, m: the ground point under the rim point of the contact (the rim
+    /// point itself when the wheel touches).
     pub point_w: Vector3<f64>,
     /// Contact angle in the wheel plane, rad (0 straight below the axle, positive ahead).
     pub angle_rad: f64,
@@ -246,27 +247,14 @@ fn contact_at(
     let (s, co) = phi.sin_cos();
     let radial = d * co + f * s;
     WheelContact {
-        point_w: c_w + radial * r,
+        // On the ground under the rim point (the rim point itself when touching).
+        point_w: c_w + radial * r - Vector3::z() * penetration_m,
         angle_rad: phi,
         normal_w: -radial,
         // Rolling forward moves the axle perpendicular to the radius, towards f at phi = 0.
         tangent_w: f * co - d * s,
         clearance_m: -penetration_m,
     }
-}
-
-/// Penetration at a fixed contact angle `phi` (the envelope of [`wheel_contact`] for small
-/// changes of `c_w`: its derivative with respect to the wheel's pose equals that of the
-/// maximum), m of height above the ground (negative: penetration).
-pub fn clearance_at_angle(
-    terrain: &dyn TerrainSurface,
-    c_w: &Vector3<f64>,
-    spin_w: &Vector3<f64>,
-    r: f64,
-    phi: f64,
-) -> f64 {
-    let (d, f) = plane_basis(spin_w);
-    -penetration(terrain, &rim_point(c_w, &d, &f, r, phi))
 }
 
 #[cfg(test)]

@@ -10,7 +10,7 @@
 //! in the least-squares sense, and the body is raised until no wheel penetrates the ground (the
 //! wheels that then float are off the ground, as on a real vehicle at its joint limits).
 
-use super::contact::{clearance_at_angle, wheel_contact, WheelContact};
+use super::contact::{wheel_contact, WheelContact};
 use super::geometry::{VehicleGeometry, WHEELS};
 use crate::surface::TerrainSurface;
 use nalgebra::{Rotation3, SMatrix, SVector, Vector3};
@@ -81,16 +81,18 @@ pub struct Placement {
     pub at_limit: bool,
 }
 
-type Unknowns = SVector<f64, 6>;
-
-/// Contact angles held fixed while the Jacobian is taken by finite differences (the envelope
-/// of the rim search: for small pose changes the derivative of the clearance equals the one at
-/// the fixed contact angle).
-type Angles = [f64; WHEELS];
+/// Unknowns `[z, roll, pitch, beta, rho1, rho2, dx, dy, dyaw]`: the last three correct the
+/// body's north, east and yaw (free only when the placement may move them, see
+/// [`place_cached`]).
+type Unknowns = SVector<f64, 9>;
+/// Clearances of the six wheels.
+type Residuals = SVector<f64, 6>;
 
 /// Residuals `e(u)`: the clearance of each wheel (negative: penetration). With `fixed`, the
-/// clearance at the given contact angles; otherwise the full rim search of
-/// [`wheel_contact`], which also fills `contacts` and `angles`.
+/// distance of each axle from the tangent plane at its contact of the last rim search (point
+/// and normal in `contacts`) less the radius: the linearisation Newton iterates on, exact at a
+/// step edge as at a smooth surface; otherwise the full rim search of [`wheel_contact`]
+/// (vertical clearance), which fills `contacts`.
 #[allow(clippy::too_many_arguments)]
 fn residuals(
     geometry: &dyn VehicleGeometry,
@@ -99,12 +101,11 @@ fn residuals(
     u: &Unknowns,
     steer_rad: &[f64; WHEELS],
     contacts: &mut [WheelContact; WHEELS],
-    angles: &mut Angles,
     fixed: bool,
-) -> Unknowns {
+) -> Residuals {
     let pose = BodyPose {
-        pos_m: [pose.pos_m[0], pose.pos_m[1], u[0]],
-        yaw_rad: pose.yaw_rad,
+        pos_m: [pose.pos_m[0] + u[6], pose.pos_m[1] + u[7], u[0]],
+        yaw_rad: pose.yaw_rad + u[8],
         roll_rad: u[1],
         pitch_rad: u[2],
     };
@@ -112,20 +113,19 @@ fn residuals(
     let p = Vector3::from(pose.pos_m);
     let Some(wheels) = geometry.wheels(u[3], [u[4], u[5]], steer_rad) else {
         // Not finite: a large residual pushes Newton back.
-        return Unknowns::repeat(1.0);
+        return Residuals::repeat(1.0);
     };
     let r = geometry.wheel_radius_m();
-    let mut e = Unknowns::zeros();
+    let mut e = Residuals::zeros();
     for i in 0..WHEELS {
         let c = p + rot * wheels[i].axle_m;
         let s = rot * wheels[i].spin_axis;
+        let k = &mut contacts[i];
         if fixed {
-            e[i] = clearance_at_angle(terrain, &c, &s, r, angles[i]);
+            e[i] = (c - k.point_w).dot(&k.normal_w) - r;
         } else {
-            let hint = angles[i].is_finite().then_some(angles[i]);
-            let k = wheel_contact(terrain, &c, &s, r, hint);
-            contacts[i] = k;
-            angles[i] = k.angle_rad;
+            let hint = k.angle_rad.is_finite().then_some(k.angle_rad);
+            *k = wheel_contact(terrain, &c, &s, r, hint);
             e[i] = k.clearance_m;
         }
     }
@@ -143,12 +143,18 @@ pub fn place(
     limits: &JointLimits,
 ) -> Placement {
     place_cached(
-        geometry, terrain, pose, guess, steer_rad, limits, &mut None, None,
+        geometry, terrain, pose, guess, steer_rad, limits, &mut None, None, false,
     )
 }
 
+/// Convergence tolerance of Newton on the tangent planes (largest distance), m.
+const TOLERANCE_M: f64 = 1e-9;
+/// Largest clearance of the confirming rim search that ends the placement, m (the rim search
+/// locates a smooth maximum to about 0.1 micrometre).
+const CONFIRM_M: f64 = 1e-6;
+
 /// Jacobian `d e / d u` kept between placements (chord method).
-pub type PlacementJacobian = SMatrix<f64, 6, 6>;
+pub type PlacementJacobian = SMatrix<f64, 6, 9>;
 
 fn no_contact() -> WheelContact {
     WheelContact {
@@ -164,8 +170,15 @@ fn no_contact() -> WheelContact {
 /// steps the configuration barely changes). The Jacobian is recomputed by finite differences
 /// (at fixed contact angles) when there is none or when an iteration reduces the residual by
 /// less than 4x; the solution is the same (to the 1e-9 m tolerance), only cheaper.
-/// `previous_angles` are the contact angles of the previous placement (followed by the rim
-/// search, see [`wheel_contact`]).
+/// `previous_contacts` are the contacts of the previous placement: Newton starts on their tangent
+/// planes, and the rim search follows their contact angles (see [`wheel_contact`]).
+///
+/// With `move_planar`, the correction may also move the body's north, east and yaw: each
+/// Newton step is the minimum-norm correction of all nine unknowns (metres and radians), the
+/// projection onto the contact constraints nearest to the integrated pose. A wheel that has
+/// rolled into a step face is then pushed back off the face by the overlap instead of being
+/// lifted by the much larger vertical penetration the face shows near a 90 deg contact angle.
+/// Without it (the initial placement), north, east and yaw are held.
 #[allow(clippy::too_many_arguments)]
 pub fn place_cached(
     geometry: &dyn VehicleGeometry,
@@ -175,20 +188,33 @@ pub fn place_cached(
     steer_rad: &[f64; WHEELS],
     limits: &JointLimits,
     cache: &mut Option<PlacementJacobian>,
-    previous_angles: Option<[f64; WHEELS]>,
+    previous_contacts: Option<&[WheelContact; WHEELS]>,
+    move_planar: bool,
 ) -> Placement {
-    let mut u = Unknowns::new(
+    let mut u = Unknowns::from_column_slice(&[
         pose.pos_m[2],
         pose.roll_rad,
         pose.pitch_rad,
         guess.rocker_rad,
         guess.bogie_rad[0],
         guess.bogie_rad[1],
-    );
-    let mut contacts = [no_contact(); WHEELS];
-    let mut angles = previous_angles.unwrap_or([f64::NAN; WHEELS]);
+        0.0,
+        0.0,
+        0.0,
+    ]);
+    let mut contacts = previous_contacts.copied().unwrap_or([no_contact(); WHEELS]);
     let mut iterations = 0;
-    let mut free = [true; 6];
+    let mut free = [
+        true,
+        true,
+        true,
+        true,
+        true,
+        true,
+        move_planar,
+        move_planar,
+        move_planar,
+    ];
     let lim = [
         f64::INFINITY,
         f64::INFINITY,
@@ -196,27 +222,28 @@ pub fn place_cached(
         limits.rocker_rad,
         limits.bogie_rad,
         limits.bogie_rad,
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::INFINITY,
     ];
     let h = 1e-7;
     let mut previous = f64::INFINITY;
-    let eval = |u: &Unknowns, contacts: &mut [WheelContact; WHEELS], angles: &mut Angles, fixed| {
-        residuals(
-            geometry, terrain, pose, u, steer_rad, contacts, angles, fixed,
-        )
+    let eval = |u: &Unknowns, contacts: &mut [WheelContact; WHEELS], fixed| {
+        residuals(geometry, terrain, pose, u, steer_rad, contacts, fixed)
     };
-    // Newton on the clearances at fixed contact angles (the envelope of the rim search), with a
+    // Newton on the distances to the contacts' tangent planes, with a
     // full rim search at the start and to confirm convergence: a contact that moves to another
     // part of the rim (a rock entering ahead of the axle) restarts the iterations there.
-    let mut fixed = previous_angles.is_some_and(|a| a.iter().all(|v| v.is_finite()));
+    let mut fixed = previous_contacts.is_some();
     for _ in 0..40 {
         iterations += 1;
-        let e = eval(&u, &mut contacts, &mut angles, fixed);
+        let e = eval(&u, &mut contacts, fixed);
         let size = e.amax();
-        if size < 1e-9 {
-            if fixed {
-                fixed = false;
-                continue;
-            }
+        if fixed && size < TOLERANCE_M {
+            fixed = false;
+            continue;
+        }
+        if !fixed && size < CONFIRM_M {
             break;
         }
         fixed = true;
@@ -226,12 +253,11 @@ pub fn place_cached(
             Some(j) if !stale => *j,
             _ => {
                 let mut j = PlacementJacobian::zeros();
-                let mut scratch = [no_contact(); WHEELS];
-                let e0 = eval(&u, &mut scratch, &mut angles, true);
-                for k in 0..6 {
+                let e0 = eval(&u, &mut contacts, true);
+                for k in 0..9 {
                     let mut up = u;
                     up[k] += h;
-                    let ep = eval(&up, &mut scratch, &mut angles, true);
+                    let ep = eval(&up, &mut contacts, true);
                     j.set_column(k, &((ep - e0) / h));
                 }
                 *cache = Some(j);
@@ -240,15 +266,16 @@ pub fn place_cached(
         };
         for (k, is_free) in free.iter().enumerate() {
             if !is_free {
-                jac.set_column(k, &Unknowns::zeros());
+                jac.set_column(k, &Residuals::zeros());
             }
         }
-        // Least squares on the free unknowns (Levenberg damping keeps it defined).
-        let jtj = jac.transpose() * jac + SMatrix::<f64, 6, 6>::identity() * 1e-12;
-        let Some(step) = jtj.cholesky().map(|c| c.solve(&(jac.transpose() * e))) else {
+        // Minimum-norm step over the free unknowns (the damping keeps it defined when a joint
+        // stop leaves fewer than six).
+        let jjt = jac * jac.transpose() + SMatrix::<f64, 6, 6>::identity() * 1e-12;
+        let Some(y) = jjt.cholesky().map(|c| c.solve(&e)) else {
             break;
         };
-        let mut step = step;
+        let mut step = jac.transpose() * y;
         // Limit the step so a bad start cannot throw the solution far away.
         let big = step.amax();
         if big > 0.2 {
@@ -262,7 +289,7 @@ pub fn place_cached(
             }
         }
     }
-    let mut e = eval(&u, &mut contacts, &mut angles, false);
+    let mut e = eval(&u, &mut contacts, false);
     let at_limit = free.iter().any(|f| !f);
     if at_limit {
         // Raise the body until no wheel penetrates (three passes: the contacts move a little).
@@ -271,7 +298,7 @@ pub fn place_cached(
             if lowest < 0.0 {
                 u[0] += lowest;
             }
-            e = eval(&u, &mut contacts, &mut angles, false);
+            e = eval(&u, &mut contacts, false);
         }
     }
     let mut clearance = [0.0; WHEELS];
@@ -280,8 +307,8 @@ pub fn place_cached(
     }
     Placement {
         pose: BodyPose {
-            pos_m: [pose.pos_m[0], pose.pos_m[1], u[0]],
-            yaw_rad: pose.yaw_rad,
+            pos_m: [pose.pos_m[0] + u[6], pose.pos_m[1] + u[7], u[0]],
+            yaw_rad: pose.yaw_rad + u[8],
             roll_rad: u[1],
             pitch_rad: u[2],
         },

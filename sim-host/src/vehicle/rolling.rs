@@ -22,13 +22,13 @@
 //! its axle upwards, which the suspension rates absorb and the body's horizontal progress
 //! reflects.
 
-use super::geometry::{TruthGeometry, WheelPose, WHEELS};
+use super::geometry::{on_bogie, side, TruthGeometry, WheelPose, WHEELS};
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 
 /// Clearance under which a wheel counts as touching the ground, m.
 pub const CONTACT_TOLERANCE_M: f64 = 0.002;
 /// Weight of the non-penetration rows relative to the rolling and lateral rows.
-pub const NORMAL_WEIGHT: f64 = 10.0;
+pub const NORMAL_WEIGHT: f64 = 1000.0;
 
 /// One wheel's contact as the rolling solve needs it, in `R`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -75,8 +75,10 @@ pub struct Twist {
 
 /// Solve the rolling constraints of all wheels on the ground for the body twist and the
 /// suspension rates. `wheels` are the wheel poses in `R` at `rocker_rad`, `bogie_rad`;
-/// `ground_speed[i]` is `(1 - s_i) r theta_dot_i` (m/s along the tangent) and `lateral[i]`
-/// the sideways slip velocity along the spin axis (m/s).
+/// `ground_speed[i]` is the wheel's rim speed `r theta_dot_i` after its slip (m/s along the
+/// tangent), `slip_factor[i]` the ratio of ground speed to rim speed (`1 - s_i` when driving;
+/// it scales the link-rotation term too), `lateral[i]` the sideways slip velocity along the
+/// spin axis (m/s) and `wheel_radius_m` the wheel radius.
 #[allow(clippy::too_many_arguments)]
 pub fn solve_rolling(
     geometry: &TruthGeometry,
@@ -85,8 +87,10 @@ pub fn solve_rolling(
     bogie_rad: [f64; 2],
     contacts: &[RollingContact; WHEELS],
     ground_speed: &[f64; WHEELS],
+    slip_factor: &[f64; WHEELS],
     lateral: &[f64; WHEELS],
 ) -> Twist {
+    let r = geometry.wheel_radius_m;
     let mut ata = SMatrix::<f64, 9, 9>::zeros();
     let mut atb = SVector::<f64, 9>::zeros();
     let mut touching = 0;
@@ -98,14 +102,28 @@ pub fn solve_rolling(
         touching += 1;
         let a = wheels[i].axle_m;
         let jac: Matrix3<f64> = geometry.axle_jacobian(i, rocker_rad, bogie_rad);
-        for (e, target, weight) in [
-            (c.normal, 0.0, NORMAL_WEIGHT),
-            (c.tangent, ground_speed[i], 1.0),
-            (c.spin, lateral[i], 1.0),
+        // Link rotation about the spin axis per unit of [w; q_dot], times k r.
+        let kr = slip_factor[i] * r;
+        let ys = c.spin.y;
+        let side_sign = if side(i) == 0 { 1.0 } else { -1.0 };
+        let link_w = c.spin * kr;
+        let mut link_q = [side_sign * ys * kr, 0.0, 0.0];
+        if on_bogie(i) {
+            link_q[1 + side(i)] = ys * kr;
+        }
+        for (e, target, weight, rolling) in [
+            (c.normal, 0.0, NORMAL_WEIGHT, false),
+            (c.tangent, ground_speed[i], 1.0, true),
+            (c.spin, lateral[i], 1.0, false),
         ] {
-            // e . (v + w x a + J q_dot) = e.v + (a x e).w + (J^T e).q_dot
-            let axe = a.cross(&e);
-            let jte = jac.transpose() * e;
+            // e . (v + w x a + J q_dot) = e.v + (a x e).w + (J^T e).q_dot, plus on the rolling
+            // row k r l . w_link.
+            let mut axe = a.cross(&e);
+            let mut jte = jac.transpose() * e;
+            if rolling {
+                axe += link_w;
+                jte += Vector3::from(link_q);
+            }
             let row = SVector::<f64, 9>::from_column_slice(&[
                 e.x, e.y, e.z, axe.x, axe.y, axe.z, jte.x, jte.y, jte.z,
             ]);
@@ -209,14 +227,14 @@ mod tests {
         let n = Vector3::new(-1.0, 0.0, -1.0).normalize();
         c[0] = RollingContact::new(true, n, w[0].spin_axis);
         assert!(c[0].tangent.z < 0.0 && c[0].tangent.x > 0.0);
-        let t = solve_rolling(&g, &w, 0.0, [0.0; 2], &c, &[0.1; 6], &[0.0; 6]);
+        let t = solve_rolling(&g, &w, 0.0, [0.0; 2], &c, &[0.1; 6], &[1.0; 6], &[0.0; 6]);
         assert!(t.v.x < 0.1 && t.v.x > 0.05, "{:?}", t);
         assert!(t.suspension_rad_s[1].abs() > 0.01, "{:?}", t);
         let mut air = c;
         for k in air.iter_mut().skip(2) {
             k.touching = false;
         }
-        let t = solve_rolling(&g, &w, 0.0, [0.0; 2], &air, &[0.1; 6], &[0.0; 6]);
+        let t = solve_rolling(&g, &w, 0.0, [0.0; 2], &air, &[0.1; 6], &[1.0; 6], &[0.0; 6]);
         assert_eq!(t.contacts, 2);
         assert!(t.v.norm() == 0.0);
     }
