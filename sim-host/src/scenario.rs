@@ -243,6 +243,10 @@ mod tests {
             "rough-kinematics",
             "slope-10-cross",
             "slope-20-cross",
+            "step-climb",
+            "rock-crawl",
+            "undulating",
+            "flat-firm",
         ] {
             assert!(names.iter().any(|n| n == required), "missing {required}");
         }

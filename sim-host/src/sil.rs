@@ -110,6 +110,20 @@ const BASE: Variant = Variant {
     terramechanics: false,
 };
 
+/// The kinematic cases: no slip and exact dimensions, so that only the difference between the
+/// flight kinematics and the truth kinematics is left.
+const KINEMATIC: Variant = Variant {
+    no_slip: true,
+    exact_dimensions: true,
+    ..BASE
+};
+
+/// The per-wheel terramechanics slip model.
+const TERRAMECHANICS: Variant = Variant {
+    terramechanics: true,
+    ..BASE
+};
+
 /// The measured result of one check.
 #[derive(Debug, Clone, Copy)]
 pub struct CheckResult {
@@ -396,11 +410,7 @@ pub const CASES: [Case; 13] = [
         id: "SIL-KIN-2",
         scenario: "rough-kinematics",
         no_slip_comp: false,
-        variant: Variant {
-            no_slip: true,
-            exact_dimensions: true,
-            terramechanics: false,
-        },
+        variant: KINEMATIC,
         title:
             "very rough terrain without slip, exact dimensions: flight 3D kinematics against the \
                 independent truth kinematics (issue 13)",
@@ -425,11 +435,7 @@ pub const CASES: [Case; 13] = [
         id: "SIL-KIN-3",
         scenario: "rock-crawl",
         no_slip_comp: false,
-        variant: Variant {
-            no_slip: true,
-            exact_dimensions: true,
-            terramechanics: false,
-        },
+        variant: KINEMATIC,
         title: "rock crawl without slip: planar 2D odometry against 3D kinematics (H04 Fig. 17)",
         checks: &[
             open(
@@ -452,11 +458,7 @@ pub const CASES: [Case; 13] = [
         id: "SIL-KIN-4",
         scenario: "undulating",
         no_slip_comp: false,
-        variant: Variant {
-            no_slip: true,
-            exact_dimensions: true,
-            terramechanics: false,
-        },
+        variant: KINEMATIC,
         title: "undulating ground without slip: flight 3D kinematics against averaged wheel \
                 odometry (V99 sec. 6)",
         checks: &[
@@ -504,11 +506,7 @@ pub const CASES: [Case; 13] = [
         id: "SIL-SLIP-1",
         scenario: "slope-10-cross",
         no_slip_comp: false,
-        variant: Variant {
-            no_slip: false,
-            exact_dimensions: false,
-            terramechanics: true,
-        },
+        variant: TERRAMECHANICS,
         title: "10 deg sand cross slope with per-wheel terramechanics slip (Wong's dry sand)",
         checks: &[
             goal(
@@ -531,11 +529,7 @@ pub const CASES: [Case; 13] = [
         id: "SIL-SLIP-2",
         scenario: "marsyard-25m",
         no_slip_comp: false,
-        variant: Variant {
-            no_slip: false,
-            exact_dimensions: false,
-            terramechanics: true,
-        },
+        variant: TERRAMECHANICS,
         title: "Mars Yard with per-wheel terramechanics slip (Wong's sandy loam)",
         checks: &[
             goal(

@@ -306,12 +306,12 @@ mod tests {
         m
     }
 
-    /// SIM-5: slip grows with the uphill slope; sand slips more than the firm soil; on a cross
+    /// SIM-16: slip grows with the uphill slope; sand slips more than the firm soil; on a cross
     /// slope the wheels slide downhill and the downhill wheels carry more load; the middle
     /// wheels, which carry most load, slip differently from the others; a wheel that is not
     /// turning does not slip; slip off gives the rim speed.
     #[test]
-    fn sim_5_per_wheel_slip() {
+    fn sim_16_per_wheel_slip() {
         let g = rocky8();
         let mut previous = -1.0;
         for deg in [0.0f64, 3.0, 6.0] {

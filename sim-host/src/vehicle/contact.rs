@@ -260,21 +260,8 @@ fn contact_at(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::terrain::{BaseShape, Terrain, TerrainSpec};
-
-    fn terrain(base: BaseShape) -> Terrain {
-        Terrain::new(
-            TerrainSpec {
-                base,
-                roughness_m: 0.0,
-                roughness_wavelength_m: 2.0,
-                rocks: None,
-                obstacles: Vec::new(),
-            },
-            0,
-            &[],
-        )
-    }
+    use crate::terrain::{BaseShape, Terrain};
+    use crate::vehicle::tests::terrain;
 
     /// Roll one wheel (spin axis east, moving north) without slip: each step moves the axle by
     /// `r dtheta` along the contact tangent, then lowers or raises it onto the ground (the
@@ -304,12 +291,12 @@ mod tests {
         (theta, c.x - x0, max_angle)
     }
 
-    /// SIM-11: a wheel of radius `r` meeting a vertical step of height `r` touches its edge at
+    /// SIM-14: a wheel of radius `r` meeting a vertical step of height `r` touches its edge at
     /// a contact angle of 90 deg and rolls over it through pi/2 rad (rim travel 1.57 r) while
     /// its axle advances `r` horizontally (within 3 %); on flat ground the rim travel equals
     /// the distance (within 0.1 %).
     #[test]
-    fn sim_11_wheel_climbs_a_step_of_one_radius() {
+    fn sim_14_wheel_climbs_a_step_of_one_radius() {
         let r = 0.1;
         let step = terrain(BaseShape::Step {
             x_m: 1.0,
@@ -332,11 +319,11 @@ mod tests {
         );
     }
 
-    /// SIM-11: on a plane the contact lies where the plane's normal through the axle meets it
+    /// SIM-14: on a plane the contact lies where the plane's normal through the axle meets it
     /// (contact angle = the slope along the wheel plane), and the clearance is measured along
     /// the vertical.
     #[test]
-    fn sim_11_contact_on_a_slope() {
+    fn sim_14_contact_on_a_slope() {
         let t = terrain(BaseShape::Plane {
             slope_deg: 20.0,
             downhill_azimuth_deg: 180.0,

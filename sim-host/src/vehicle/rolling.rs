@@ -163,11 +163,11 @@ mod tests {
         std::array::from_fn(|i| RollingContact::new(true, -Vector3::z(), wheels[i].spin_axis))
     }
 
-    /// SIM-12: on level ground, equal wheel speeds give a pure forward twist at the rim speed
+    /// SIM-15: on level ground, equal wheel speeds give a pure forward twist at the rim speed
     /// with no suspension motion; a turn in place (Ackermann-free: wheels tangent to circles
     /// about the centre) gives a pure yaw rate.
     #[test]
-    fn sim_12_level_ground_twists() {
+    fn sim_15_level_ground_twists() {
         let g = rocky8();
         let w = g.wheels(0.0, [0.0, 0.0], &[0.0; 6]).unwrap();
         let t = solve_rolling(
@@ -177,6 +177,7 @@ mod tests {
             [0.0; 2],
             &level_contacts(&w),
             &[0.1; 6],
+            &[1.0; 6],
             &[0.0; 6],
         );
         assert!((t.v - Vector3::new(0.1, 0.0, 0.0)).norm() < 1e-9, "{:?}", t);
@@ -211,16 +212,17 @@ mod tests {
             [0.0; 2],
             &level_contacts(&w),
             &speed,
+            &[1.0; 6],
             &[0.0; 6],
         );
         assert!((t.w.z - omega).abs() < 1e-9 && t.v.norm() < 1e-9, "{:?}", t);
     }
 
-    /// SIM-12: when the right front wheel climbs at 45 deg (its contact normal tilted back)
+    /// SIM-15: when the right front wheel climbs at 45 deg (its contact normal tilted back)
     /// while all wheels turn at the same rate, the right bogie turns, the body advances less
     /// than the rim speed, and fewer than three wheels on the ground give no motion.
     #[test]
-    fn sim_12_climbing_wheel_moves_the_bogie() {
+    fn sim_15_climbing_wheel_moves_the_bogie() {
         let g = rocky8();
         let w = g.wheels(0.0, [0.0, 0.0], &[0.0; 6]).unwrap();
         let mut c = level_contacts(&w);

@@ -5,7 +5,8 @@ use super::placement::{place, BodyPose, JointLimits, Suspension};
 use crate::surface::TerrainSurface;
 use crate::terrain::{BaseShape, Terrain, TerrainSpec};
 
-fn terrain(base: BaseShape) -> Terrain {
+/// A terrain of `base` alone (no roughness, rocks or obstacles).
+pub(crate) fn terrain(base: BaseShape) -> Terrain {
     Terrain::new(
         TerrainSpec {
             base,
@@ -213,35 +214,4 @@ fn sim_3_joint_stops_hold_and_wheels_lift() {
     let touching = p.clearance_m.iter().filter(|c| c.abs() < 1e-3).count();
     let lifted = p.clearance_m.iter().filter(|c| **c > 1e-3).count();
     assert!(touching >= 1 && lifted >= 1, "{:?}", p.clearance_m);
-}
-
-#[test]
-fn dbg_replace() {
-    let g = rocky8();
-    let t = terrain(BaseShape::Flat);
-    let p = place(
-        &g,
-        &t,
-        &start(-0.2),
-        &Suspension::default(),
-        &[0.0; 6],
-        &JointLimits::rocky8(),
-    );
-    eprintln!("first it {} clr {:?}", p.iterations, p.clearance_m);
-    for c in &p.contacts {
-        eprintln!("pt {:?} n {:?}", c.point_w, c.normal_w);
-    }
-    let mut pose = p.pose;
-    pose.pos_m[0] += 0.0005;
-    let q = super::placement::place_cached(
-        &g,
-        &t,
-        &pose,
-        &p.suspension,
-        &[0.0; 6],
-        &JointLimits::rocky8(),
-        &mut None,
-        Some(&p.contacts),
-    );
-    eprintln!("second it {} clr {:?}", q.iterations, q.clearance_m);
 }
