@@ -611,13 +611,13 @@ the table as `requirement (open)` (they do not fail the tests) until the flight 
 fixed:
 
 - **SIL-KIN-1, SIL-KIN-2** (3D kinematics at most 3 % with slip, 1 % without slip and with exact
-  dimensions on `rough-kinematics`): the flight odometry (H04 eq. 15) takes each contact straight
-  below its axle, so on 0.35 m bumps every wheel's centre path is mis-modelled. The flight
-  contact-angle estimator (V99 sec. 6, `fsw::kinematics::contact`) exists but is switched off:
-  in closed loop it was worse (see `docs/kinematics.md`).
-- **SIL-KIN-3** (`rock-crawl`, H04 Fig. 17: planar 2D at least 30 %, 3D at most 3 %): the boulders
-  give 2D errors of about 14 % and 3D errors of about 6 %; H04's 30 % came from a more extreme
-  kinematic simulation. The 3D figure has the same cause as SIL-KIN-1.
+  dimensions on `rough-kinematics`): the flight odometry now estimates each wheel's contact
+  angle (V99 sec. 6, `fsw::kinematics::contact`, angles relative to their mean) and halves the
+  error of eq. 15 with the contact under the axle, but on 0.35 m bumps it is still above 1 %
+  without slip; with slip the lumped slip model's scrubbing adds to it.
+- **SIL-KIN-3** (`rock-crawl`, H04 Fig. 17): the 3D kinematics meets its 3 %; planar 2D odometry
+  is about 14 % off, not the 30 % H04 saw: H04's figure came from a more extreme kinematic
+  simulation, and our boulders (0.5-1.5 wheel radii, flanks up to 45 deg) over 6 m are milder.
 - **SIL-KIN-5** (`step-climb`): climbing a vertical step of one wheel radius with the right wheels
   stalls: the truth model is kinematic (each wheel's slip comes from the slip model, not from a
   force balance), so a wheel pressed against a vertical face cannot be pushed up it by the others

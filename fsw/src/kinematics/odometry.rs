@@ -226,9 +226,35 @@ impl KinematicOdometry {
                 &self.contact_rad,
                 &self.config.contact,
             )?;
-            let jacobians = contact_jacobians(&frames, radius, &sol.contact_angles_rad);
+            // The common mode of the angles (all tangents tilted alike) is the direction of the
+            // body's motion in its own x-z plane, which the wheels barely observe (the same rim
+            // travels fit a body moving along x or climbing along a tilted x): with
+            // `ContactConfig::zero_mean` the angles are taken relative to their mean over the
+            // valid wheels, and the body step is the eq. 15 least squares along the resulting
+            // contact tangents.
+            let mut angles = sol.contact_angles_rad;
+            let (mut sum, mut n) = (0.0, 0.0);
+            for (a, v) in angles.iter().zip(valid.iter()) {
+                if *v {
+                    sum += a;
+                    n += 1.0;
+                }
+            }
+            let zero_mean = self.config.contact.zero_mean && n > 0.0;
+            if zero_mean {
+                let mean = sum / n;
+                for a in angles.iter_mut() {
+                    *a -= mean;
+                }
+            }
+            let jacobians = contact_jacobians(&frames, radius, &angles);
             let lsq = ContactLeastSquares::new(&jacobians.map(|j| j.contact_point_m), &valid)?;
-            (sol.body_step, jacobians, lsq, Some(sol.contact_angles_rad))
+            let step = if zero_mean {
+                lsq.solve(&contact_velocities(&jacobians, &increments, &drive))
+            } else {
+                sol.body_step
+            };
+            (step, jacobians, lsq, Some(angles))
         } else {
             let jacobians = frames.map(|f| WheelJacobian::from_frames(&f, radius));
             let points = frames.map(|f| f.contact_point_m);

@@ -104,26 +104,26 @@ pub fn solve_rolling(
         let jac: Matrix3<f64> = geometry.axle_jacobian(i, rocker_rad, bogie_rad);
         // Link rotation about the spin axis per unit of [w; q_dot], times k r.
         let kr = slip_factor[i] * r;
-        let ys = c.spin.y;
         let side_sign = if side(i) == 0 { 1.0 } else { -1.0 };
-        let link_w = c.spin * kr;
-        let mut link_q = [side_sign * ys * kr, 0.0, 0.0];
-        if on_bogie(i) {
-            link_q[1 + side(i)] = ys * kr;
-        }
-        for (e, target, weight, rolling) in [
-            (c.normal, 0.0, NORMAL_WEIGHT, false),
-            (c.tangent, ground_speed[i], 1.0, true),
-            (c.spin, lateral[i], 1.0, false),
-        ] {
-            // e . (v + w x a + J q_dot) = e.v + (a x e).w + (J^T e).q_dot, plus on the rolling
-            // row k r l . w_link.
-            let mut axe = a.cross(&e);
-            let mut jte = jac.transpose() * e;
-            if rolling {
-                axe += link_w;
-                jte += Vector3::from(link_q);
+        // Link rotation per unit of [w; q_dot] projected on `axis`, times `scale`.
+        let link = |axis: &Vector3<f64>, scale: f64| {
+            let ya = axis.y * scale;
+            let mut q = [side_sign * ya, 0.0, 0.0];
+            if on_bogie(i) {
+                q[1 + side(i)] = ya;
             }
+            (axis * scale, Vector3::from(q))
+        };
+        let none = (Vector3::zeros(), Vector3::zeros());
+        for (e, target, weight, (link_w, link_q)) in [
+            (c.normal, 0.0, NORMAL_WEIGHT, none),
+            (c.tangent, ground_speed[i], 1.0, link(&c.spin, kr)),
+            (c.spin, lateral[i], 1.0, link(&c.tangent, -r)),
+        ] {
+            // e . (v + w x a + J q_dot) = e.v + (a x e).w + (J^T e).q_dot, plus the link's
+            // rotation: k r l . w_link on the rolling row, -r t . w_link on the lateral row.
+            let axe = a.cross(&e) + link_w;
+            let jte = jac.transpose() * e + link_q;
             let row = SVector::<f64, 9>::from_column_slice(&[
                 e.x, e.y, e.z, axe.x, axe.y, axe.z, jte.x, jte.y, jte.z,
             ]);
