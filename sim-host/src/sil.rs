@@ -618,10 +618,12 @@ fixed:
 - **SIL-KIN-3** (`rock-crawl`, H04 Fig. 17): the 3D kinematics meets its 3 %; planar 2D odometry
   is about 14 % off, not the 30 % H04 saw: H04's figure came from a more extreme kinematic
   simulation, and our boulders (0.5-1.5 wheel radii, flanks up to 45 deg) over 6 m are milder.
-- **SIL-KIN-5** (`step-climb`): climbing a vertical step of one wheel radius with the right wheels
-  stalls: the truth model is kinematic (each wheel's slip comes from the slip model, not from a
-  force balance), so a wheel pressed against a vertical face cannot be pushed up it by the others
-  and the rolling solve turns the rover instead. A quasi-static force model of the climb is the
+- **SIL-KIN-5** (`step-climb`): the right front wheel now climbs the vertical step of one wheel
+  radius (a step face within 1 mm ahead of the rim becomes its rolling contact, and the
+  placement measures faces along their normal), but the right middle wheel then stalls at the
+  face: the truth model is kinematic, so when a wheel held by a face conflicts with the others
+  rolling on, the least squares shares the misfit as slip instead of a force balance deciding
+  which wheels spin and which one is pushed up. A quasi-static force model of the climb is the
   missing piece (simulator side).
 - SIL-SLIP-1/2 are goals: the per-wheel terramechanics model with Wong's soil tables (not the
   default) bogs down on the sand slope; see `docs/simulator.md`, section Slip.

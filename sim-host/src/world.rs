@@ -21,7 +21,7 @@ use crate::slip::{SlipModel, SlipState, WheelGround, WheelSlip};
 use crate::slip_lumped::LumpedSlip;
 use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
-use crate::vehicle::contact::WheelContact;
+use crate::vehicle::contact::{edge_contact_ahead, WheelContact, EDGE_PROBE_M};
 use crate::vehicle::geometry::{rocky8, TruthGeometry, VehicleGeometry, WheelPose, WHEELS};
 use crate::vehicle::motors::MotorParams;
 use crate::vehicle::placement::{
@@ -309,6 +309,28 @@ impl World {
         let pose0 = self.truth.pose;
         let rot = pose0.rot_w_from_r();
         let rot_inv = rot.inverse();
+        // A wheel on the ground whose rim is within the edge probe of a step face ahead rolls
+        // on the face (it climbs; the ground only holds it from below): the placement alone
+        // would push it back off the face every step and leave it pressed there.
+        let p0 = Vector3::from(pose0.pos_m);
+        for i in 0..WHEELS {
+            let rate = self.truth.wheel_rate_rad_s[i];
+            if rate == 0.0 {
+                continue;
+            }
+            let c = p0 + rot * wheels[i].axle_m;
+            let spin = rot * wheels[i].spin_axis;
+            let r_wheel = self.geometry.wheel_radius_m();
+            if let Some(k) = edge_contact_ahead(&self.terrain, &c, &spin, r_wheel, rate.signum()) {
+                if k.clearance_m < EDGE_PROBE_M
+                    && k.clearance_m < self.contacts[i].clearance_m + EDGE_PROBE_M
+                {
+                    self.contacts[i] = k;
+                    self.truth.clearance_m[i] =
+                        self.truth.clearance_m[i].min(k.clearance_m.max(0.0));
+                }
+            }
+        }
         let contacts: [RollingContact; WHEELS] = std::array::from_fn(|i| {
             RollingContact::new(
                 self.truth.clearance_m[i] < CONTACT_TOLERANCE_M,

@@ -145,6 +145,110 @@ fn parabolic(g: &dyn Fn(f64) -> f64, h: f64) -> (f64, f64) {
     best
 }
 
+/// The edge between neighbouring `samples` (contact angle, penetration) with the largest
+/// penetration on its high side: bisection on the ground height under the rim between two
+/// samples whose heights differ by more than [`EDGE_M`]. Returns `(phi, penetration)`.
+fn best_edge(
+    terrain: &dyn TerrainSurface,
+    c_w: &Vector3<f64>,
+    d: &Vector3<f64>,
+    f: &Vector3<f64>,
+    r: f64,
+    samples: &[(f64, f64)],
+) -> Option<(f64, f64)> {
+    let height = |phi: f64| {
+        let q = rim_point(c_w, d, f, r, phi);
+        terrain.height_m(q.x, q.y)
+    };
+    let mut best: Option<(f64, f64)> = None;
+    for pair in samples.windows(2) {
+        let (lo, hi) = (pair[0].0, pair[1].0);
+        let (h_lo, h_hi) = (height(lo), height(hi));
+        if (h_hi - h_lo).abs() <= EDGE_M {
+            continue;
+        }
+        let mid_height = 0.5 * (h_lo + h_hi);
+        let (mut a, mut b) = (lo, hi);
+        for _ in 0..EDGE_ITERATIONS {
+            let m = 0.5 * (a + b);
+            if (height(m) > mid_height) == (h_lo > mid_height) {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        let high_side = if h_hi > h_lo { b } else { a };
+        let v = penetration(terrain, &rim_point(c_w, d, f, r, high_side));
+        if best.is_none_or(|(_, bv)| v > bv) {
+            best = Some((high_side, v));
+        }
+    }
+    best
+}
+
+/// How far outside its rim [`edge_contact_ahead`] looks for a step face, m.
+pub const EDGE_PROBE_M: f64 = 1e-3;
+
+/// A second contact on a step edge or face ahead of the wheel (`direction` +1: at positive
+/// contact angles, -1: negative), when the terrain has edges: a wheel standing on the ground and
+/// pressed against a step face touches both, and the vertical clearance of [`wheel_contact`]
+/// does not see a face that the rim only touches. The rim is probed [`EDGE_PROBE_M`] outside
+/// its radius over the forward quarter; the edge where the probe enters the step gives the
+/// contact angle, and the clearance is the distance along that radius from the rim to the step
+/// (negative: overlap). The placement and the rolling solve follow this contact when it is the
+/// closer one (the wheel climbs the face; the ground only holds it from below and lets go as it
+/// rises). `None` when no step is within the probe.
+pub fn edge_contact_ahead(
+    terrain: &dyn TerrainSurface,
+    c_w: &Vector3<f64>,
+    spin_w: &Vector3<f64>,
+    r: f64,
+    direction: f64,
+) -> Option<WheelContact> {
+    if !terrain.has_edges() || direction == 0.0 {
+        return None;
+    }
+    let (d, f) = plane_basis(spin_w);
+    let probe = r + EDGE_PROBE_M;
+    let step = FRAC_PI_2 / 6.0;
+    let samples: [(f64, f64); 7] = std::array::from_fn(|k| {
+        let phi = direction.signum() * k as f64 * step;
+        (
+            phi,
+            penetration(terrain, &rim_point(c_w, &d, &f, probe, phi)),
+        )
+    });
+    let (phi, v) = best_edge(terrain, c_w, &d, &f, probe, &samples)?;
+    if v <= 0.0 {
+        return None;
+    }
+    // Along the radius at that angle, where the ray enters the step: the edge's distance from
+    // the axle, so the clearance is measured along the contact normal (a face shows no vertical
+    // clearance at all).
+    let (s, co) = phi.sin_cos();
+    let radial = d * co + f * s;
+    let inside = |rho: f64| penetration(terrain, &(c_w + radial * rho)) > 0.0;
+    let (mut a, mut b) = (0.5 * r, probe);
+    if inside(a) {
+        return None;
+    }
+    for _ in 0..EDGE_ITERATIONS {
+        let m = 0.5 * (a + b);
+        if inside(m) {
+            b = m;
+        } else {
+            a = m;
+        }
+    }
+    Some(WheelContact {
+        point_w: c_w + radial * b,
+        angle_rad: phi,
+        normal_w: -radial,
+        tangent_w: f * co - d * s,
+        clearance_m: b - r,
+    })
+}
+
 /// Contact of a wheel of radius `r` centred at `c_w` with spin axis `spin_w` (unit, `W`).
 /// `hint` is the contact angle of the previous step, rad: its neighbourhood is searched too,
 /// so a contact on an edge is followed from step to step.
@@ -172,32 +276,12 @@ pub fn wheel_contact(
     let coarse_best = best;
     // Edges: bisect on the ground height between neighbouring samples that differ a lot, and
     // evaluate the rim just on the high side.
-    let height = |phi: f64| {
-        let q = rim_point(c_w, &d, &f, r, phi);
-        terrain.height_m(q.x, q.y)
-    };
     let mut edge_best = (best_phi, best);
-    let edges = terrain.has_edges();
-    for pair in samples.windows(2).filter(|_| edges) {
-        let (lo, hi) = (pair[0].0, pair[1].0);
-        let (h_lo, h_hi) = (height(lo), height(hi));
-        if (h_hi - h_lo).abs() <= EDGE_M {
-            continue;
-        }
-        let mid_height = 0.5 * (h_lo + h_hi);
-        let (mut a, mut b) = (lo, hi);
-        for _ in 0..EDGE_ITERATIONS {
-            let m = 0.5 * (a + b);
-            if (height(m) > mid_height) == (h_lo > mid_height) {
-                a = m;
-            } else {
-                b = m;
+    if terrain.has_edges() {
+        if let Some(e) = best_edge(terrain, c_w, &d, &f, r, &samples) {
+            if e.1 > edge_best.1 {
+                edge_best = e;
             }
-        }
-        let high_side = if h_hi > h_lo { b } else { a };
-        let v = g(high_side);
-        if v > edge_best.1 {
-            edge_best = (high_side, v);
         }
     }
     let mut refine = |centre: f64, half: f64| {

@@ -10,7 +10,7 @@
 //! in the least-squares sense, and the body is raised until no wheel penetrates the ground (the
 //! wheels that then float are off the ground, as on a real vehicle at its joint limits).
 
-use super::contact::{wheel_contact, WheelContact};
+use super::contact::{edge_contact_ahead, wheel_contact, WheelContact};
 use super::geometry::{VehicleGeometry, WHEELS};
 use crate::surface::TerrainSurface;
 use nalgebra::{Rotation3, SMatrix, SVector, Vector3};
@@ -125,7 +125,17 @@ fn residuals(
             e[i] = (c - k.point_w).dot(&k.normal_w) - r;
         } else {
             let hint = k.angle_rad.is_finite().then_some(k.angle_rad);
-            *k = wheel_contact(terrain, &c, &s, r, hint);
+            let mut best = wheel_contact(terrain, &c, &s, r, hint);
+            // A step face or edge the rim touches, ahead or behind, measured along its normal:
+            // it holds the wheel when it is (about) as close as the ground.
+            for direction in [1.0, -1.0] {
+                if let Some(edge) = edge_contact_ahead(terrain, &c, &s, r, direction) {
+                    if edge.clearance_m < best.clearance_m + EDGE_PREFERENCE_M {
+                        best = edge;
+                    }
+                }
+            }
+            *k = best;
             e[i] = k.clearance_m;
         }
     }
@@ -146,6 +156,10 @@ pub fn place(
         geometry, terrain, pose, guess, steer_rad, limits, &mut None, None, false,
     )
 }
+
+/// A step edge is taken as a wheel's contact when its clearance is below the ground contact's
+/// plus this, m: at equal distance the edge is the one the wheel must climb.
+const EDGE_PREFERENCE_M: f64 = 1e-6;
 
 /// Convergence tolerance of Newton on the tangent planes (largest distance), m.
 const TOLERANCE_M: f64 = 1e-9;
