@@ -15,8 +15,9 @@
 //! axes through the axle centres (so the axle centre does not move with steering); a positive
 //! steering angle turns the wheel to the right (about `+z_R`). A positive rotation about `+y_R`
 //! lifts the points ahead of the pivot (`z` down). The angle conventions are those the joint
-//! encoders report; the test `sim_2_truth_geometry_matches_flight_convention` checks them
-//! against the flight model (a test may read it; the simulation never does).
+//! encoders report; the test `sim_2_truth_geometry_matches_flight_convention`
+//! (`sim-host/tests/truth_convention.rs`) checks them against the flight model (a test may read
+//! it; the simulation never does).
 
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
@@ -293,48 +294,6 @@ mod tests {
             ];
             for (k, col) in fd.iter().enumerate() {
                 assert!((j.column(k) - col).norm() < 1e-6, "wheel {i} column {k}");
-            }
-        }
-    }
-
-    /// SIM-2: the truth geometry reports joint angles in the flight software's convention:
-    /// at the same rocker, bogie and steering angles the axle centres and rolling directions of
-    /// the independent side-view model equal those of the flight D-H model (H04 eq. 12) to the
-    /// 4-digit rounding of Table 2. Only this test reads the flight geometry.
-    #[test]
-    fn sim_2_truth_geometry_matches_flight_convention() {
-        use fsw::kinematics::geometry::wheel_frames;
-        use fsw::kinematics::{SuspensionState, ROCKY8};
-        let g = rocky8();
-        for (beta, rho, steer) in [
-            (0.0, [0.0, 0.0], 0.0),
-            (0.2, [0.0, 0.0], 0.3),
-            (-0.15, [0.3, -0.4], -0.5),
-            (0.4, [-0.6, 0.5], 1.0),
-        ] {
-            let state = SuspensionState {
-                rocker_rad: beta,
-                bogie_rad: rho,
-                steer_rad: [steer; 6],
-            };
-            let frames = wheel_frames(&ROCKY8, &state).unwrap();
-            let ours = g.wheels(beta, rho, &[steer; 6]).unwrap();
-            for i in 0..WHEELS {
-                let f = &frames[i].contact;
-                let axle = Vector3::new(f.pos.x, f.pos.y, f.pos.z);
-                let x = f.x_axis();
-                let roll = Vector3::new(x.x, x.y, x.z);
-                assert!(
-                    (axle - ours[i].axle_m).norm() < 5e-4,
-                    "wheel {} at {beta} {rho:?}: {axle:?} vs {:?}",
-                    i + 1,
-                    ours[i].axle_m
-                );
-                assert!(
-                    (roll - ours[i].rolling_dir).norm() < 2e-3,
-                    "wheel {}",
-                    i + 1
-                );
             }
         }
     }
