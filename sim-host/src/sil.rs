@@ -193,9 +193,8 @@ const fn open(
     unit: &'static str,
 ) -> Check {
     Check {
-        required: false,
         open: true,
-        ..req(what, value, compare, threshold, unit)
+        ..goal(what, value, compare, threshold, unit)
     }
 }
 

@@ -50,7 +50,7 @@
 //! `|dtheta_i| < min_drive_increment_rad` keep their angle; angles are clamped to
 //! `+-max_angle_rad`.
 
-use super::forward::{contact_velocities, ContactLeastSquares};
+use super::forward::{contact_velocities, finite_joint_inputs, ContactLeastSquares};
 use super::geometry::{check_suspension, wheel_frames_trusted, RoverGeometry, WheelFrames};
 use super::jacobian::WheelJacobian;
 use super::{KinematicsError, SuspensionRates, SuspensionState};
@@ -214,22 +214,12 @@ pub(crate) fn contact_step_frames(
     {
         return Err(KinematicsError::NonFinite);
     }
-    let incs = [
-        increments.rocker_rad_s,
-        increments.bogie_rad_s[0],
-        increments.bogie_rad_s[1],
-    ];
-    let drive_ok = drive_increment_rad
-        .iter()
-        .zip(wheel_valid.iter())
-        .all(|(d, ok)| !*ok || d.is_finite());
     let gyro_ok = match gyro_rad {
         Some(g) => g.iter().all(|x| x.is_finite()),
         None => true,
     };
-    if !drive_ok
+    if !finite_joint_inputs(increments, drive_increment_rad, wheel_valid)
         || !gyro_ok
-        || incs.iter().any(|x| !x.is_finite())
         || previous_rad.iter().any(|x| !x.is_finite())
     {
         return Err(KinematicsError::NonFinite);

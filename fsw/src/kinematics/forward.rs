@@ -174,6 +174,25 @@ pub(crate) fn contact_velocities(
     b
 }
 
+/// True when the rocker and bogie rates (or increments) and the drive rates (or increments) of
+/// the valid wheels are finite: the input check of eq. 15 and of the contact-angle step.
+pub(crate) fn finite_joint_inputs(
+    rates: &SuspensionRates,
+    drive: &[f64; WHEEL_COUNT],
+    wheel_valid: &[bool; WHEEL_COUNT],
+) -> bool {
+    let suspension = [
+        rates.rocker_rad_s,
+        rates.bogie_rad_s[0],
+        rates.bogie_rad_s[1],
+    ];
+    let drive_ok = drive
+        .iter()
+        .zip(wheel_valid.iter())
+        .all(|(d, ok)| !*ok || d.is_finite());
+    drive_ok && suspension.iter().all(|r| r.is_finite())
+}
+
 /// Eq. 15 (H04): least-squares body rates `[x_dot y_dot z_dot roll pitch yaw]` (rover frame `R`,
 /// m/s and rad/s) from the suspension angles and rates and the six drive rates (rad/s). Rows of
 /// wheels with `wheel_valid[i] == false` are dropped. Errors: non-finite input, angles out of
@@ -193,16 +212,7 @@ pub fn forward_kinematics(
         }
     }
     check_suspension(geometry, &state)?;
-    let rate_inputs = [
-        rates.rocker_rad_s,
-        rates.bogie_rad_s[0],
-        rates.bogie_rad_s[1],
-    ];
-    let drive_ok = drive_rad_s
-        .iter()
-        .zip(wheel_valid.iter())
-        .all(|(d, ok)| !*ok || d.is_finite());
-    if !drive_ok || rate_inputs.iter().any(|r| !r.is_finite()) {
+    if !finite_joint_inputs(rates, drive_rad_s, wheel_valid) {
         return Err(KinematicsError::NonFinite);
     }
     let frames = wheel_frames_trusted(geometry, &state);
