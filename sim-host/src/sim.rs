@@ -110,6 +110,8 @@ pub struct Estimates {
     pub kin3d: ([f64; 3], [f64; 4]),
     /// Planar wheel odometry `[north, east, yaw]`.
     pub kin2d: [f64; 3],
+    /// Dead reckoning: wheel odometry with gyro attitude (position, attitude).
+    pub dr: ([f64; 3], [f64; 4]),
     /// Slip vector of the last RG2 cycle `[x m, y m, yaw rad]` (EKF minus kinematics).
     pub slip: [f64; 3],
     /// The gate accepted the last kinematic interval.
@@ -469,6 +471,10 @@ fn estimates<P: Platform>(fsw: &Fsw<P>) -> Option<Estimates> {
             quat_xyzw(&kin3d.q_nr),
         ),
         kin2d: nav.kin2d(),
+        dr: {
+            let d = nav.dead_reckoning();
+            ([d.p_n.x, d.p_n.y, d.p_n.z], quat_xyzw(&d.q_nr))
+        },
         slip: [slip.x_m, slip.y_m, slip.phi_rad],
         gate_accepted: nav.gate().accepted,
     })

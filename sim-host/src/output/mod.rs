@@ -1,4 +1,4 @@
-//! Output files of a run: `truth.tum`, `ekf.tum`, `vo.tum`, `kin3d.tum`, `kin2d.tum`,
+//! Output files of a run: `truth.tum`, `ekf.tum`, `vo.tum`, `kin3d.tum`, `kin2d.tum`, `dr.tum`,
 //! `vo_checks.csv`, `summary.json`, `report.html`.
 
 pub mod summary;

@@ -7,7 +7,7 @@ use super::tum::Trajectory;
 use crate::sim::RunResult;
 use serde::Serialize;
 
-/// Four flight estimates.
+/// Five flight estimates.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct PerEstimate {
     /// EKF.
@@ -18,6 +18,8 @@ pub struct PerEstimate {
     pub kin3d: Option<f64>,
     /// Planar kinematic odometry.
     pub kin2d: Option<f64>,
+    /// Dead reckoning (wheel odometry with gyro attitude, RB sec. 6).
+    pub dr: Option<f64>,
 }
 
 /// Attitude errors of the estimates that carry attitude.
@@ -184,6 +186,7 @@ fn per_estimate(f: impl Fn(Trajectory) -> Option<f64>) -> PerEstimate {
         vo: f(Trajectory::Vo),
         kin3d: f(Trajectory::Kin3d),
         kin2d: f(Trajectory::Kin2d),
+        dr: f(Trajectory::Dr),
     }
 }
 

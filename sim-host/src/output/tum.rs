@@ -19,15 +19,18 @@ pub enum Trajectory {
     Kin3d,
     /// Flight planar wheel odometry (z is the EKF's start height; roll and pitch zero).
     Kin2d,
+    /// Flight dead reckoning: wheel odometry with gyro attitude (RB's baseline).
+    Dr,
 }
 
 impl Trajectory {
-    /// The four flight estimates, in output order.
-    pub const ESTIMATES: [Trajectory; 4] = [
+    /// The five flight estimates, in output order.
+    pub const ESTIMATES: [Trajectory; 5] = [
         Trajectory::Ekf,
         Trajectory::Vo,
         Trajectory::Kin3d,
         Trajectory::Kin2d,
+        Trajectory::Dr,
     ];
 
     /// File stem and summary key.
@@ -38,6 +41,7 @@ impl Trajectory {
             Trajectory::Vo => "vo",
             Trajectory::Kin3d => "kin3d",
             Trajectory::Kin2d => "kin2d",
+            Trajectory::Dr => "dr",
         }
     }
 
@@ -50,6 +54,7 @@ impl Trajectory {
             Trajectory::Ekf => e.map(|e| (e.ekf_pos_m, e.ekf_quat_xyzw)),
             Trajectory::Vo => e.and_then(|e| e.vo),
             Trajectory::Kin3d => e.map(|e| e.kin3d),
+            Trajectory::Dr => e.map(|e| e.dr),
             Trajectory::Kin2d => e.map(|e| {
                 let (s, c) = (0.5 * e.kin2d[2]).sin_cos();
                 ([e.kin2d[0], e.kin2d[1], start_z_m], [0.0, 0.0, s, c])

@@ -1,0 +1,119 @@
+//! Diagnostic trajectories, kept beside the estimator for the ground and the simulator's
+//! comparisons; none of them feeds the EKF. One of them, the 3D kinematics, is also the
+//! navigation pose of a rover driving without slip compensation (H05 Fig. 9 baseline).
+//!
+//! | trajectory | translation | attitude |
+//! |---|---|---|
+//! | `kin2d` | planar wheel odometry | planar wheel odometry |
+//! | `kin3d` | rocker-bogie kinematics (eq. 15) | EKF attitude at each interval start |
+//! | `dr` | planar wheel odometry step in `R` | gyro integration from the aligned attitude, alignment bias (RB sec. 6 "dead reckoning") |
+//! | `vo` | VO relative poses chained | VO relative poses chained |
+
+use super::PoseEstimate;
+use crate::types::{Quat, RelativePose, Vec3};
+use rover_hal::ImuSample;
+
+/// Longest IMU sample gap the gyro dead reckoning integrates across, us; a longer gap (or time
+/// going backwards) skips that sample's rotation and counts it in [`Trajectories::dr_gaps`].
+const DR_MAX_GAP_US: u64 = 50_000;
+
+/// The diagnostic trajectories of the navigator (all in `N`, m, rotations `R` to `N`).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Trajectories {
+    /// 3D kinematics: eq. 15 translation rotated by the EKF attitude at each interval start.
+    pub kin3d: PoseEstimate,
+    /// Planar wheel odometry `[north m, east m, yaw rad]`.
+    pub kin2d: [f64; 3],
+    /// Dead reckoning: gyro attitude with the wheel odometry step (RB's comparison baseline).
+    pub dr: PoseEstimate,
+    /// Gyro bias removed by the dead reckoning (the alignment's estimate, held), rad/s.
+    dr_bias: Vec3,
+    /// Time of the last gyro sample integrated into `dr`, us.
+    dr_t_us: Option<u64>,
+    /// Samples whose rotation the dead reckoning could not integrate (gap, non-finite).
+    pub dr_gaps: u32,
+    /// VO-only: VO relative poses chained from the EKF pose of the first keyframe.
+    pub vo: Option<PoseEstimate>,
+}
+
+impl Trajectories {
+    /// All trajectories at `p0` (m, `N`) with heading `yaw0` (rad).
+    pub fn new(p0: Vec3, yaw0: f64) -> Self {
+        let q0 = Quat::from_euler_angles(0.0, 0.0, yaw0);
+        let pose = PoseEstimate { p_n: p0, q_nr: q0 };
+        Self {
+            kin3d: pose,
+            kin2d: [p0.x, p0.y, yaw0],
+            dr: pose,
+            dr_bias: Vec3::zeros(),
+            dr_t_us: None,
+            dr_gaps: 0,
+            vo: None,
+        }
+    }
+
+    /// Restart the attitude-carrying trajectories at the aligned pose (after the alignment at
+    /// rest): the 3D kinematics and the dead reckoning take the aligned attitude, the dead
+    /// reckoning keeps the aligned gyro bias `b_g` (rad/s) for the rest of the drive.
+    pub fn aligned(&mut self, pose: PoseEstimate, b_g: Vec3, t_us: u64) {
+        self.kin3d = pose;
+        self.dr = pose;
+        self.dr_bias = b_g;
+        self.dr_t_us = Some(t_us);
+        self.kin2d = [pose.p_n.x, pose.p_n.y, super::yaw_of(&pose.q_nr)];
+    }
+
+    /// RG1: one checked IMU sample rotates the dead-reckoning attitude (first order in the
+    /// sample period, bias-corrected with the aligned bias).
+    pub fn gyro(&mut self, s: &ImuSample) {
+        let previous = self.dr_t_us.replace(s.t_us);
+        let dt = previous.and_then(|p| s.t_us.checked_sub(p));
+        let w = Vec3::new(
+            s.gyro_rad_s[0] - self.dr_bias.x,
+            s.gyro_rad_s[1] - self.dr_bias.y,
+            s.gyro_rad_s[2] - self.dr_bias.z,
+        );
+        match dt {
+            Some(dt) if dt <= DR_MAX_GAP_US && w.iter().all(|v| v.is_finite()) => {
+                let step = Quat::from_scaled_axis(w * (dt as f64 * 1e-6));
+                self.dr.q_nr = crate::estimation::state::renormalize(&(self.dr.q_nr * step));
+            }
+            _ => self.dr_gaps = self.dr_gaps.saturating_add(1),
+        }
+    }
+
+    /// RG2: one planar wheel-odometry increment `[dx m, dy m, dyaw rad]` in `R` at the
+    /// previous reading: `kin2d` integrates it with its own heading, the dead reckoning rotates
+    /// the translation by its gyro attitude (mid-step yaw from the wheel increment).
+    pub fn wheel_step(&mut self, step: [f64; 3]) {
+        let [dx, dy, dyaw] = step;
+        if !(dx.is_finite() && dy.is_finite() && dyaw.is_finite()) {
+            return;
+        }
+        let yaw = self.kin2d[2] + 0.5 * dyaw;
+        let (s, c) = (libm::sin(yaw), libm::cos(yaw));
+        self.kin2d[0] += dx * c - dy * s;
+        self.kin2d[1] += dx * s + dy * c;
+        self.kin2d[2] = crate::guidance::wrap_pi(self.kin2d[2] + dyaw);
+        self.dr.p_n += self.dr.q_nr.transform_vector(&Vec3::new(dx, dy, 0.0));
+    }
+
+    /// RG2: the kinematic interval's translation (eq. 15, `R` at its start) rotated by the EKF
+    /// attitude `q0` of the start; the attitude becomes the EKF's current `q_now`.
+    pub fn kinematic_step(&mut self, q0: &Quat, rp: &RelativePose, q_now: &Quat) {
+        self.kin3d.p_n += q0.to_rotation_matrix() * rp.trans_0_1_m;
+        self.kin3d.q_nr = *q_now;
+    }
+
+    /// Background: a VO relative pose between two keyframes; `anchor` is the EKF pose of its
+    /// first keyframe, used when the VO-only trajectory starts (or restarts after an outage).
+    pub fn vo_step(&mut self, anchor: Option<PoseEstimate>, rp: &RelativePose) {
+        if self.vo.is_none() {
+            self.vo = anchor;
+        }
+        if let Some(v) = self.vo.as_mut() {
+            v.p_n += v.q_nr.transform_vector(&rp.trans_0_1_m);
+            v.q_nr = crate::estimation::state::renormalize(&(v.q_nr * rp.rot_0_1));
+        }
+    }
+}

@@ -1,0 +1,89 @@
+//! Guidance adapter (RG2): the navigation pose and slip vector into the path follower
+//! (eq. 47-49), speed limiting and inverse kinematics (eq. 16-25) to the motor command.
+
+use super::*;
+
+impl Navigator {
+    /// RG2, after [`Self::kinematic_cycle`]: guidance and inverse kinematics. Returns the motor
+    /// command, or `None` when the rover must be stopped (aligning, arrived, safed, a sensor
+    /// lost, or a guidance/kinematics failure).
+    pub fn guidance_cycle(&mut self) -> Option<MobilityCommand> {
+        self.command = VehicleCommand::default();
+        if self.mode != NavMode::Driving {
+            return None;
+        }
+        if self.frames_without_imu >= self.config.imu_timeout_frames
+            || self.cycles_without_joints >= self.config.joints_timeout_cycles
+        {
+            self.counters.sensor_holds = self.counters.sensor_holds.saturating_add(1);
+            return None;
+        }
+        let (ekf, guidance, joints) = match (
+            self.ekf_running.then_some(&self.ekf),
+            self.guidance.as_mut(),
+            &self.last_joints,
+        ) {
+            (Some(e), Some(g), Some(j)) => (e, g, *j),
+            _ => return None,
+        };
+        let (nav_pose, slip) = if self.config.slip_compensation {
+            let x = ekf.state();
+            (
+                PoseEstimate {
+                    p_n: x.p_n,
+                    q_nr: x.q_nr,
+                },
+                self.slip,
+            )
+        } else {
+            (self.traj.kin3d, SlipVector::default())
+        };
+        let pose = Pose2 {
+            x_m: nav_pose.p_n.x,
+            y_m: nav_pose.p_n.y,
+            phi_rad: yaw_of(&nav_pose.q_nr),
+        };
+        let out = match guidance.step(pose, slip) {
+            Ok(o) => o,
+            Err(_) => {
+                self.counters.command_errors = self.counters.command_errors.saturating_add(1);
+                return None;
+            }
+        };
+        self.last_guidance = Some(out);
+        if out.goal_reached {
+            self.mode = NavMode::Arrived;
+            return None;
+        }
+        let mut cmd = VehicleCommand {
+            x_dot_m_s: out.x_dot_m_s,
+            y_dot_m_s: out.y_dot_m_s,
+            yaw_rate_rad_s: out.phi_dot_rad_s,
+        };
+        let geometry = &self.config.geometry;
+        let state = SuspensionState::from_joints(&joints);
+        let limit = geometry.limits.wheel_rate_rad_s;
+        match max_speed_scale(geometry, &state, &cmd, limit) {
+            Ok(k) if k < 1.0 => {
+                cmd.x_dot_m_s *= k;
+                cmd.y_dot_m_s *= k;
+                cmd.yaw_rate_rad_s *= k;
+            }
+            Ok(_) => {}
+            Err(_) => {
+                self.counters.command_errors = self.counters.command_errors.saturating_add(1);
+                return None;
+            }
+        }
+        match inverse_kinematics(geometry, &state, &cmd) {
+            Ok(solution) => {
+                self.command = cmd;
+                Some(solution.command)
+            }
+            Err(_) => {
+                self.counters.command_errors = self.counters.command_errors.saturating_add(1);
+                None
+            }
+        }
+    }
+}

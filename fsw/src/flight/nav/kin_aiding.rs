@@ -1,0 +1,194 @@
+//! Kinematic aiding (RG2): the kinematic interval (eq. 15), its Mahalanobis gate (eq. 46) and
+//! the gate policy (fuse, hold, VO-loss fallback), the slip vector, zero-velocity updates.
+
+use super::*;
+
+impl Navigator {
+    /// Adds one IMU sample's bias-corrected rotation to the rotation since the last joint
+    /// reading. A sample that does not follow the previous one by 0 to 50 ms (a gap, time going
+    /// backwards) or is not finite drops the integral: the next joint step then has no gyro
+    /// input and the estimator uses the contacts alone.
+    pub(super) fn integrate_gyro(&mut self, s: &ImuSample) {
+        let previous = self.gyro_t_us.replace(s.t_us);
+        let dt_us = previous.and_then(|p| s.t_us.checked_sub(p));
+        let b_g = self.ekf.state().b_g;
+        let w = Vec3::new(
+            s.gyro_rad_s[0] - b_g.x,
+            s.gyro_rad_s[1] - b_g.y,
+            s.gyro_rad_s[2] - b_g.z,
+        );
+        match (self.gyro_since_joints, dt_us) {
+            (Some(q), Some(dt)) if dt <= 50_000 && w.iter().all(|v| v.is_finite()) => {
+                let step = crate::types::Quat::from_scaled_axis(w * (dt as f64 * 1e-6));
+                self.gyro_since_joints = Some(q * step);
+            }
+            _ => self.gyro_since_joints = None,
+        }
+    }
+
+    /// RG2: one checked joint reading (`None`: none this cycle). Kinematic interval, gate,
+    /// fusion or slip vector, dead reckoning; zero-velocity update when stopped.
+    pub fn kinematic_cycle(&mut self, joints: Option<&JointState>) {
+        let Some(j) = joints else {
+            self.cycles_without_joints = self.cycles_without_joints.saturating_add(1);
+            return;
+        };
+        self.cycles_without_joints = 0;
+        let previous = self.last_joints.replace(*j);
+        if let Some(prev) = previous {
+            if let Ok(step) = planar_pose_increment(&self.config.geometry, &prev, j) {
+                self.traj.wheel_step(step);
+            }
+        }
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        let t_us = ekf.time_us();
+        let Some(start) = self.interval else {
+            self.restart_interval(j, t_us);
+            return;
+        };
+        // Body rotation over the joint step from the gyro, in R at the step start.
+        let gyro = self
+            .gyro_since_joints
+            .replace(crate::types::Quat::identity())
+            .map(|q| crate::estimation::state::log_quat(&q));
+        let pose = self
+            .odometry
+            .update_with_gyro(j, gyro)
+            .and_then(|()| self.odometry.take());
+        let mut rp = match pose {
+            Ok(rp) => rp,
+            Err(KinematicsError::TimeNotAdvancing) => return,
+            Err(_) => {
+                self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
+                self.release(Some(start));
+                self.interval = None;
+                self.restart_interval(j, t_us);
+                return;
+            }
+        };
+        if start.t_us() == t_us {
+            // No IMU time has passed: keep the interval open.
+            return;
+        }
+        // The interval is labelled with the EKF times of its ends (the joint reading and the
+        // IMU sample of a frame carry the same time stamp on this rover).
+        rp.t0_us = start.t_us();
+        rp.t1_us = t_us;
+        if let Ok((q0, _)) = ekf.clone_pose(start) {
+            self.traj.kinematic_step(&q0, &rp, &ekf.state().q_nr);
+        }
+        self.cycles_since_vo = self.cycles_since_vo.saturating_add(1);
+        let vo_lost = self.cycles_since_vo > self.config.vo_timeout_cycles;
+        let holding = self.cycles_since_reject < self.config.slip_hold_cycles;
+        let result = if vo_lost {
+            self.counters.kin_ungated = self.counters.kin_ungated.saturating_add(1);
+            // Without VO the slip is unobservable: the kinematics is fused without the gate but
+            // with a slip allowance (`vo_loss_slip_fraction` of the step on x, y and yaw), so
+            // that slip is not learnt as a heading error; and since nothing else observes the
+            // vertical, with the ground vehicle's constraint that it does not move along its
+            // own z axis (1-sigma 20 % of the step plus 0.5 mm; H04 sec. 3 leaves it unobserved).
+            let step = rp.trans_0_1_m.norm();
+            let yaw = libm::fabs(crate::estimation::state::log_quat(&rp.rot_0_1).z);
+            let f = self.config.vo_loss_slip_fraction;
+            let sigma_z = 0.2 * step + 5.0e-4;
+            if let Some(o) = rp.observed.get_mut(5) {
+                *o = true;
+            }
+            rp.covariance[(5, 5)] += sigma_z * sigma_z;
+            rp.covariance[(3, 3)] += (f * step) * (f * step);
+            rp.covariance[(4, 4)] += (f * step) * (f * step);
+            rp.covariance[(2, 2)] += (f * yaw) * (f * yaw) + 1.0e-8;
+            self.recorder.relative_pose(&rp, false);
+            ekf.update_relative_pose(&rp, false)
+        } else if holding {
+            ekf.gate_relative_pose(&rp)
+        } else {
+            self.recorder.relative_pose(&rp, true);
+            ekf.update_relative_pose(&rp, true)
+        };
+        match result {
+            Ok(d) => {
+                self.counters.kin_tested = self.counters.kin_tested.saturating_add(1);
+                self.gate = GateStatus {
+                    d2: d.d2,
+                    accepted: d.accepted,
+                    dof: d.dof as u8,
+                };
+                if d.accepted {
+                    self.cycles_since_reject = self.cycles_since_reject.saturating_add(1);
+                } else {
+                    self.counters.kin_rejected = self.counters.kin_rejected.saturating_add(1);
+                    self.cycles_since_reject = 0;
+                }
+                if d.applied {
+                    self.slip = SlipVector::default();
+                } else {
+                    if d.accepted {
+                        self.counters.kin_held = self.counters.kin_held.saturating_add(1);
+                    }
+                    // Slip = EKF minus kinematics = -(measured - predicted), rover frame R0.
+                    self.slip = SlipVector {
+                        x_m: -d.residual[3],
+                        y_m: -d.residual[4],
+                        phi_rad: -d.residual[2],
+                    };
+                }
+            }
+            Err(e) => {
+                self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
+                self.ekf_error(e);
+            }
+        }
+        if self.is_stopped(j) {
+            if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
+                let result = ekf.update_zero_velocity(t_us);
+                self.recorder.zero_velocity(t_us);
+                match result {
+                    Ok(()) => self.counters.zupts = self.counters.zupts.saturating_add(1),
+                    Err(e) => self.ekf_error(e),
+                }
+            }
+        }
+        self.release(Some(start));
+        self.interval = None;
+        if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
+            let result = ekf.clone_at(t_us);
+            self.recorder.clone_at(t_us);
+            match result {
+                Ok(h) => self.interval = Some(h),
+                Err(_) => {
+                    self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
+                }
+            }
+        }
+    }
+
+    pub(super) fn restart_interval(&mut self, j: &JointState, t_us: u64) {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        if self.odometry.start(j).is_err() {
+            self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
+            return;
+        }
+        self.gyro_since_joints = Some(crate::types::Quat::identity());
+        let result = ekf.clone_at(t_us);
+        self.recorder.clone_at(t_us);
+        match result {
+            Ok(h) => self.interval = Some(h),
+            Err(_) => self.counters.kin_errors = self.counters.kin_errors.saturating_add(1),
+        }
+    }
+
+    pub(super) fn is_stopped(&self, j: &JointState) -> bool {
+        let commanded_zero = self.command.x_dot_m_s == 0.0
+            && self.command.y_dot_m_s == 0.0
+            && self.command.yaw_rate_rad_s == 0.0;
+        commanded_zero
+            && j.drive_rate_rad_s
+                .iter()
+                .all(|r| libm::fabs(*r) < self.config.stopped_wheel_rate_rad_s)
+    }
+}

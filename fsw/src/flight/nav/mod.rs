@@ -1,0 +1,526 @@
+//! # Navigation: estimator, odometry, visual odometry and guidance wired together
+//!
+//! [`Navigator`] owns the error-state EKF, the kinematic odometry, the visual odometry pipeline
+//! and the path follower, and runs them from the flight tasks (H04 sec. 4-5, H05 sec. IV-V):
+//!
+//! - **RG1** [`Navigator::propagate`]: while aligning, the IMU samples of the stationary rover
+//!   are averaged (tilt from the specific force, gyro bias from the rate); afterwards each checked
+//!   sample propagates the EKF (eq. 26-27).
+//! - **RG2** [`Navigator::kinematic_cycle`]: the joint reading extends the kinematic interval; the
+//!   interval's [`RelativePose`] (eq. 15, 5 dof) is tested by the Mahalanobis gate (eq. 46) and
+//!   fused when accepted; when rejected, the slip vector is EKF minus kinematics (minus the
+//!   residual). The interval starts at an EKF clone and ends at the current state.
+//!   [`Navigator::guidance_cycle`] then runs guidance (eq. 47-49) on the EKF pose and the slip
+//!   vector, and inverse kinematics (eq. 16-25) gives the motor command.
+//! - **RG3** [`Navigator::capture_started`]: the stereo capture time is cloned (eq. 41).
+//! - **background** [`Navigator::vo_start`], [`Navigator::vo_step`]: VO runs in the frames'
+//!   slack, work items up to a cost quantum per frame; its relative pose between the previous
+//!   and the current capture clone is applied at capture time by a replay of the recorded
+//!   filter operations ([`Navigator::replay_step`], 16 operations per frame), however many
+//!   frames later it ends.
+//! - **RG4** [`Navigator::sun`]: the sun-sensor heading update (RB sec. 5.1).
+//!
+//! Fallbacks: no IMU for [`NavConfig::imu_timeout_frames`] or no joints for
+//! [`NavConfig::joints_timeout_cycles`] stops the rover until the sensor returns; a VO failure
+//! restarts VO at the next capture, and when no VO update was fused for
+//! [`NavConfig::vo_timeout_cycles`] the kinematic intervals are fused without the gate (wheel
+//! and IMU odometry: slip is then unobservable and not compensated); an EKF covariance fault
+//! latches [`NavMode::Safed`] (rover stopped, ground action needed).
+//!
+//! With [`NavConfig::slip_compensation`] off the rover navigates as one without slip
+//! compensation (H05 Fig. 9, "without compensation"): guidance steers on the kinematic dead
+//! reckoning ([`Navigator::kin3d`]: wheel odometry with the IMU attitude) and the slip vector
+//! is zero. The EKF, gate and VO still run and are reported, so the downhill bias between the
+//! VO-aided estimate and the kinematic pose is visible.
+
+mod align;
+mod diagnostics;
+mod guidance_adapter;
+mod kin_aiding;
+mod vo_sched;
+
+use align::Alignment;
+use diagnostics::Trajectories;
+use vo_sched::StereoStage;
+
+use crate::estimation::{
+    CloneHandle, CoreCov, Ekf, EkfConfig, EstError, NominalState, Recorder, ReplayProgress,
+};
+use crate::guidance::{
+    Guidance, GuidanceCommand, GuidanceConfig, GuidanceError, Path, Point2, Pose2, SlipVector,
+};
+use crate::kinematics::{
+    inverse_kinematics, max_speed_scale, planar_pose_increment, wheel_contact_points,
+    KinematicOdometry, KinematicsError, OdometryConfig, RoverGeometry, SuspensionState,
+    VehicleCommand, ROCKY8,
+};
+use crate::types::{Quat, RelativePose, Vec3};
+use crate::vo::{Progress, VisualOdometry, VoConfig, VoError, VoOutput};
+use rover_hal::{
+    ImuSample, JointState, MobilityCommand, StereoCalibration, StereoFrame, SunReading,
+};
+
+/// Waypoint capacity of the path.
+pub const MAX_WAYPOINTS: usize = 32;
+/// Feature capacity of the visual odometry.
+pub const VO_FEATURES: usize = 150;
+
+/// Navigation settings (constant during a drive).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavConfig {
+    /// Rover geometry for kinematics (one source of truth: [`ROCKY8`]).
+    pub geometry: RoverGeometry,
+    /// Start position of the rover reference point in `N` (north, east, down), m, from the
+    /// ground's localisation.
+    pub initial_position_n_m: [f64; 3],
+    /// Start heading (yaw from north, positive towards east), rad.
+    pub initial_yaw_rad: f64,
+    /// 1-sigma uncertainty of the start heading, rad.
+    pub initial_yaw_sigma_rad: f64,
+    /// 1-sigma uncertainty of the start position, m per axis.
+    pub initial_position_sigma_m: f64,
+    /// IMU samples averaged at rest before the EKF starts (tilt and gyro bias alignment).
+    pub align_samples: u32,
+    /// EKF settings (IMU noise, gravity, sun direction in `N`).
+    pub ekf: EkfConfig,
+    /// Initial 1-sigma of the gyro bias after alignment, rad/s.
+    pub gyro_bias_sigma_rad_s: f64,
+    /// Initial 1-sigma of the accelerometer bias, m/s^2.
+    pub accel_bias_sigma_m_s2: f64,
+    /// Kinematic odometry noise model.
+    pub odometry: OdometryConfig,
+    /// Visual odometry tuning.
+    pub vo: VoConfig,
+    /// Run visual odometry on stereo captures.
+    pub vo_enabled: bool,
+    /// A VO relative pose whose Mahalanobis distance `d_m^2` exceeds this is counted in
+    /// [`NavCounters::vo_large_d2`] (it is still fused: VO rejects its own outliers and is the
+    /// measurement that corrects slip).
+    pub vo_warn_d2: f64,
+    /// Slip compensation: guidance on the EKF pose with the slip vector (on) or on kinematic
+    /// dead reckoning without slip vector (off); see the module doc.
+    pub slip_compensation: bool,
+    /// Slip hold: after a kinematic interval is rejected, the next intervals are not fused for
+    /// this many RG2 cycles even when the gate accepts them (a slipping rover produces some
+    /// intervals whose slip is within the noise; fusing them would teach the filter the crab
+    /// angle as a heading error). The slip vector still comes from their residual.
+    pub slip_hold_cycles: u32,
+    /// VO fallback: when no VO update was fused for this many RG2 cycles (VO failing, camera
+    /// lost, or VO off), kinematic intervals are fused without the gate, since without VO the
+    /// slip cannot be measured and the EKF would otherwise run on the IMU alone.
+    pub vo_timeout_cycles: u32,
+    /// Slip allowance of the VO-loss fallback, as a fraction of the kinematic step.
+    pub vo_loss_slip_fraction: f64,
+    /// Recorded filter operations replayed per background slice when a VO result is applied at
+    /// its capture time ([`Recorder::replay_step`]): bounds the slice (an IMU propagation is
+    /// about 10 000 instructions on the rover CPU, an update up to 95 000) while the replay
+    /// still catches up within a few dozen frames.
+    pub replay_ops_per_slice: u16,
+    /// Guidance settings.
+    pub guidance: GuidanceConfig,
+    /// Minor frames without a checked IMU sample after which the rover is stopped.
+    pub imu_timeout_frames: u32,
+    /// RG2 cycles without a checked joint reading after which the rover is stopped.
+    pub joints_timeout_cycles: u32,
+    /// Below this measured wheel rate (rad/s, every wheel) with a zero command the rover is
+    /// stopped and a zero-velocity update is applied.
+    pub stopped_wheel_rate_rad_s: f64,
+}
+
+impl NavConfig {
+    /// Defaults for Rocky 8 starting at `position` (m, `N`) with heading `yaw_rad`.
+    pub fn rocky8(position: [f64; 3], yaw_rad: f64) -> Self {
+        let xy = match wheel_contact_points(&ROCKY8, &SuspensionState::default()) {
+            Ok(p) => p.map(|c| [c.x, c.y]),
+            Err(_) => [[0.0; 2]; 6],
+        };
+        Self {
+            geometry: ROCKY8,
+            initial_position_n_m: position,
+            initial_yaw_rad: yaw_rad,
+            initial_yaw_sigma_rad: 0.01,
+            initial_position_sigma_m: 0.001,
+            align_samples: 400,
+            ekf: EkfConfig::default(),
+            gyro_bias_sigma_rad_s: 2.0e-4,
+            accel_bias_sigma_m_s2: 1.0e-2,
+            // Contact-angle kinematic estimation (V99 sec. 6) with the gyro rotation of each
+            // joint step and the angles taken relative to their mean: on the simulator's truth
+            // kinematics without slip it cuts the 3D odometry's distance error on `undulating`
+            // from 1.31 % (contacts under the axles) to 0.32 % (`docs/kinematics.md`).
+            odometry: OdometryConfig {
+                contact_angles: true,
+                ..OdometryConfig::default()
+            },
+            // The EKF prior predicts each feature within a few pixels over a 1 s step, so the
+            // tracking window is 8 px, not the stand-alone default of 24 px (9x less work), and
+            // the stereo search of a tracked feature covers +-8 px around the disparity of the
+            // predicted point instead of all 128 disparities.
+            vo: VoConfig {
+                search_radius_px: 8,
+                track_disparity_margin_px: 8,
+                ..VoConfig::default()
+            },
+            vo_enabled: true,
+            vo_warn_d2: 1.0e3,
+            slip_compensation: true,
+            slip_hold_cycles: 20,
+            vo_timeout_cycles: 60,
+            vo_loss_slip_fraction: 0.3,
+            replay_ops_per_slice: 16,
+            guidance: GuidanceConfig::rocky8(xy),
+            imu_timeout_frames: 20,
+            joints_timeout_cycles: 10,
+            stopped_wheel_rate_rad_s: 0.01,
+        }
+    }
+}
+
+/// What the navigator is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum NavMode {
+    /// Averaging IMU samples at rest; the rover is held stopped.
+    #[default]
+    Aligning,
+    /// Following the path.
+    Driving,
+    /// Goal reached; stopped, zero-velocity updates.
+    Arrived,
+    /// Estimator fault latched; stopped until the ground resets the flight software.
+    Safed,
+}
+
+/// A pose estimate in `N`: position (m) and attitude (`R` to `N`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseEstimate {
+    /// Position of the rover reference point, m, `N`.
+    pub p_n: Vec3,
+    /// Attitude, rotates `R` vectors into `N`.
+    pub q_nr: Quat,
+}
+
+impl PoseEstimate {
+    fn identity() -> Self {
+        Self {
+            p_n: Vec3::zeros(),
+            q_nr: Quat::identity(),
+        }
+    }
+}
+
+/// Counters of the navigation functions (telemetry and the simulator's summary).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub struct NavCounters {
+    /// Kinematic intervals tested by the gate (eq. 46).
+    pub kin_tested: u32,
+    /// Of those, rejected (slip detected).
+    pub kin_rejected: u32,
+    /// Accepted by the gate but not fused because slip was detected within the hold time.
+    pub kin_held: u32,
+    /// Fused without the gate because VO had not updated for the VO timeout (fallback).
+    pub kin_ungated: u32,
+    /// Kinematic intervals that could not be formed (odometry or clone error).
+    pub kin_errors: u32,
+    /// Zero-velocity updates applied.
+    pub zupts: u32,
+    /// VO updates that delivered a relative pose.
+    pub vo_updates: u32,
+    /// VO updates fused into the EKF.
+    pub vo_fused: u32,
+    /// Of those, applied at capture time and replayed to the present ([`Recorder`]).
+    pub vo_replayed: u32,
+    /// Of those, lost because the recording overflowed before the sliced replay caught up.
+    pub vo_replay_lost: u32,
+    /// VO attempts that failed (after the first keyframe).
+    pub vo_failures: u32,
+    /// VO relative poses fused with `d_m^2 > vo_warn_d2` (the estimate had drifted).
+    pub vo_large_d2: u32,
+    /// Captures skipped because VO was still busy or no clone slot was free.
+    pub captures_skipped: u32,
+    /// Sun updates applied.
+    pub sun_applied: u32,
+    /// Sun readings refused (gate, skew, not in view).
+    pub sun_refused: u32,
+    /// EKF errors on propagation or update (other than the ones counted above).
+    pub ekf_errors: u32,
+    /// Guidance or inverse-kinematics failures (the rover was stopped for that cycle).
+    pub command_errors: u32,
+    /// Cycles the rover was held stopped because a sensor was lost.
+    pub sensor_holds: u32,
+}
+
+/// Result of the last kinematic interval.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GateStatus {
+    /// Mahalanobis squared distance (eq. 46).
+    pub d2: f64,
+    /// Accepted (no slip detected).
+    pub accepted: bool,
+    /// Degrees of freedom.
+    pub dof: u8,
+}
+
+/// The navigation state of the flight software (about 110 KB, all inline).
+pub struct Navigator {
+    config: NavConfig,
+    mode: NavMode,
+    align: Alignment,
+    /// The filter; meaningful once `ekf_running` (alignment done). Kept inline and reset in
+    /// place so that starting it does not move 9 KB through the stack.
+    ekf: Ekf,
+    ekf_running: bool,
+    odometry: KinematicOdometry,
+    interval: Option<CloneHandle>,
+    last_joints: Option<JointState>,
+    /// Body rotation since the last joint reading the odometry took, integrated from the
+    /// bias-corrected gyro samples (the gyro input of the contact-angle estimator, V99 sec. 6);
+    /// `None` until an interval has started or after a gap in the IMU samples.
+    gyro_since_joints: Option<crate::types::Quat>,
+    /// Time stamp of the last IMU sample integrated into `gyro_since_joints`, us.
+    gyro_t_us: Option<u64>,
+    vo: Option<VisualOdometry<VO_FEATURES>>,
+    calibration: StereoCalibration,
+    key_clone: Option<CloneHandle>,
+    /// Filter operations since the pending capture, for the exact late VO update.
+    recorder: Recorder,
+    stereo: StereoStage,
+    guidance: Option<Guidance<MAX_WAYPOINTS>>,
+    slip: SlipVector,
+    gate: GateStatus,
+    command: VehicleCommand,
+    last_guidance: Option<GuidanceCommand>,
+    /// Diagnostic trajectories (kin2d, kin3d, dead reckoning, VO-only).
+    traj: Trajectories,
+    vo_quality: Option<VoOutput>,
+    counters: NavCounters,
+    frames_without_imu: u32,
+    cycles_without_joints: u32,
+    cycles_since_reject: u32,
+    cycles_since_vo: u32,
+}
+
+/// Why the navigator could not be built.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum NavError {
+    /// The path was refused (empty, non-finite, repeated waypoints, too many).
+    Path(crate::guidance::PathError),
+    /// The guidance settings were refused.
+    Guidance(GuidanceError),
+    /// A non-finite start pose or setting.
+    BadConfig,
+}
+
+/// Yaw (rad, from north towards east) of the attitude `q` (`R` to `N`).
+pub(super) fn yaw_of(q: &Quat) -> f64 {
+    let c = q.to_rotation_matrix().into_inner();
+    libm::atan2(c[(1, 0)], c[(0, 0)])
+}
+
+impl Navigator {
+    /// A navigator for `path` (waypoints north, east in `N`, m) with `config` and the camera
+    /// `calibration`. VO is not built here (see [`Self::start_vo`]).
+    pub fn new(
+        config: NavConfig,
+        path: &[Point2],
+        calibration: &StereoCalibration,
+    ) -> Result<Self, NavError> {
+        let start = [
+            config.initial_position_n_m[0],
+            config.initial_position_n_m[1],
+            config.initial_position_n_m[2],
+            config.initial_yaw_rad,
+            config.initial_yaw_sigma_rad,
+            config.initial_position_sigma_m,
+        ];
+        if start.iter().any(|v| !v.is_finite()) || config.align_samples == 0 {
+            return Err(NavError::BadConfig);
+        }
+        let path = Path::<MAX_WAYPOINTS>::new(path).map_err(NavError::Path)?;
+        let ekf = Ekf::new(
+            config.ekf,
+            NominalState::at_rest(0),
+            &(CoreCov::identity() * 1.0e-6),
+        )
+        .map_err(|_| NavError::BadConfig)?;
+        let guidance = Guidance::new(path, config.guidance).map_err(NavError::Guidance)?;
+        let counters = NavCounters::default();
+        let p0 = Vec3::from(config.initial_position_n_m);
+        Ok(Self {
+            config,
+            mode: NavMode::Aligning,
+            align: Alignment::default(),
+            ekf,
+            ekf_running: false,
+            odometry: KinematicOdometry::new(config.geometry, config.odometry),
+            interval: None,
+            last_joints: None,
+            gyro_since_joints: None,
+            gyro_t_us: None,
+            vo: None,
+            calibration: *calibration,
+            key_clone: None,
+            recorder: Recorder::new(),
+            stereo: StereoStage::Idle,
+            guidance: Some(guidance),
+            slip: SlipVector::default(),
+            gate: GateStatus::default(),
+            command: VehicleCommand::default(),
+            last_guidance: None,
+            traj: Trajectories::new(p0, config.initial_yaw_rad),
+            vo_quality: None,
+            counters,
+            frames_without_imu: 0,
+            cycles_without_joints: 0,
+            cycles_since_reject: u32::MAX,
+            cycles_since_vo: 0,
+        })
+    }
+
+    /// The current mode.
+    pub fn mode(&self) -> NavMode {
+        self.mode
+    }
+
+    /// The EKF, once aligned.
+    pub fn ekf(&self) -> Option<&Ekf> {
+        self.ekf_running.then_some(&self.ekf)
+    }
+
+    /// Counters.
+    pub fn counters(&self) -> &NavCounters {
+        &self.counters
+    }
+
+    /// The slip vector of the last RG2 cycle (EKF minus kinematics, rover frame; zero when the
+    /// gate accepted the kinematics).
+    pub fn slip(&self) -> SlipVector {
+        self.slip
+    }
+
+    /// The gate result of the last kinematic interval.
+    pub fn gate(&self) -> GateStatus {
+        self.gate
+    }
+
+    /// The rover command of the last RG2 cycle (rover frame, m/s and rad/s).
+    pub fn command(&self) -> VehicleCommand {
+        self.command
+    }
+
+    /// The last guidance output (carrot, cross-track projection, goal distance).
+    pub fn guidance_output(&self) -> Option<&GuidanceCommand> {
+        self.last_guidance.as_ref()
+    }
+
+    /// Dead reckoning with the rocker-bogie kinematic translation (eq. 15) rotated by the
+    /// estimator's attitude at each interval start ("3D kinematics"), `N`.
+    pub fn kin3d(&self) -> PoseEstimate {
+        self.traj.kin3d
+    }
+
+    /// Planar wheel odometry `[north m, east m, yaw rad]` with its own heading from the wheels,
+    /// ignoring the suspension and the terrain ("2D kinematics").
+    pub fn kin2d(&self) -> [f64; 3] {
+        self.traj.kin2d
+    }
+
+    /// Dead reckoning (RB sec. 6 baseline): the planar wheel-odometry step rotated by the gyro
+    /// attitude, integrated from the aligned attitude with the alignment's gyro bias; no
+    /// filter, no sun, no VO. `N`, m.
+    pub fn dead_reckoning(&self) -> PoseEstimate {
+        self.traj.dr
+    }
+
+    /// The VO-only pose: VO relative poses chained from the EKF pose of the first keyframe
+    /// after the start or after a VO outage; `None` before the first VO update.
+    pub fn vo_pose(&self) -> Option<PoseEstimate> {
+        self.traj.vo
+    }
+
+    /// The last VO output (quality figures), if any.
+    pub fn vo_output(&self) -> Option<&VoOutput> {
+        self.vo_quality.as_ref()
+    }
+
+    fn ekf_error(&mut self, e: EstError) {
+        self.counters.ekf_errors = self.counters.ekf_errors.saturating_add(1);
+        if matches!(e, EstError::Faulted | EstError::CovarianceUnhealthy { .. }) {
+            self.mode = NavMode::Safed;
+        }
+    }
+
+    /// RG1: one checked IMU sample (`None`: no new sample this frame).
+    pub fn propagate(&mut self, sample: Option<&ImuSample>) {
+        let Some(s) = sample else {
+            self.frames_without_imu = self.frames_without_imu.saturating_add(1);
+            return;
+        };
+        self.frames_without_imu = 0;
+        if self.mode == NavMode::Aligning {
+            self.accumulate_alignment(s);
+            return;
+        }
+        if self.ekf_running {
+            let result = self.ekf.propagate(s);
+            self.recorder.propagate(s);
+            if let Err(e) = result {
+                self.ekf_error(e);
+            }
+            if self.config.odometry.contact_angles {
+                self.integrate_gyro(s);
+            }
+            self.traj.gyro(s);
+        }
+    }
+
+    fn release(&mut self, handle: Option<CloneHandle>) {
+        if let (Some(h), Some(ekf)) = (handle, self.ekf_running.then_some(&mut self.ekf)) {
+            self.recorder.release(h.t_us());
+            if ekf.release(h).is_err() {
+                self.counters.ekf_errors = self.counters.ekf_errors.saturating_add(1);
+            }
+        }
+    }
+
+    /// RG4: one checked sun reading with the sun in view.
+    pub fn sun(&mut self, reading: &SunReading) {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        let result = ekf.update_sun(reading);
+        self.recorder.sun(reading);
+        match result {
+            Ok(u) if u.applied => {
+                self.counters.sun_applied = self.counters.sun_applied.saturating_add(1)
+            }
+            Ok(_) | Err(_) => {
+                self.counters.sun_refused = self.counters.sun_refused.saturating_add(1)
+            }
+        }
+    }
+
+    /// The EKF pose, or the configured start pose before alignment.
+    pub fn pose(&self) -> PoseEstimate {
+        match self.ekf_running.then_some(&self.ekf) {
+            Some(e) => PoseEstimate {
+                p_n: e.state().p_n,
+                q_nr: e.state().q_nr,
+            },
+            None => PoseEstimate {
+                p_n: Vec3::from(self.config.initial_position_n_m),
+                q_nr: Quat::from_euler_angles(0.0, 0.0, self.config.initial_yaw_rad),
+            },
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &NavConfig {
+        &self.config
+    }
+}
+
+impl Default for PoseEstimate {
+    fn default() -> Self {
+        Self::identity()
+    }
+}

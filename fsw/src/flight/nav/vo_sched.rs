@@ -1,0 +1,290 @@
+//! Visual odometry scheduling (RG3 and background): capture clones (eq. 41), the stereo state
+//! machine, VO work slices, and the fusion of VO relative poses at their capture time by a
+//! sliced replay of the recorded filter operations.
+
+use super::*;
+
+/// Where the stereo pipeline is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum StereoStage {
+    /// Nothing pending.
+    Idle,
+    /// Capture triggered at `t_us` and cloned; waiting for the camera.
+    Capturing { clone: Option<CloneHandle> },
+    /// VO running on the frame of `clone`; `items` work items done so far.
+    Processing {
+        clone: Option<CloneHandle>,
+        items: u32,
+    },
+}
+
+impl Navigator {
+    /// Build the visual odometry state (about 96 KB) in place, when [`NavConfig::vo_enabled`].
+    /// Call once after the navigator has reached its final location (a static on the rover
+    /// CPU), so that the large state is not copied through the stack by the constructors.
+    /// A calibration VO refuses leaves VO off (counted in [`NavCounters::vo_failures`]).
+    pub fn start_vo(&mut self) {
+        if !self.config.vo_enabled || self.vo.is_some() {
+            return;
+        }
+        match VisualOdometry::new(self.config.vo, &self.calibration) {
+            Ok(v) => self.vo = Some(v),
+            Err(_) => self.counters.vo_failures = self.counters.vo_failures.saturating_add(1),
+        }
+    }
+
+    /// True when VO is running on a frame (the camera frame must stay held).
+    pub fn vo_busy(&self) -> bool {
+        matches!(self.stereo, StereoStage::Processing { .. })
+    }
+
+    /// True while a VO result is being replayed from its capture time in background slices
+    /// ([`Self::replay_step`]); no capture is started meanwhile.
+    pub fn replaying(&self) -> bool {
+        self.recorder.replaying()
+    }
+
+    /// Background: replays up to [`NavConfig::replay_ops_per_slice`] recorded filter
+    /// operations of a late VO update; when the replay has caught up, the replayed filter
+    /// becomes the live one (bit-identical to a one-shot replay then). Returns the operations
+    /// budget used (0 when no replay is in progress).
+    pub fn replay_step(&mut self) -> u32 {
+        if !self.recorder.replaying() {
+            return 0;
+        }
+        if !self.ekf_running {
+            self.recorder.end();
+            return 1;
+        }
+        let ops = self.config.replay_ops_per_slice.max(1);
+        if self.recorder.replay_step(&mut self.ekf, usize::from(ops)) == ReplayProgress::Abandoned {
+            self.counters.vo_replay_lost = self.counters.vo_replay_lost.saturating_add(1);
+        }
+        u32::from(ops)
+    }
+
+    /// True when a capture may be triggered (VO enabled and idle, no replay in progress,
+    /// estimator running).
+    pub fn wants_capture(&self) -> bool {
+        self.vo.is_some()
+            && self.ekf_running
+            && matches!(self.stereo, StereoStage::Idle)
+            && !self.recorder.replaying()
+            && self.mode != NavMode::Safed
+    }
+
+    /// True when a capture is waiting for the camera.
+    pub fn capture_pending(&self) -> bool {
+        matches!(self.stereo, StereoStage::Capturing { .. })
+    }
+
+    /// RG3: a capture was triggered at `t_us` (camera time base = IMU time base). Clones the
+    /// state there (eq. 41). Returns false when the capture cannot be used (no clone slot).
+    pub fn capture_started(&mut self, t_us: u64) -> bool {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return false;
+        };
+        match ekf.clone_at(t_us) {
+            Ok(h) => {
+                self.stereo = StereoStage::Capturing { clone: Some(h) };
+                // Record from here on, so that the VO result can be applied at capture time
+                // exactly (replay) however late it arrives.
+                self.recorder.begin(&self.ekf);
+                true
+            }
+            Err(_) => {
+                self.counters.captures_skipped = self.counters.captures_skipped.saturating_add(1);
+                self.stereo = StereoStage::Idle;
+                false
+            }
+        }
+    }
+
+    /// RG3 found VO still busy: the capture is skipped (counted).
+    pub fn capture_skipped(&mut self) {
+        self.counters.captures_skipped = self.counters.captures_skipped.saturating_add(1);
+    }
+
+    /// The capture was lost (camera error or timeout): its clone is released.
+    pub fn capture_lost(&mut self) {
+        if !self.recorder.replaying() {
+            self.recorder.end();
+        }
+        let clone = match self.stereo {
+            StereoStage::Capturing { clone } | StereoStage::Processing { clone, .. } => clone,
+            StereoStage::Idle => None,
+        };
+        self.release(clone);
+        if let Some(vo) = self.vo.as_mut() {
+            if vo.is_busy() {
+                vo.reset();
+                let key = self.key_clone.take();
+                self.release(key);
+            }
+        }
+        self.stereo = StereoStage::Idle;
+    }
+
+    /// Background: the captured `frame` is ready. Starts VO with the EKF's motion between the
+    /// keyframe clone and this capture's clone as the prior. Returns false when VO did not
+    /// start (the caller releases the frame).
+    pub fn vo_start(&mut self, frame: &StereoFrame) -> bool {
+        let StereoStage::Capturing { clone } = self.stereo else {
+            return false;
+        };
+        let prior = self.ekf_relative_pose(self.key_clone, clone);
+        let Some(vo) = self.vo.as_mut() else {
+            self.capture_lost();
+            return false;
+        };
+        match vo.start(frame, prior.as_ref()) {
+            Ok(()) => {
+                self.stereo = StereoStage::Processing { clone, items: 0 };
+                true
+            }
+            Err(_) => {
+                self.counters.vo_failures = self.counters.vo_failures.saturating_add(1);
+                self.vo_keyframe_lost();
+                self.capture_lost();
+                false
+            }
+        }
+    }
+
+    pub(super) fn vo_keyframe_lost(&mut self) {
+        if let Some(vo) = self.vo.as_mut() {
+            vo.reset();
+        }
+        let key = self.key_clone.take();
+        self.release(key);
+    }
+
+    /// The EKF's relative pose between two clones (the VO motion prior), in the
+    /// [`RelativePose`] convention.
+    pub(super) fn ekf_relative_pose(
+        &self,
+        from: Option<CloneHandle>,
+        to: Option<CloneHandle>,
+    ) -> Option<RelativePose> {
+        let ekf = self.ekf_running.then_some(&self.ekf)?;
+        let (q0, p0) = ekf.clone_pose(from?).ok()?;
+        let (q1, p1) = ekf.clone_pose(to?).ok()?;
+        Some(RelativePose {
+            t0_us: from?.t_us(),
+            t1_us: to?.t_us(),
+            rot_0_1: q0.inverse() * q1,
+            trans_0_1_m: q0.inverse_transform_vector(&(p1 - p0)),
+            covariance: crate::types::Mat6::zeros(),
+            observed: [true; 6],
+        })
+    }
+
+    /// Background: advance VO on `frame` by at most `quantum` work items. Returns the items
+    /// used and whether the update finished (the caller then releases the frame).
+    pub fn vo_step(&mut self, frame: &StereoFrame, quantum: u32) -> (u32, bool) {
+        let StereoStage::Processing { clone, items } = self.stereo else {
+            return (0, true);
+        };
+        let Some(vo) = self.vo.as_mut() else {
+            self.capture_lost();
+            return (0, true);
+        };
+        match vo.step(frame, quantum) {
+            Progress::Working { items: total } => {
+                self.stereo = StereoStage::Processing {
+                    clone,
+                    items: total,
+                };
+                (total.saturating_sub(items), false)
+            }
+            Progress::Finished(result) => {
+                self.vo_finished(clone, result);
+                (quantum.max(1), true)
+            }
+        }
+    }
+
+    pub(super) fn vo_finished(
+        &mut self,
+        capture: Option<CloneHandle>,
+        result: Result<VoOutput, VoError>,
+    ) {
+        self.stereo = StereoStage::Idle;
+        let had_key = self.key_clone.is_some();
+        match result {
+            Ok(out) => {
+                self.vo_quality = Some(out);
+                match out.pose {
+                    Some(rp) => {
+                        self.counters.vo_updates = self.counters.vo_updates.saturating_add(1);
+                        self.vo_fuse(&rp);
+                    }
+                    // A new keyframe without a previous one (start, or after a VO outage): the
+                    // VO-only trajectory is anchored again at the EKF pose of this keyframe.
+                    None => self.traj.vo = None,
+                }
+            }
+            Err(_) => {
+                if had_key {
+                    self.counters.vo_failures = self.counters.vo_failures.saturating_add(1);
+                }
+            }
+        }
+        // Keep the clone of whichever frame VO now holds as its keyframe.
+        let key_t = self.vo.as_ref().and_then(|v| v.keyframe_time_us());
+        let old_key = self.key_clone.take();
+        let (keep, drop) = match (key_t, capture, old_key) {
+            (Some(t), Some(c), _) if c.t_us() == t => (Some(c), old_key),
+            (Some(t), _, Some(k)) if k.t_us() == t => (Some(k), capture),
+            _ => {
+                self.release(old_key);
+                (None, capture)
+            }
+        };
+        self.release(drop);
+        self.key_clone = keep;
+        if keep.is_none() {
+            if let Some(vo) = self.vo.as_mut() {
+                // A keyframe without its clone cannot be used: rebuild at the next capture.
+                vo.reset();
+            }
+        }
+    }
+
+    pub(super) fn vo_fuse(&mut self, rp: &RelativePose) {
+        let (Some(key), Some(ekf)) = (self.key_clone, self.ekf_running.then_some(&mut self.ekf))
+        else {
+            return;
+        };
+        // VO-only dead reckoning, started at the first keyframe's EKF pose.
+        let anchor = ekf
+            .clone_pose(key)
+            .ok()
+            .map(|(q, p)| PoseEstimate { p_n: p, q_nr: q });
+        self.traj.vo_step(anchor, rp);
+        // VO is fused without the gate: it rejects its own outliers (LMedS, H04 sec. 2) and it
+        // is the measurement that corrects an estimate slip has pulled away; a large distance
+        // is counted for the ground.
+        // Applied at capture time and replayed to now when the recording since the capture is
+        // complete (exact); otherwise at the capture clones (exact there, first order now). The
+        // replay runs in background slices (replay_step): the live filter takes the result when
+        // the replay has caught up.
+        let result = if self.recorder.active() {
+            self.counters.vo_replayed = self.counters.vo_replayed.saturating_add(1);
+            self.recorder.start_late(rp, false)
+        } else {
+            self.recorder.end();
+            ekf.update_relative_pose(rp, false)
+        };
+        match result {
+            Ok(d) => {
+                self.counters.vo_fused = self.counters.vo_fused.saturating_add(1);
+                if d.d2 > self.config.vo_warn_d2 {
+                    self.counters.vo_large_d2 = self.counters.vo_large_d2.saturating_add(1);
+                }
+                self.cycles_since_vo = 0;
+            }
+            Err(e) => self.ekf_error(e),
+        }
+    }
+}
