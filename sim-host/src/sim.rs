@@ -323,6 +323,34 @@ pub fn run_with<H: RunHooks>(
             let w = world.borrow();
             if w.steps % 10 == 0 {
                 records.push(record(&w, &scenario.waypoints, &fsw));
+                if let Ok(path) = std::env::var("SIM_GATE_DUMP") {
+                    use std::io::Write as _;
+                    let g = fsw.nav().gate();
+                    let c = fsw.nav().counters();
+                    if let Ok(mut f) = std::fs::OpenOptions::new()
+                        .create(true)
+                        .append(true)
+                        .open(path)
+                    {
+                        let sp = &w.truth.suspension;
+                        let _ = writeln!(
+                            f,
+                            "{} {} {} {} {:?} {:?} {:?}",
+                            w.truth.t_us,
+                            c.kin_tested,
+                            g.accepted,
+                            g.d2,
+                            g.residual,
+                            g.sigma,
+                            [
+                                sp.rocker_rad,
+                                sp.bogie_rad[0],
+                                sp.bogie_rad[1],
+                                w.truth.distance_m
+                            ]
+                        );
+                    }
+                }
             }
         }
         steps += 1;
@@ -411,10 +439,30 @@ pub fn flight_config(scenario: &Scenario, world: &World, slip_compensation: bool
     nav.gyro_bias_sigma_rad_s = imu.gyro_bias_rad_s.max(1e-6);
     nav.accel_bias_sigma_m_s2 = imu.accel_bias_m_s2.max(1e-4);
     let sun = scenario.sensors.sun.sun_w();
-    nav.ekf.sun_dir_n = Some(Vec3::new(sun.x, sun.y, sun.z));
+    let _ = sun; nav.ekf.sun = None; // TEMP until the site ephemeris lands
     nav.ekf.sun_sigma_rad = scenario.sensors.sun.noise_rad.max(1e-4);
     nav.guidance.cruise_speed_m_s = scenario.speed_m_s.min(nav.guidance.max_wheel_speed_m_s);
     nav.slip_compensation = slip_compensation;
+    if std::env::var("NO_CA").is_ok() {
+        nav.odometry.contact_angles = false;
+    }
+    if let Ok(v) = std::env::var("SUSP") {
+        nav.odometry.suspension_increment_noise_rad = v.parse().unwrap();
+    }
+    if std::env::var("OBS3").is_ok() {
+        nav.odometry.observed = [false, false, true, true, true, false];
+    }
+    if let Ok(v) = std::env::var("STEER") {
+        nav.odometry.steer_noise_rad = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("DRV") {
+        nav.odometry.drive_increment_noise_rad = v.parse().unwrap();
+    }
+    if let Ok(v) = std::env::var("RSCALE") { nav.odometry.radius_scale_sigma = v.parse().unwrap(); }
+    if let Ok(v) = std::env::var("ARTIC") { nav.odometry.articulation_fraction = v.parse().unwrap(); }
+    if let Ok(v) = std::env::var("DFRAC") {
+        nav.odometry.drive_fraction = v.parse().unwrap();
+    }
     config
 }
 

@@ -24,7 +24,6 @@ use core::fmt::Write;
 use fsw::flight::nav::Navigator;
 use fsw::flight::{Devices, FlightState, Fsw, FswConfig, FswError, Platform};
 use fsw::telemetry::{DeviceHealth, FrameStatus, RecordKind};
-use fsw::types::Vec3;
 use rover_replay::tape::{ByteSource, FrameMark, TapeReader, MAX_WAYPOINTS, NAV_PARAMS};
 use rover_replay::{Digest, Divergence, FrameOutputs, MobilityOutput, TapeError, TapeHandle};
 
@@ -64,36 +63,36 @@ impl FlightSetup {
     }
 }
 
-/// The scenario-dependent flight parameters a tape carries ([`rover_replay::TapeHeader::nav_params`]):
-/// IMU noise densities (4), initial bias sigmas (2), sun direction in `N` (3), sun in use (1),
-/// sun sigma (1), cruise speed (1), slip compensation (1), 3 spare zeros.
+/// The drive-dependent flight parameters a tape carries ([`rover_replay::TapeHeader::nav_params`]):
+/// the mission inputs on top of the nominal profile [`FswConfig::rocky8`]: sun ephemeris
+/// (latitude, declination, hour angle at clock zero, in use), cruise speed, slip compensation,
+/// VO enabled, 9 spare zeros. Nothing else of the configuration depends on the drive.
 pub fn nav_params(config: &FswConfig) -> [f64; NAV_PARAMS] {
     let n = &config.nav;
-    let noise = &n.ekf.imu_noise;
-    let sun = n.ekf.sun_dir_n.unwrap_or_default();
     let flag = |b: bool| if b { 1.0 } else { 0.0 };
-    [
-        noise.gyro_rad_s_sqrt_hz,
-        noise.gyro_bias_rad_s2_sqrt_hz,
-        noise.accel_m_s2_sqrt_hz,
-        noise.accel_bias_m_s3_sqrt_hz,
-        n.gyro_bias_sigma_rad_s,
-        n.accel_bias_sigma_m_s2,
-        sun.x,
-        sun.y,
-        sun.z,
-        flag(n.ekf.sun_dir_n.is_some()),
-        n.ekf.sun_sigma_rad,
+    let (lat, dec, h0) = match n.ekf.sun {
+        Some(e) => (e.latitude_rad, e.declination_rad, e.hour_angle_t0_rad),
+        None => (0.0, 0.0, 0.0),
+    };
+    let mut p = [0.0; NAV_PARAMS];
+    let values = [
+        lat,
+        dec,
+        h0,
+        flag(n.ekf.sun.is_some()),
         n.guidance.cruise_speed_m_s,
         flag(n.slip_compensation),
-        0.0,
-        0.0,
-        0.0,
-    ]
+        flag(n.vo_enabled),
+    ];
+    for (slot, v) in p.iter_mut().zip(values) {
+        *slot = v;
+    }
+    p
 }
 
-/// The flight configuration for `setup`: [`FswConfig::rocky8`] at the start pose with the
-/// parameters of [`nav_params`] (a still setup keeps the defaults).
+/// The flight configuration for `setup`: the nominal profile [`FswConfig::rocky8`] at the
+/// planned start pose with the mission inputs of [`nav_params`] (a still setup keeps the
+/// defaults).
 pub fn flight_config(setup: &FlightSetup) -> FswConfig {
     let [n, e, d, _, _, yaw] = setup.start_pose;
     let mut config = FswConfig::rocky8([n, e, d], yaw);
@@ -101,16 +100,14 @@ pub fn flight_config(setup: &FlightSetup) -> FswConfig {
         return config;
     };
     let nav = &mut config.nav;
-    nav.ekf.imu_noise.gyro_rad_s_sqrt_hz = p[0];
-    nav.ekf.imu_noise.gyro_bias_rad_s2_sqrt_hz = p[1];
-    nav.ekf.imu_noise.accel_m_s2_sqrt_hz = p[2];
-    nav.ekf.imu_noise.accel_bias_m_s3_sqrt_hz = p[3];
-    nav.gyro_bias_sigma_rad_s = p[4];
-    nav.accel_bias_sigma_m_s2 = p[5];
-    nav.ekf.sun_dir_n = (p[9] != 0.0).then(|| Vec3::new(p[6], p[7], p[8]));
-    nav.ekf.sun_sigma_rad = p[10];
-    nav.guidance.cruise_speed_m_s = p[11];
-    nav.slip_compensation = p[12] != 0.0;
+    nav.ekf.sun = (p[3] != 0.0).then_some(fsw::estimation::ephemeris::SunEphemeris {
+        latitude_rad: p[0],
+        declination_rad: p[1],
+        hour_angle_t0_rad: p[2],
+    });
+    nav.guidance.cruise_speed_m_s = p[4];
+    nav.slip_compensation = p[5] != 0.0;
+    nav.vo_enabled = p[6] != 0.0;
     config
 }
 

@@ -36,6 +36,7 @@
 //! map.
 
 mod clone;
+pub mod ephemeris;
 mod fusion;
 pub mod gate;
 mod propagate;
@@ -100,9 +101,9 @@ pub struct EkfConfig {
     /// Largest difference between a sun or ZUPT measurement's time stamp and the state time for
     /// the measurement to be applied at the current state, microseconds.
     pub max_measurement_skew_us: u64,
-    /// Direction towards the sun in `N` (unit vector), from the ephemeris; `None` disables the
-    /// sun-sensor update.
-    pub sun_dir_n: Option<Vec3>,
+    /// Sun ephemeris of the drive (the sun's direction in `N` at each reading's time);
+    /// `None` disables the sun-sensor update.
+    pub sun: Option<ephemeris::SunEphemeris>,
     /// Sun-sensor noise, rad, per axis perpendicular to the sun direction (RB sec. 5.1).
     pub sun_sigma_rad: f64,
     /// ZUPT pseudo-measurement noise, m/s per axis.
@@ -122,7 +123,7 @@ impl Default for EkfConfig {
             gravity_n_m_s2: Vec3::new(0.0, 0.0, MARS_GRAVITY_M_S2),
             max_imu_dt_us: 50_000,
             max_measurement_skew_us: 10_000,
-            sun_dir_n: None,
+            sun: None,
             sun_sigma_rad: 0.01,
             zupt_sigma_m_s: 0.001,
             zero_rate_sigma_rad_s: 1.0e-5,

@@ -1,7 +1,7 @@
 //! Sun-sensor absolute attitude update, processed sequentially (RB sec. 5, eq. 16-21).
 //!
 //! The sensor gives the unit vector towards the sun in the rover frame, `s_R`; the filter knows
-//! the sun's direction in `N`, `s_N` (ephemeris, [`super::EkfConfig::sun_dir_n`]). With the
+//! the sun's direction in `N`, `s_N` (ephemeris, [`super::EkfConfig::sun`], at the reading's time). With the
 //! rover-frame attitude error, `s_R = C' s_N = exp(-[dtheta]x) C_hat' s_N ~ s_hat + [s_hat]x
 //! dtheta`. Only the two directions perpendicular to `s_hat` carry information (a rotation about
 //! the sun line is unobservable), so the measurement is the projection of `s_R` on a tangent
@@ -38,7 +38,7 @@ impl Ekf {
         if self.fault {
             return Err(EstError::Faulted);
         }
-        let s_n = match self.config.sun_dir_n {
+        let s_n = match self.config.sun.and_then(|e| e.sun_dir_n(reading.t_us)) {
             Some(s) if reading.sun_in_view => s,
             _ => return Err(EstError::SunUnavailable),
         };

@@ -215,35 +215,71 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
     assert_eq!(s.stereo_frames, 0);
 }
 
-/// NAV-1: the navigator aligns on 400 samples at rest (tilt from gravity, heading from the
-/// ground), then commands forward motion along the path; losing the IMU stops the rover; an
-/// invalid path is refused with an error value.
+/// NAV-1: the navigator aligns on 400 samples at rest (tilt from gravity, heading from the sun
+/// sensor against the ephemeris), then commands forward motion along the path; losing the IMU
+/// stops the rover; an invalid path is refused with an error value. Without a sun reading the
+/// alignment waits `align_sun_wait_samples` more samples and takes the plan's heading.
 #[test]
 fn nav_1_alignment_drive_command_and_sensor_loss_hold() {
+    use crate::estimation::ephemeris::SunEphemeris;
     use nav::{NavConfig, NavError, NavMode, Navigator};
     let calib = StuckCamera.calibration();
-    let path = [[0.0, 0.0], [5.0, 0.0]];
-    // A 2 deg roll (right side down) seen by the accelerometer at rest.
+    let path = [[0.0, 0.0], [5.0 * 0.3_f64.cos(), 5.0 * 0.3_f64.sin()]];
+    // A 2 deg roll (right side down) seen by the accelerometer at rest; the rover actually
+    // faces 0.3 rad east of north while the plan says north.
     let roll = 2.0_f64.to_radians();
+    let true_yaw = 0.3;
     let g = 3.711;
-    let mut nav = match Navigator::new(NavConfig::rocky8([0.0; 3], 0.0), &path, &calib) {
+    let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+    let ephemeris = SunEphemeris::from_site(-14.6, 30.0, 10.5);
+    config.ekf.sun = Some(ephemeris);
+    let q_true = crate::types::Quat::from_euler_angles(roll, 0.0, true_yaw);
+    let imu = |k: u64| ImuSample {
+        t_us: 5_000 * (k + 1),
+        gyro_rad_s: [1e-4, 0.0, 0.0],
+        accel_m_s2: [0.0, -g * roll.sin(), -g * roll.cos()],
+        valid: true,
+    };
+    // Without the sun: the plan's heading after the wait.
+    let mut blind = match Navigator::new(config, &path, &calib) {
+        Ok(n) => n,
+        Err(e) => panic!("navigator refused: {e:?}"),
+    };
+    let wait = u64::from(config.align_samples + config.align_sun_wait_samples);
+    for k in 0..wait - 1 {
+        blind.propagate(Some(&imu(k)));
+    }
+    assert_eq!(blind.mode(), NavMode::Aligning, "waits for the sun");
+    blind.propagate(Some(&imu(wait)));
+    assert_eq!(blind.mode(), NavMode::Driving);
+    assert_eq!(blind.counters().heading_from_plan, 1);
+    assert!(blind.pose().q_nr.euler_angles().2.abs() < 1e-12);
+    let mut nav = match Navigator::new(config, &path, &calib) {
         Ok(n) => n,
         Err(e) => panic!("navigator refused: {e:?}"),
     };
     assert_eq!(nav.mode(), NavMode::Aligning);
     for k in 0..400u64 {
-        let s = ImuSample {
-            t_us: 5_000 * (k + 1),
-            gyro_rad_s: [1e-4, 0.0, 0.0],
-            accel_m_s2: [0.0, -g * roll.sin(), -g * roll.cos()],
-            valid: true,
-        };
-        nav.propagate(Some(&s));
+        if k == 3 {
+            let t_us = 5_000 * (k + 1);
+            let s_n = ephemeris.sun_dir_n(t_us).unwrap_or_default();
+            let s_r = q_true.inverse_transform_vector(&s_n);
+            nav.sun(&SunReading {
+                t_us,
+                sun_dir_rover: [s_r.x, s_r.y, s_r.z],
+                sun_in_view: true,
+            });
+        }
+        nav.propagate(Some(&imu(k)));
         assert!(nav.guidance_cycle().is_none(), "no motion while aligning");
     }
     assert_eq!(nav.mode(), NavMode::Driving);
+    assert_eq!(nav.counters().heading_from_sun, 1);
     let (r, p, y) = nav.pose().q_nr.euler_angles();
-    assert!((r - roll).abs() < 1e-9 && p.abs() < 1e-9 && y.abs() < 1e-12);
+    assert!((r - roll).abs() < 1e-9 && p.abs() < 1e-9, "{r} {p}");
+    assert!((y - true_yaw).abs() < 1e-9, "heading from the sun: {y}");
+    let heading_sigma = nav.ekf().map(|e| e.heading_sigma_rad()).unwrap_or(1.0);
+    assert!(heading_sigma < 0.03, "sun heading sigma {heading_sigma}");
     let bias = nav.ekf().map(|e| e.state().b_g.x);
     assert!(bias.is_some_and(|b| (b - 1e-4).abs() < 1e-12));
     nav.kinematic_cycle(Some(&joints(2_000_000)));

@@ -36,7 +36,9 @@ pub struct Scenario {
 impl Scenario {
     pub fn drive() -> Self {
         let config = EkfConfig {
-            sun_dir_n: Some(Vec3::new(0.5, -0.3, -0.8).normalize()),
+            sun: Some(crate::estimation::ephemeris::SunEphemeris::from_site(
+                -14.6, 30.0, 10.0,
+            )),
             sun_sigma_rad: 0.01,
             ..EkfConfig::default()
         };
@@ -181,7 +183,11 @@ pub fn run(sc: &Scenario, seed: u64) -> RunStats {
         }
         if let Some(period) = sc.sun_period_us {
             if every(t, period) && t > 0 {
-                let s_n = sc.config.sun_dir_n.expect("sun direction");
+                let s_n = sc
+                    .config
+                    .sun
+                    .and_then(|e| e.sun_dir_n(t))
+                    .expect("sun direction");
                 let n = gauss3(&mut rng) * sc.config.sun_sigma_rad;
                 let s_r = exp_quat(&n) * (rot(&truth.pose.q_nr).transpose() * s_n);
                 let reading = SunReading {

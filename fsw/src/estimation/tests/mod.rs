@@ -290,7 +290,9 @@ fn est_4_bad_inputs_are_refused() {
         sun_in_view: true,
     };
     assert_eq!(ekf.update_sun(&sun), Err(EstError::SunUnavailable));
-    ekf.config.sun_dir_n = Some(Vector3::x());
+    ekf.config.sun = Some(crate::estimation::ephemeris::SunEphemeris::from_site(
+        -90.0, 0.0, 12.0,
+    )); // s_N = north
     assert_eq!(
         ekf.update_sun(&SunReading {
             sun_in_view: false,

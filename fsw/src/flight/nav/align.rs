@@ -1,5 +1,13 @@
 //! Alignment at rest: tilt from the averaged specific force, gyro bias from the averaged rate
-//! (eq. 26 with v = 0), and the start of the EKF.
+//! (eq. 26 with v = 0), heading from the sun sensor (RB sec. 5.1: the sun's direction in the
+//! levelled rover frame against its ephemeris direction in `N`), and the start of the EKF with
+//! the covariance of those estimates.
+//!
+//! The alignment ends when [`NavConfig::align_samples`] IMU samples are averaged and at least
+//! one sun reading was taken. Without a sun reading for [`NavConfig::align_sun_wait_samples`]
+//! more samples (sun out of view, sensor failed, no ephemeris) the heading of the plan
+//! ([`NavConfig::initial_yaw_rad`], 1-sigma [`NavConfig::initial_yaw_sigma_rad`]) is used and
+//! [`NavCounters::heading_from_plan`] counts it.
 
 use super::*;
 
@@ -9,6 +17,57 @@ pub(super) struct Alignment {
     count: u32,
     gyro: [f64; 3],
     accel: [f64; 3],
+    /// Sum of the unit sun vectors read in `R` during the alignment.
+    sun: [f64; 3],
+    /// Sun readings summed.
+    sun_count: u32,
+    /// Time of the last sun reading summed, us (the ephemeris is evaluated there).
+    sun_t_us: u64,
+}
+
+impl Alignment {
+    /// Adds one sun reading in `R` (unit vector, finite; others are ignored).
+    pub(super) fn add_sun(&mut self, reading: &SunReading) {
+        let s = reading.sun_dir_rover;
+        let norm = libm::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+        if !reading.sun_in_view || !(libm::fabs(norm - 1.0) < 0.01) {
+            return;
+        }
+        for (acc, v) in self.sun.iter_mut().zip(s.iter()) {
+            *acc += v;
+        }
+        self.sun_count = self.sun_count.saturating_add(1);
+        self.sun_t_us = reading.t_us;
+    }
+}
+
+/// Heading (rad) and its 1-sigma (rad) from the averaged sun vector `s_r` (`R`), the tilt
+/// `(roll, pitch)` with 1-sigma `tilt_sigma` (rad) and the ephemeris direction `s_n`: with
+/// `v = R_y(pitch) R_x(roll) s_R` the sun in the levelled frame, `yaw = az(s_N) - az(v)`,
+/// `az(u) = atan2(u_y, u_x)`; variance `(sigma_sun^2 / n) / cos^2(el) + sigma_tilt^2 tan^2(el)`
+/// for a sun at elevation `el`. `None` when the sun is within 5 deg of the zenith (no azimuth).
+fn sun_heading(
+    s_r: Vec3,
+    roll: f64,
+    pitch: f64,
+    tilt_sigma: f64,
+    s_n: Vec3,
+    sun_sigma_rad: f64,
+    n: u32,
+) -> Option<(f64, f64)> {
+    let v = Quat::from_euler_angles(roll, pitch, 0.0) * s_r.normalize();
+    let horizontal = libm::sqrt(v.x * v.x + v.y * v.y);
+    let horizontal_n = libm::sqrt(s_n.x * s_n.x + s_n.y * s_n.y);
+    let min = libm::sin(5.0_f64.to_radians());
+    if !(horizontal > min && horizontal_n > min) {
+        return None;
+    }
+    let yaw = crate::guidance::wrap_pi(libm::atan2(s_n.y, s_n.x) - libm::atan2(v.y, v.x));
+    let tan_el = libm::fabs(v.z) / horizontal;
+    let var = sun_sigma_rad * sun_sigma_rad / f64::from(n.max(1)) / (horizontal * horizontal)
+        + tilt_sigma * tilt_sigma * tan_el * tan_el;
+    let sigma = libm::sqrt(var).max(1.0e-3);
+    (yaw.is_finite() && sigma.is_finite()).then_some((yaw, sigma))
 }
 
 impl Navigator {
@@ -19,7 +78,12 @@ impl Navigator {
             a.gyro[k] += s.gyro_rad_s[k];
             a.accel[k] += s.accel_m_s2[k];
         }
-        if a.count < self.config.align_samples {
+        let sun_wait_over = a.count
+            >= self
+                .config
+                .align_samples
+                .saturating_add(self.config.align_sun_wait_samples);
+        if a.count < self.config.align_samples || (a.sun_count == 0 && !sun_wait_over) {
             return;
         }
         let n = f64::from(a.count);
@@ -33,7 +97,35 @@ impl Navigator {
         // At rest f = -C' g_N: the rover-frame down axis is -f / |f| (eq. 26 with v = 0).
         let pitch = libm::asin((f.x / g).clamp(-1.0, 1.0));
         let roll = libm::atan2(-f.y, -f.z);
-        let q = Quat::from_euler_angles(roll, pitch, self.config.initial_yaw_rad);
+        let c = &self.config;
+        let tilt_sigma = c.accel_bias_sigma_m_s2 / g;
+        let sun = match (a.sun_count, c.ekf.sun.and_then(|e| e.sun_dir_n(a.sun_t_us))) {
+            (k, Some(s_n)) if k > 0 => sun_heading(
+                Vec3::new(a.sun[0], a.sun[1], a.sun[2]),
+                roll,
+                pitch,
+                tilt_sigma,
+                s_n,
+                c.ekf.sun_sigma_rad,
+                k,
+            ),
+            _ => None,
+        };
+        let (yaw, yaw_sigma) = match sun {
+            Some(h) => {
+                self.counters.heading_from_sun = self.counters.heading_from_sun.saturating_add(1);
+                h
+            }
+            None if sun_wait_over => {
+                self.counters.heading_from_plan =
+                    self.counters.heading_from_plan.saturating_add(1);
+                (c.initial_yaw_rad, c.initial_yaw_sigma_rad)
+            }
+            // A sun reading without an azimuth (zenith) or ephemeris: keep waiting for the
+            // timeout.
+            None => return,
+        };
+        let q = Quat::from_euler_angles(roll, pitch, yaw);
         let x0 = NominalState {
             t_us: s.t_us,
             q_nr: q,
@@ -42,14 +134,12 @@ impl Navigator {
             b_a: Vec3::zeros(),
             p_n: Vec3::from(self.config.initial_position_n_m),
         };
-        let c = &self.config;
-        let tilt_sigma = c.accel_bias_sigma_m_s2 / g;
         let gyro_avg_sigma = c.ekf.imu_noise.gyro_rad_s_sqrt_hz * libm::sqrt(200.0 / n) + 1.0e-6;
         let mut p0 = CoreCov::zeros();
         let diag = [
             tilt_sigma,
             tilt_sigma,
-            c.initial_yaw_sigma_rad,
+            yaw_sigma,
             gyro_avg_sigma,
             gyro_avg_sigma,
             gyro_avg_sigma,

@@ -115,6 +115,16 @@ impl Navigator {
                     d2: d.d2,
                     accepted: d.accepted,
                     dof: d.dof as u8,
+                    residual: core::array::from_fn(|k| d.residual.get(k).copied().unwrap_or(0.0)),
+                    sigma: core::array::from_fn(|k| {
+                        libm::sqrt(
+                            d.residual_covariance
+                                .get((k, k))
+                                .copied()
+                                .unwrap_or(0.0)
+                                .max(0.0),
+                        )
+                    }),
                 };
                 if d.accepted {
                     self.cycles_since_reject = self.cycles_since_reject.saturating_add(1);

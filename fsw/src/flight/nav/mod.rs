@@ -71,16 +71,20 @@ pub struct NavConfig {
     /// Rover geometry for kinematics (one source of truth: [`ROCKY8`]).
     pub geometry: RoverGeometry,
     /// Start position of the rover reference point in `N` (north, east, down), m, from the
-    /// ground's localisation.
+    /// ground's localisation (the drive plan), not measured on board.
     pub initial_position_n_m: [f64; 3],
-    /// Start heading (yaw from north, positive towards east), rad.
+    /// Start heading of the plan (yaw from north, positive towards east), rad: used only when
+    /// the alignment gets no sun heading (see [`NavCounters::heading_from_plan`]).
     pub initial_yaw_rad: f64,
-    /// 1-sigma uncertainty of the start heading, rad.
+    /// 1-sigma uncertainty of the plan's start heading, rad.
     pub initial_yaw_sigma_rad: f64,
     /// 1-sigma uncertainty of the start position, m per axis.
     pub initial_position_sigma_m: f64,
     /// IMU samples averaged at rest before the EKF starts (tilt and gyro bias alignment).
     pub align_samples: u32,
+    /// IMU samples the alignment waits beyond `align_samples` for a sun reading (heading)
+    /// before it starts with the plan's heading [`Self::initial_yaw_rad`].
+    pub align_sun_wait_samples: u32,
     /// EKF settings (IMU noise, gravity, sun direction in `N`).
     pub ekf: EkfConfig,
     /// Initial 1-sigma of the gyro bias after alignment, rad/s.
@@ -138,20 +142,23 @@ impl NavConfig {
             geometry: ROCKY8,
             initial_position_n_m: position,
             initial_yaw_rad: yaw_rad,
-            initial_yaw_sigma_rad: 0.01,
-            initial_position_sigma_m: 0.001,
+            // The ground's knowledge of the start: heading from the end of the previous drive
+            // (a few degrees), position from orbital/ground localisation (5 cm here, relative to
+            // the drive's own map frame).
+            initial_yaw_sigma_rad: 0.05,
+            initial_position_sigma_m: 0.05,
             align_samples: 400,
+            align_sun_wait_samples: 2000,
             ekf: EkfConfig::default(),
             gyro_bias_sigma_rad_s: 2.0e-4,
             accel_bias_sigma_m_s2: 1.0e-2,
-            // Contact-angle kinematic estimation (V99 sec. 6) with the gyro rotation of each
-            // joint step and the angles taken relative to their mean: on the simulator's truth
-            // kinematics without slip it cuts the 3D odometry's distance error on `undulating`
-            // from 1.31 % (contacts under the axles) to 0.32 % (`docs/kinematics.md`).
-            odometry: OdometryConfig {
-                contact_angles: true,
-                ..OdometryConfig::default()
-            },
+            // Eq. 15 kinematics (contacts below the axles) with the calibrated noise model.
+            // The contact-angle estimator (V99 sec. 6, `OdometryConfig::contact_angles`) cuts
+            // the 3D odometry's distance error on `undulating` from 1.31 % to 0.32 %, but its
+            // step takes the gyro rotation as an input and its covariance does not describe its
+            // residuals: with it the gate rejects 54 % of the intervals on firm flat ground
+            // without slip (`docs/kinematics.md`), so it stays off until its covariance is right.
+            odometry: OdometryConfig::default(),
             // The EKF prior predicts each feature within a few pixels over a 1 s step, so the
             // tracking window is 8 px, not the stand-alone default of 24 px (9x less work), and
             // the stereo search of a tracked feature covers +-8 px around the disparity of the
@@ -241,6 +248,10 @@ pub struct NavCounters {
     pub sun_applied: u32,
     /// Sun readings refused (gate, skew, not in view).
     pub sun_refused: u32,
+    /// Alignments whose heading came from the sun sensor.
+    pub heading_from_sun: u32,
+    /// Alignments that took the plan's heading (no usable sun reading in time).
+    pub heading_from_plan: u32,
     /// EKF errors on propagation or update (other than the ones counted above).
     pub ekf_errors: u32,
     /// Guidance or inverse-kinematics failures (the rover was stopped for that cycle).
@@ -258,6 +269,11 @@ pub struct GateStatus {
     pub accepted: bool,
     /// Degrees of freedom.
     pub dof: u8,
+    /// Residual `[r_theta (rad); r_p (m)]` in `R0`, measured minus predicted (eq. 46 input).
+    pub residual: [f64; 6],
+    /// Square roots of the residual covariance's diagonal, same units (`residual / sigma` is the
+    /// per-axis normalised residual the ground uses to see which axis slipped).
+    pub sigma: [f64; 6],
 }
 
 /// The navigation state of the flight software (about 110 KB, all inline).
@@ -484,6 +500,10 @@ impl Navigator {
 
     /// RG4: one checked sun reading with the sun in view.
     pub fn sun(&mut self, reading: &SunReading) {
+        if self.mode == NavMode::Aligning {
+            self.align.add_sun(reading);
+            return;
+        }
         let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
         };
