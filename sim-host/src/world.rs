@@ -448,7 +448,9 @@ impl World {
         let velocity_w = (p1 - p0) / dt;
         let accel_w = (velocity_w - self.prev_velocity_w) / dt;
         self.prev_velocity_w = velocity_w;
-        let delta = rot_inv * rot1;
+        // The rotation over the step as a unit quaternion: `Rotation3::scaled_axis` takes the
+        // acos of `(trace - 1) / 2`, which rounding can push above 1 for a rover at rest (NaN).
+        let delta = nalgebra::UnitQuaternion::from_rotation_matrix(&(rot_inv * rot1));
         let gyro = delta.scaled_axis() / dt;
         let specific_force = rot1.inverse() * (accel_w - Vector3::new(0.0, 0.0, MARS_GRAVITY_M_S2));
         self.sample_imu(gyro, specific_force, dt);
