@@ -53,6 +53,8 @@ pub struct Streams {
     pub sun: ChaCha8Rng,
     /// Geometry dimension errors.
     pub geometry: ChaCha8Rng,
+    /// Scale-factor and misalignment errors of the IMU.
+    pub imu_calibration: ChaCha8Rng,
 }
 
 impl Streams {
@@ -69,6 +71,7 @@ impl Streams {
             encoders: s(3),
             sun: s(4),
             geometry: s(5),
+            imu_calibration: s(7),
         }
     }
 }
@@ -195,7 +198,11 @@ impl World {
                 &mut streams.slip,
             )),
         };
-        let imu = ImuModel::new(scenario.sensors.imu, &mut streams.imu);
+        let imu = ImuModel::new(
+            scenario.sensors.imu,
+            &mut streams.imu,
+            &mut streams.imu_calibration,
+        );
         let [start, next] = [scenario.waypoints[0], scenario.waypoints[1]];
         let yaw = (next[1] - start[1]).atan2(next[0] - start[0]);
         let r = geometry.wheel_radius_m();
