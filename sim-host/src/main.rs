@@ -325,12 +325,11 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
     }
     let seed_used = seed.unwrap_or(scenario.seed);
     let renderer: Option<Box<dyn sim_host::camera::StereoRenderer>> = (!no_render).then(|| {
-        let sun = &scenario.sensors.sun;
+        let sun = scenario.site.sun_w(0.0);
         Box::new(sim_host::camera::TexturedRenderer::new(
             sim_host::devices::hazcam_calibration(),
             seed_used,
-            sun.azimuth_deg,
-            sun.elevation_deg,
+            [sun.x, sun.y, sun.z],
         )) as Box<dyn sim_host::camera::StereoRenderer>
     });
     let out = out.unwrap_or_else(|| PathBuf::from(format!("out/{}-{seed_used}", scenario.name)));

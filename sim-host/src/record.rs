@@ -308,12 +308,11 @@ pub fn record(scenario: &Scenario, options: RecordOptions) -> anyhow::Result<Rec
     scenario.duration_s = scenario.duration_s.min(options.seconds);
     let seed = options.seed.unwrap_or(scenario.seed);
     let renderer: Option<Box<dyn StereoRenderer>> = options.render.then(|| {
-        let sun = &scenario.sensors.sun;
+        let sun = scenario.site.sun_w(0.0);
         Box::new(TexturedRenderer::new(
             hazcam_calibration(),
             seed,
-            sun.azimuth_deg,
-            sun.elevation_deg,
+            [sun.x, sun.y, sun.z],
         )) as Box<dyn StereoRenderer>
     });
     let rec: Shared = Rc::new(RefCell::new(Recorder::default()));

@@ -408,7 +408,7 @@ pub fn flight_config(scenario: &Scenario, world: &World, slip_compensation: bool
     };
     nav.gyro_bias_sigma_rad_s = imu.gyro_bias_rad_s.max(1e-6);
     nav.accel_bias_sigma_m_s2 = imu.accel_bias_m_s2.max(1e-4);
-    let sun = scenario.sensors.sun.sun_w();
+    let sun = scenario.site.sun_w(0.0);
     nav.ekf.sun_dir_n = Some(Vec3::new(sun.x, sun.y, sun.z));
     nav.ekf.sun_sigma_rad = scenario.sensors.sun.noise_rad.max(1e-4);
     nav.guidance.cruise_speed_m_s = scenario.speed_m_s.min(nav.guidance.max_wheel_speed_m_s);
