@@ -38,7 +38,7 @@ fn main() -> anyhow::Result<()> {
     let scenario = Scenario::load(std::path::Path::new(&path))?;
     let terrain = Terrain::new(scenario.terrain.clone(), scenario.seed, &scenario.waypoints);
     let calib = hazcam_calibration();
-    let sun = &scenario.sensors.sun;
+    let sun = scenario.site.sun_w(0.0);
     // Poses along the path.
     let wp = &scenario.waypoints;
     let poses: Vec<([[f64; 3]; 3], [f64; 3])> = (0..pairs)
@@ -70,12 +70,8 @@ fn main() -> anyhow::Result<()> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let (w, h) = (rover_hal::IMAGE_WIDTH_PX, rover_hal::IMAGE_HEIGHT_PX);
     let (ns, hash, errors) = pool.install(|| {
-        let renderer = sim_host::camera::TexturedRenderer::new(
-            calib,
-            scenario.seed,
-            sun.azimuth_deg,
-            sun.elevation_deg,
-        );
+        let renderer =
+            sim_host::camera::TexturedRenderer::new(calib, scenario.seed, [sun.x, sun.y, sun.z]);
         let mut left = vec![0u8; w * h];
         let mut right = vec![0u8; w * h];
         // One warm-up pair (first-touch of the buffers).

@@ -24,6 +24,12 @@ pub trait StereoRenderer {
         left: &mut [u8],
         right: &mut [u8],
     );
+
+    /// Light the next frames with the sun at `sun_w` (unit vector towards the sun in `W`). The
+    /// default ignores it (a renderer without shading).
+    fn set_sun(&self, sun_w: [f64; 3]) {
+        let _ = sun_w;
+    }
 }
 
 /// Uniform grey images (value 128): the stand-in used when no terrain renderer is available.
@@ -49,24 +55,22 @@ impl StereoRenderer for FlatGreyRenderer {
 /// The rendered hazcams: [`crate::render::StereoRenderer`] over the terrain's heights with the
 /// procedural albedo texture of [`crate::render::AlbedoTexture`] and Lambertian sun shading.
 ///
+/// Each frame is drawn with the calibration passed to [`StereoRenderer::render`] (the simulated
+/// camera passes its true head) and the sun of the last [`StereoRenderer::set_sun`].
+///
 /// A render error (which only a degenerate pose or calibration can cause) gives black images,
 /// which the flight software rejects as a blank frame, and is counted in [`Self::errors`].
 pub struct TexturedRenderer {
     inner: std::cell::RefCell<crate::render::StereoRenderer>,
     texture: std::sync::Arc<crate::render::AlbedoTexture>,
-    sun: crate::render::Sun,
+    sun: std::cell::Cell<crate::render::Sun>,
     errors: std::cell::Cell<u64>,
 }
 
 impl TexturedRenderer {
-    /// A renderer for `calib` with the texture of `texture_seed` and the sun at the given
-    /// azimuth (from north towards east) and elevation, degrees.
-    pub fn new(
-        calib: StereoCalibration,
-        texture_seed: u64,
-        sun_azimuth_deg: f64,
-        sun_elevation_deg: f64,
-    ) -> Self {
+    /// A renderer starting with `calib`, with the texture of `texture_seed` and the sun at
+    /// `sun_w` (unit vector towards the sun in `W`) until [`StereoRenderer::set_sun`].
+    pub fn new(calib: StereoCalibration, texture_seed: u64, sun_w: [f64; 3]) -> Self {
         let params = crate::render::TextureParams {
             seed: texture_seed,
             ..crate::render::TextureParams::default()
@@ -77,10 +81,7 @@ impl TexturedRenderer {
                 crate::render::RenderSettings::default(),
             )),
             texture: std::sync::Arc::new(crate::render::AlbedoTexture::new(params)),
-            sun: crate::render::Sun::from_azimuth_elevation(
-                sun_azimuth_deg.to_radians(),
-                sun_elevation_deg.to_radians(),
-            ),
+            sun: std::cell::Cell::new(crate::render::Sun { direction_w: sun_w }),
             errors: std::cell::Cell::new(0),
         }
     }
@@ -115,25 +116,30 @@ impl StereoRenderer for TexturedRenderer {
         surface: &dyn TerrainSurface,
         left_cam_rot_w_from_k: [[f64; 3]; 3],
         left_cam_pos_w: [f64; 3],
-        _calib: &StereoCalibration,
+        calib: &StereoCalibration,
         seed: u64,
         left: &mut [u8],
         right: &mut [u8],
     ) {
+        let mut inner = self.inner.borrow_mut();
+        if inner.calibration() != calib {
+            inner.set_calibration(*calib);
+        }
         let textured =
             crate::render::TexturedSurface::new(BorrowedSurface(surface), self.texture.clone());
         let pose = crate::render::CameraPose {
             rot_world_from_camera: left_cam_rot_w_from_k,
             pos_world_m: left_cam_pos_w,
         };
-        let result = self
-            .inner
-            .borrow_mut()
-            .render(&textured, &pose, &self.sun, seed, left, right);
+        let result = inner.render(&textured, &pose, &self.sun.get(), seed, left, right);
         if result.is_err() {
             self.errors.set(self.errors.get() + 1);
             left.fill(0);
             right.fill(0);
         }
+    }
+
+    fn set_sun(&self, sun_w: [f64; 3]) {
+        self.sun.set(crate::render::Sun { direction_w: sun_w });
     }
 }

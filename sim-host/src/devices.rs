@@ -130,10 +130,10 @@ impl Mobility for StillMobility {
 
 /// Rocky 8 hazcam calibration (REFERENCE.md): 640x480, 79.5 x 64.0 deg FOV, 8.4 cm baseline,
 /// pitched 45 deg down, mounted 0.2 m ahead of and 0.6 m above the rover reference point. The
-/// flight code's definition ([`fsw::vo::rocky8_hazcam`]), so the simulated cameras and the
-/// tests cannot drift apart.
+/// simulator's own nominal head ([`crate::sensors::camera_model::nominal_hazcam`], written from
+/// the published figures): what a ground calibration file says, never the per-seed true head.
 pub fn hazcam_calibration() -> StereoCalibration {
-    fsw::vo::rocky8_hazcam()
+    crate::sensors::camera_model::nominal_hazcam()
 }
 
 /// The capture protocol of a simulated stereo camera (trigger, poll, frame, release): a capture

@@ -2,7 +2,7 @@
 //! the scenario's injected faults. The flight software sees only these readings.
 
 use crate::camera::StereoRenderer;
-use crate::devices::{hazcam_calibration, CaptureProtocol};
+use crate::devices::CaptureProtocol;
 use crate::sensors::faults::{FaultDevice, FaultKind};
 use crate::world::World;
 use nalgebra::Vector3;
@@ -199,12 +199,18 @@ impl SunSensor for WorldSun {
     }
 }
 
-/// Stereo camera device: renders the pair at the trigger from the true camera pose and
-/// completes `latency_polls` polls later.
+/// Stereo camera device: renders the pair at the trigger from the true camera pose with the
+/// true head (the world's [`crate::sensors::camera_model::HazcamModel::truth`], this seed's
+/// calibration errors included) and the sun at the trigger time, and completes
+/// `latency_polls` polls later. [`StereoCamera::calibration`] gives the nominal head (what the
+/// ground calibration file says), never the true one.
 pub struct WorldStereo {
     world: SharedWorld,
     renderer: Box<dyn StereoRenderer>,
+    /// The nominal head (given to the flight software).
     calib: StereoCalibration,
+    /// The true head (used to render).
+    truth: StereoCalibration,
     left: Vec<u8>,
     right: Vec<u8>,
     capture: CaptureProtocol,
@@ -221,10 +227,15 @@ impl WorldStereo {
         latency_polls: u32,
         seed: u64,
     ) -> Self {
+        let (calib, truth) = {
+            let w = world.borrow();
+            (w.hazcam.nominal, w.hazcam.truth)
+        };
         Self {
             world,
             renderer,
-            calib: hazcam_calibration(),
+            calib,
+            truth,
             left: vec![0; IMAGE_PIXELS],
             right: vec![0; IMAGE_PIXELS],
             capture: CaptureProtocol::new(latency_polls),
@@ -262,17 +273,20 @@ impl StereoCamera for WorldStereo {
             self.right.fill(0);
         } else if !(stuck && self.rendered > 0) {
             let rot = w.truth.pose.rot_w_from_r();
-            let r_rk = nalgebra::Matrix3::from_fn(|i, j| self.calib.rot_rover_from_camera[i][j]);
+            let head = &self.truth;
+            let r_rk = nalgebra::Matrix3::from_fn(|i, j| head.rot_rover_from_camera[i][j]);
             let r_wk = rot.matrix() * r_rk;
-            let pos = Vector3::from(w.truth.pose.pos_m)
-                + rot * Vector3::from(self.calib.pos_camera_in_rover_m);
+            let pos =
+                Vector3::from(w.truth.pose.pos_m) + rot * Vector3::from(head.pos_camera_in_rover_m);
+            let sun = w.sun_w();
+            self.renderer.set_sun([sun.x, sun.y, sun.z]);
             let rows = [0, 1, 2].map(|i| [r_wk[(i, 0)], r_wk[(i, 1)], r_wk[(i, 2)]]);
             let render_start = Instant::now();
             self.renderer.render(
                 &w.terrain,
                 rows,
                 [pos.x, pos.y, pos.z],
-                &self.calib,
+                head,
                 self.seed ^ u64::from(sequence).wrapping_mul(0x9E37_79B9),
                 &mut self.left,
                 &mut self.right,

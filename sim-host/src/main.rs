@@ -81,6 +81,10 @@ enum Command {
         /// The terrain produces no slip (every axle moves at its wheel's rim speed).
         #[arg(long)]
         no_slip: bool,
+        /// Visual odometry off in the flight software: the EKF gets IMU, sun sensor and
+        /// kinematics (the cameras still capture).
+        #[arg(long)]
+        no_vo: bool,
         /// Slip model of the truth: `lumped` (default) or `terramechanics` (per wheel,
         /// docs/terramechanics.md).
         #[arg(long)]
@@ -209,6 +213,7 @@ struct RunRequest {
     sim_counter: bool,
     no_render: bool,
     no_slip: bool,
+    no_vo: bool,
     slip_model: Option<String>,
     quiet: bool,
 }
@@ -243,6 +248,7 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
             sim_counter: false,
             no_render: false,
             no_slip: false,
+            no_vo: false,
             slip_model: None,
             quiet: true,
         })?;
@@ -308,6 +314,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
         sim_counter,
         no_render,
         no_slip,
+        no_vo,
         slip_model,
         quiet,
     } = req;
@@ -325,12 +332,11 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
     }
     let seed_used = seed.unwrap_or(scenario.seed);
     let renderer: Option<Box<dyn sim_host::camera::StereoRenderer>> = (!no_render).then(|| {
-        let sun = &scenario.sensors.sun;
+        let sun = scenario.site.sun_w(0.0);
         Box::new(sim_host::camera::TexturedRenderer::new(
             sim_host::devices::hazcam_calibration(),
             seed_used,
-            sun.azimuth_deg,
-            sun.elevation_deg,
+            [sun.x, sun.y, sun.z],
         )) as Box<dyn sim_host::camera::StereoRenderer>
     });
     let out = out.unwrap_or_else(|| PathBuf::from(format!("out/{}-{seed_used}", scenario.name)));
@@ -356,6 +362,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
             seed,
             no_slip_comp,
             reference_driver,
+            no_vo,
             counter: if sim_counter {
                 CounterMode::SimTime
             } else {
@@ -527,6 +534,7 @@ fn main() -> anyhow::Result<()> {
             sim_counter,
             no_render,
             no_slip,
+            no_vo,
             slip_model,
         }) => run_scenario(RunRequest {
             path: scenario,
@@ -538,6 +546,7 @@ fn main() -> anyhow::Result<()> {
             sim_counter,
             no_render,
             no_slip,
+            no_vo,
             slip_model,
             quiet: false,
         })

@@ -14,7 +14,7 @@ use crate::devices::{hazcam_calibration, CountingTelemetry};
 use crate::hal_devices::{CounterMode, WorldClock, WorldImu, WorldMobility, WorldStereo, WorldSun};
 use crate::scenario::Scenario;
 use crate::sim::{run_with, RunHooks, RunOptions, WorldPlatform};
-use crate::world::{World, FRAME_US};
+use crate::world::FRAME_US;
 use fsw::flight::{Devices, Fsw, Platform};
 use fsw_image::flight_replay::frame_digest;
 use rover_hal::{
@@ -308,12 +308,11 @@ pub fn record(scenario: &Scenario, options: RecordOptions) -> anyhow::Result<Rec
     scenario.duration_s = scenario.duration_s.min(options.seconds);
     let seed = options.seed.unwrap_or(scenario.seed);
     let renderer: Option<Box<dyn StereoRenderer>> = options.render.then(|| {
-        let sun = &scenario.sensors.sun;
+        let sun = scenario.site.sun_w(0.0);
         Box::new(TexturedRenderer::new(
             hazcam_calibration(),
             seed,
-            sun.azimuth_deg,
-            sun.elevation_deg,
+            [sun.x, sun.y, sun.z],
         )) as Box<dyn StereoRenderer>
     });
     let rec: Shared = Rc::new(RefCell::new(Recorder::default()));
@@ -353,8 +352,8 @@ fn header(scenario: &Scenario, seed: u64, frames: u64) -> anyhow::Result<TapeHea
     if scenario.waypoints.len() > MAX_WAYPOINTS {
         anyhow::bail!("a tape holds at most {MAX_WAYPOINTS} waypoints");
     }
-    let world = World::new(scenario, seed)?;
-    let pose = &world.truth.pose;
+    let config = crate::sim::flight_config(scenario, crate::sim::DriveOptions::default());
+    let nav = &config.nav;
     let mut waypoints = [[0.0; 2]; MAX_WAYPOINTS];
     for (dst, src) in waypoints.iter_mut().zip(&scenario.waypoints) {
         *dst = *src;
@@ -368,17 +367,16 @@ fn header(scenario: &Scenario, seed: u64, frames: u64) -> anyhow::Result<TapeHea
         frames: u32::try_from(frames)?,
         seed,
         calibration: hazcam_calibration(),
+        // The planned start (the flight configuration's), not the truth.
         start_pose: [
-            pose.pos_m[0],
-            pose.pos_m[1],
-            pose.pos_m[2],
-            pose.roll_rad,
-            pose.pitch_rad,
-            pose.yaw_rad,
+            nav.initial_position_n_m[0],
+            nav.initial_position_n_m[1],
+            nav.initial_position_n_m[2],
+            0.0,
+            0.0,
+            nav.initial_yaw_rad,
         ],
-        nav_params: fsw_image::flight_replay::nav_params(&crate::sim::flight_config(
-            scenario, &world, true,
-        )),
+        nav_params: fsw_image::flight_replay::nav_params(&config),
         waypoints,
         waypoint_count: scenario.waypoints.len() as u8,
         scenario: name,

@@ -1,6 +1,7 @@
 //! Scenario files (TOML): terrain, soil, path, duration, sensor rates and noise, seed, faults.
 //! The format is documented in `docs/simulator.md`.
 
+use crate::sensors::camera_model::CameraTolerances;
 use crate::sensors::encoders::EncoderParams;
 use crate::sensors::faults::FaultSpec;
 use crate::sensors::imu::ImuParams;
@@ -75,6 +76,49 @@ impl SoilSpec {
     }
 }
 
+/// Where and when the traverse happens (the `[site]` table): the sun's motion in the
+/// simulator follows from it ([`crate::sensors::sun`]). The flight software is given the same
+/// site and date as mission inputs and computes the sun with its own code and clock.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default)]
+pub struct Site {
+    /// Latitude, degrees (north positive).
+    pub latitude_deg: f64,
+    /// Areocentric solar longitude `Ls` (the season), degrees; constant over a run.
+    pub solar_longitude_deg: f64,
+    /// Local true solar time at simulation time 0, hours (0-24, noon at 12).
+    pub local_solar_time_h: f64,
+}
+
+impl Default for Site {
+    /// Gusev crater (14.6 deg S) at the northern spring equinox (`Ls` 0), starting at 09:00
+    /// local true solar time: the sun climbs from 43.2 deg to 52.2 deg elevation over the
+    /// longest scenario (2400 s), 76-70 deg azimuth (east-north-east).
+    fn default() -> Self {
+        Self {
+            latitude_deg: -14.6,
+            solar_longitude_deg: 0.0,
+            local_solar_time_h: 9.0,
+        }
+    }
+}
+
+impl Site {
+    /// Local true solar time `t_s` seconds after simulation time 0, hours (not wrapped).
+    pub fn local_solar_time_at_h(&self, t_s: f64) -> f64 {
+        self.local_solar_time_h + 24.0 * t_s / crate::sensors::sun::SOL_S
+    }
+
+    /// Unit vector towards the sun in `W` (x north, y east, z down) at simulation time `t_s`.
+    pub fn sun_w(&self, t_s: f64) -> nalgebra::Vector3<f64> {
+        crate::sensors::sun::sun_direction_w(
+            self.latitude_deg,
+            self.solar_longitude_deg,
+            self.local_solar_time_at_h(t_s),
+        )
+    }
+}
+
 /// Sensor rates and noise.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default)]
@@ -85,7 +129,7 @@ pub struct SensorSpec {
     pub encoders: EncoderParams,
     /// Joint-encoder sample rate, Hz (must divide 200).
     pub encoder_hz: u32,
-    /// Sun and sun sensor.
+    /// Sun sensor (the sun itself follows from the scenario's [`Site`]).
     pub sun: SunParams,
     /// Sun-sensor sample rate, Hz (must divide 200).
     pub sun_hz: u32,
@@ -94,6 +138,12 @@ pub struct SensorSpec {
     /// Per-seed error of each vehicle dimension seen by the simulator, m (1-sigma); the flight
     /// code keeps the nominal geometry.
     pub dimension_error_m: f64,
+    /// Per-seed calibration errors of the hazcam head (the flight software is given the
+    /// nominal calibration; the images are rendered with the true one). `false`: the true head
+    /// is the nominal one.
+    pub camera_calibration_errors: bool,
+    /// 1-sigma tolerances of those errors.
+    pub camera_tolerances: CameraTolerances,
 }
 
 impl Default for SensorSpec {
@@ -106,6 +156,8 @@ impl Default for SensorSpec {
             sun_hz: 200,
             camera_latency_polls: 3,
             dimension_error_m: 0.002,
+            camera_calibration_errors: true,
+            camera_tolerances: CameraTolerances::default(),
         }
     }
 }
@@ -155,6 +207,9 @@ pub struct Scenario {
     pub terrain: TerrainSpec,
     /// Soil.
     pub soil: SoilSpec,
+    /// Site, season and time of day (the sun's motion).
+    #[serde(default)]
+    pub site: Site,
     /// Sensors.
     #[serde(default)]
     pub sensors: SensorSpec,
@@ -200,6 +255,13 @@ impl Scenario {
         anyhow::ensure!(
             self.speed_m_s > 0.0 && self.speed_m_s <= 0.3,
             "speed_m_s must be in (0, 0.3]"
+        );
+        let site = &self.site;
+        anyhow::ensure!(
+            (-90.0..=90.0).contains(&site.latitude_deg)
+                && site.solar_longitude_deg.is_finite()
+                && site.local_solar_time_h.is_finite(),
+            "site: latitude_deg in [-90, 90], finite solar_longitude_deg and local_solar_time_h"
         );
         for hz in [self.sensors.encoder_hz, self.sensors.sun_hz] {
             anyhow::ensure!(hz > 0 && 200 % hz == 0, "sensor rates must divide 200 Hz");

@@ -558,12 +558,11 @@ pub fn case(id: &str) -> Option<Case> {
 pub fn run_case(case: Case, scenarios_dir: &Path) -> anyhow::Result<CaseResult> {
     let mut scenario = Scenario::load(&scenarios_dir.join(format!("{}.toml", case.scenario)))?;
     case.variant.apply(&mut scenario);
-    let sun = &scenario.sensors.sun;
+    let sun = scenario.site.sun_w(0.0);
     let renderer: Box<dyn StereoRenderer> = Box::new(TexturedRenderer::new(
         hazcam_calibration(),
         scenario.seed,
-        sun.azimuth_deg,
-        sun.elevation_deg,
+        [sun.x, sun.y, sun.z],
     ));
     let result = run(
         &scenario,

@@ -16,10 +16,8 @@ use crate::hal_devices::{
 use crate::scenario::{DriverMode, Scenario};
 use crate::vehicle::placement::BodyPose;
 use crate::world::{World, FRAME_US};
-use fsw::estimation::ImuNoise;
 use fsw::flight::nav::{NavCounters, NavMode};
 use fsw::flight::{Devices, Fsw, FswConfig, Platform};
-use fsw::types::Vec3;
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -44,6 +42,8 @@ pub struct RunOptions {
     pub no_slip_comp: bool,
     /// Let the simulator's reference driver command the motors instead of the flight software.
     pub reference_driver: bool,
+    /// Visual odometry off in the flight software (the cameras still capture).
+    pub no_vo: bool,
     /// Execution counter of the flight clock.
     pub counter: CounterMode,
     /// Stereo renderer (default: [`FlatGreyRenderer`]).
@@ -58,6 +58,7 @@ impl Default for RunOptions {
             seed: None,
             no_slip_comp: false,
             reference_driver: false,
+            no_vo: false,
             counter: CounterMode::Host,
             renderer: None,
             progress: None,
@@ -254,7 +255,13 @@ pub fn run_with<H: RunHooks>(
         sun: WorldSun::new(world.clone()),
         telemetry: CountingTelemetry::default(),
     };
-    let config = flight_config(scenario, &world.borrow(), !options.no_slip_comp);
+    let config = flight_config(
+        scenario,
+        DriveOptions {
+            slip_compensation: !options.no_slip_comp,
+            vo_enabled: !options.no_vo,
+        },
+    );
     let mut fsw = Fsw::new(hooks.wrap(devices), &config, &scenario.waypoints)
         .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
     fsw.start_vo();
@@ -422,47 +429,90 @@ pub fn run_with<H: RunHooks>(
     })
 }
 
-/// The flight software's configuration for `scenario`, with the start pose of `world`.
-pub fn flight_config(scenario: &Scenario, world: &World, slip_compensation: bool) -> FswConfig {
-    let pose = world.truth.pose;
-    let mut config = FswConfig::rocky8(pose.pos_m, pose.yaw_rad);
-    let imu = &scenario.sensors.imu;
-    // Per-sample standard deviations at 200 Hz to densities: sigma * sqrt(dt).
-    let sqrt_dt = (FRAME_US as f64 * 1e-6).sqrt();
+/// What the ground chooses for a drive besides the scenario: slip compensation and VO.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DriveOptions {
+    /// Slip compensation on (H05) or off (wheel and IMU odometry only).
+    pub slip_compensation: bool,
+    /// Visual odometry on; off: the EKF gets IMU, sun and kinematics only.
+    pub vo_enabled: bool,
+}
+
+impl Default for DriveOptions {
+    fn default() -> Self {
+        Self {
+            slip_compensation: true,
+            vo_enabled: true,
+        }
+    }
+}
+
+/// The mission inputs of a drive as the ground plans it from the scenario, never from the
+/// simulator's truth or seed: the start pose of the plan (first waypoint, heading towards the
+/// second, height from the smooth terrain model plus the nominal height of the rover
+/// reference point), the site and time for the sun ephemeris, the cruise speed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mission {
+    /// Planned start position, m, `N` (north, east, down).
+    pub start_n_m: [f64; 3],
+    /// Planned start heading, rad.
+    pub start_yaw_rad: f64,
+    /// Sun ephemeris of the site and time.
+    pub sun: fsw::estimation::ephemeris::SunEphemeris,
+    /// Cruise speed, m/s.
+    pub cruise_speed_m_s: f64,
+}
+
+impl Mission {
+    /// The plan of `scenario`.
+    pub fn plan(scenario: &Scenario) -> Self {
+        let [start, next] = [scenario.waypoints[0], scenario.waypoints[1]];
+        // The ground's terrain model: the base shape without roughness, rocks or obstacles.
+        let mut smooth = scenario.terrain.clone();
+        smooth.roughness_m = 0.0;
+        smooth.rocks = None;
+        smooth.obstacles.clear();
+        let ground = crate::surface::TerrainSurface::height_m(
+            &crate::terrain::Terrain::new(smooth, 0, &scenario.waypoints),
+            start[0],
+            start[1],
+        );
+        // Nominal height of the reference point above the wheel contacts (flight geometry).
+        let reference_height = fsw::kinematics::wheel_contact_points(
+            &fsw::kinematics::ROCKY8,
+            &fsw::kinematics::SuspensionState::default(),
+        )
+        .map(|c| c.iter().map(|p| p.z).sum::<f64>() / c.len() as f64)
+        .unwrap_or(0.0);
+        let site = &scenario.site;
+        Self {
+            start_n_m: [start[0], start[1], -(ground + reference_height)],
+            start_yaw_rad: (next[1] - start[1]).atan2(next[0] - start[0]),
+            sun: fsw::estimation::ephemeris::SunEphemeris::from_site(
+                site.latitude_deg,
+                site.solar_longitude_deg,
+                site.local_solar_time_h,
+            ),
+            cruise_speed_m_s: scenario.speed_m_s,
+        }
+    }
+}
+
+/// The flight software's configuration for `scenario`: the nominal flight profile
+/// ([`FswConfig::rocky8`]: datasheet-class IMU densities, nominal geometry and calibration,
+/// calibrated odometry noise) with the mission inputs of [`Mission::plan`] and the drive
+/// options. Nothing comes from the simulator's truth, parameters or seed
+/// (`sim-host/tests/flight_profile.rs` checks it for every scenario and several seeds).
+pub fn flight_config(scenario: &Scenario, options: DriveOptions) -> FswConfig {
+    let mission = Mission::plan(scenario);
+    let mut config = FswConfig::rocky8(mission.start_n_m, mission.start_yaw_rad);
     let nav = &mut config.nav;
-    nav.ekf.imu_noise = ImuNoise {
-        gyro_rad_s_sqrt_hz: imu.gyro_noise_rad_s * sqrt_dt,
-        gyro_bias_rad_s2_sqrt_hz: imu.gyro_bias_walk_rad_s_sqrt_s,
-        accel_m_s2_sqrt_hz: imu.accel_noise_m_s2 * sqrt_dt,
-        accel_bias_m_s3_sqrt_hz: imu.accel_bias_walk_m_s2_sqrt_s,
-    };
-    nav.gyro_bias_sigma_rad_s = imu.gyro_bias_rad_s.max(1e-6);
-    nav.accel_bias_sigma_m_s2 = imu.accel_bias_m_s2.max(1e-4);
-    let sun = scenario.sensors.sun.sun_w();
-    let _ = sun; nav.ekf.sun = None; // TEMP until the site ephemeris lands
-    nav.ekf.sun_sigma_rad = scenario.sensors.sun.noise_rad.max(1e-4);
-    nav.guidance.cruise_speed_m_s = scenario.speed_m_s.min(nav.guidance.max_wheel_speed_m_s);
-    nav.slip_compensation = slip_compensation;
-    if std::env::var("NO_CA").is_ok() {
-        nav.odometry.contact_angles = false;
-    }
-    if let Ok(v) = std::env::var("SUSP") {
-        nav.odometry.suspension_increment_noise_rad = v.parse().unwrap();
-    }
-    if std::env::var("OBS3").is_ok() {
-        nav.odometry.observed = [false, false, true, true, true, false];
-    }
-    if let Ok(v) = std::env::var("STEER") {
-        nav.odometry.steer_noise_rad = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("DRV") {
-        nav.odometry.drive_increment_noise_rad = v.parse().unwrap();
-    }
-    if let Ok(v) = std::env::var("RSCALE") { nav.odometry.radius_scale_sigma = v.parse().unwrap(); }
-    if let Ok(v) = std::env::var("ARTIC") { nav.odometry.articulation_fraction = v.parse().unwrap(); }
-    if let Ok(v) = std::env::var("DFRAC") {
-        nav.odometry.drive_fraction = v.parse().unwrap();
-    }
+    nav.ekf.sun = Some(mission.sun);
+    nav.guidance.cruise_speed_m_s = mission
+        .cruise_speed_m_s
+        .min(nav.guidance.max_wheel_speed_m_s);
+    nav.slip_compensation = options.slip_compensation;
+    nav.vo_enabled = options.vo_enabled;
     config
 }
 

@@ -11,8 +11,9 @@
 //! placement solver projects the vehicle back onto the terrain (height, roll, pitch, rocker and
 //! bogies at the integrated north, east and yaw: the holonomic constraint).
 
-use crate::scenario::Scenario;
 use crate::scenario::SlipModelKind;
+use crate::scenario::{Scenario, Site};
+use crate::sensors::camera_model::HazcamModel;
 use crate::sensors::encoders::EncoderParams;
 use crate::sensors::faults::Faults;
 use crate::sensors::imu::ImuModel;
@@ -53,6 +54,10 @@ pub struct Streams {
     pub sun: ChaCha8Rng,
     /// Geometry dimension errors.
     pub geometry: ChaCha8Rng,
+    /// Calibration errors of the hazcam head.
+    pub camera: ChaCha8Rng,
+    /// Scale-factor and misalignment errors of the IMU.
+    pub imu_calibration: ChaCha8Rng,
 }
 
 impl Streams {
@@ -69,6 +74,8 @@ impl Streams {
             encoders: s(3),
             sun: s(4),
             geometry: s(5),
+            camera: s(6),
+            imu_calibration: s(7),
         }
     }
 }
@@ -136,8 +143,13 @@ pub struct World {
     imu: ImuModel,
     /// Encoder model.
     pub encoders: EncoderParams,
-    /// Sun model.
+    /// Sun sensor model.
     pub sun: SunParams,
+    /// Site, season and time of day: the sun's motion.
+    pub site: Site,
+    /// The hazcam head: the nominal calibration (given to the flight software) and the true
+    /// one with this seed's errors (used to render).
+    pub hazcam: HazcamModel,
     /// Faults.
     pub faults: Faults,
     /// Host nanoseconds spent inside simulated devices doing the simulator's own work (image
@@ -195,7 +207,16 @@ impl World {
                 &mut streams.slip,
             )),
         };
-        let imu = ImuModel::new(scenario.sensors.imu, &mut streams.imu);
+        let imu = ImuModel::new(
+            scenario.sensors.imu,
+            &mut streams.imu,
+            &mut streams.imu_calibration,
+        );
+        let hazcam = HazcamModel::new(
+            scenario.sensors.camera_calibration_errors,
+            &scenario.sensors.camera_tolerances,
+            &mut streams.camera,
+        );
         let [start, next] = [scenario.waypoints[0], scenario.waypoints[1]];
         let yaw = (next[1] - start[1]).atan2(next[0] - start[0]);
         let r = geometry.wheel_radius_m();
@@ -239,6 +260,8 @@ impl World {
             imu,
             encoders: scenario.sensors.encoders,
             sun: scenario.sensors.sun,
+            site: scenario.site,
+            hazcam,
             faults: Faults::new(scenario.faults.clone()),
             streams,
             encoder_every: u64::from(200 / scenario.sensors.encoder_hz),
@@ -448,7 +471,9 @@ impl World {
         let velocity_w = (p1 - p0) / dt;
         let accel_w = (velocity_w - self.prev_velocity_w) / dt;
         self.prev_velocity_w = velocity_w;
-        let delta = rot_inv * rot1;
+        // The rotation over the step as a unit quaternion: `Rotation3::scaled_axis` takes the
+        // acos of `(trace - 1) / 2`, which rounding can push above 1 for a rover at rest (NaN).
+        let delta = nalgebra::UnitQuaternion::from_rotation_matrix(&(rot_inv * rot1));
         let gyro = delta.scaled_axis() / dt;
         let specific_force = rot1.inverse() * (accel_w - Vector3::new(0.0, 0.0, MARS_GRAVITY_M_S2));
         self.sample_imu(gyro, specific_force, dt);
@@ -512,9 +537,15 @@ impl World {
         self.joints = j;
     }
 
+    /// Unit vector towards the sun in `W` at the current truth time.
+    pub fn sun_w(&self) -> Vector3<f64> {
+        self.site.sun_w(self.truth.t_us as f64 * 1e-6)
+    }
+
     fn sample_sun(&mut self) {
         let rot = self.truth.pose.rot_w_from_r();
-        let (v, in_view) = self.sun.measure(&rot, &mut self.streams.sun);
+        let sun_w = self.sun_w();
+        let (v, in_view) = self.sun.measure(&sun_w, &rot, &mut self.streams.sun);
         self.sun_reading = SunReading {
             t_us: self.truth.t_us,
             sun_dir_rover: v,

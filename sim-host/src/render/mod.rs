@@ -250,6 +250,11 @@ impl StereoRenderer {
         &self.calib
     }
 
+    /// Draw the next frames with `calib`.
+    pub fn set_calibration(&mut self, calib: StereoCalibration) {
+        self.calib = calib;
+    }
+
     /// Render the pair seen from `left_pose` into `left` and `right` (`IMAGE_PIXELS` bytes
     /// each, row-major), with the albedo filtered to each pixel's footprint. `noise_seed` selects
     /// the image noise (use a different seed per frame).

@@ -1,5 +1,6 @@
-//! Sensor models: IMU, joint encoders, sun sensor, and fault injection.
+//! Sensor models: IMU, joint encoders, sun sensor, the hazcam head, and fault injection.
 
+pub mod camera_model;
 pub mod encoders;
 pub mod faults;
 pub mod imu;

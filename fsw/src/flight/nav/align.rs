@@ -117,8 +117,7 @@ impl Navigator {
                 h
             }
             None if sun_wait_over => {
-                self.counters.heading_from_plan =
-                    self.counters.heading_from_plan.saturating_add(1);
+                self.counters.heading_from_plan = self.counters.heading_from_plan.saturating_add(1);
                 (c.initial_yaw_rad, c.initial_yaw_sigma_rad)
             }
             // A sun reading without an azimuth (zenith) or ephemeris: keep waiting for the
