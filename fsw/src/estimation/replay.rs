@@ -49,6 +49,8 @@ enum Measurement {
     Clone { t_us: u64 },
     /// `release(handle)` of the clone at `t_us`.
     Release { t_us: u64 },
+    /// `inflate_velocity(velocity, accel_bias)`.
+    Inflate { velocity: f64, accel_bias: f64 },
 }
 
 /// Which list the next operation comes from.
@@ -214,6 +216,14 @@ impl Recorder {
         self.measurement(Measurement::Release { t_us });
     }
 
+    /// Record `inflate_velocity(velocity_sigma_m_s, accel_bias_sigma_m_s2)`.
+    pub fn inflate_velocity(&mut self, velocity_sigma_m_s: f64, accel_bias_sigma_m_s2: f64) {
+        self.measurement(Measurement::Inflate {
+            velocity: velocity_sigma_m_s,
+            accel_bias: accel_bias_sigma_m_s2,
+        });
+    }
+
     /// Restore the snapshot into `ekf`, apply the late measurement `m` there (gated or not),
     /// replay the recorded operations and end the recording. Returns the decision of `m`.
     /// Errors: no recording or an overflowed one ([`EstError::NoStateAtTime`]; `ekf` is then
@@ -311,6 +321,12 @@ fn replay_one(ekf: &mut Ekf, m: &Measurement) {
             if let Some(h) = ekf.clone_handle(*t_us) {
                 let _ = ekf.release(h);
             }
+        }
+        Measurement::Inflate {
+            velocity,
+            accel_bias,
+        } => {
+            let _ = ekf.inflate_velocity(*velocity, *accel_bias);
         }
     }
 }

@@ -8,12 +8,36 @@
 //! `w_m - b_hat_g`, `R = sigma_rate^2 I`. It makes the vertical gyro bias observable too.
 
 use super::fusion::Innovation;
-use super::state::{I_BG, I_V};
+use super::state::{I_BA, I_BG, I_V};
 use super::{Ekf, EstError};
 use crate::types::{Mat3, Vec3};
 use nalgebra::SMatrix;
 
 impl Ekf {
+    /// Covariance inflation after the filter stopped accepting its measurements (a streak of
+    /// gate rejections, `Navigator`'s recovery): adds `velocity_sigma_m_s^2` to the velocity
+    /// variances and `accel_bias_sigma_m_s2^2` to the accelerometer-bias variances, so that
+    /// the next measurement can pull the filter back (the state itself is unchanged). Both
+    /// sigmas must be finite and non-negative.
+    pub fn inflate_velocity(
+        &mut self,
+        velocity_sigma_m_s: f64,
+        accel_bias_sigma_m_s2: f64,
+    ) -> Result<(), EstError> {
+        if self.fault {
+            return Err(EstError::Faulted);
+        }
+        let (sv, sb) = (velocity_sigma_m_s, accel_bias_sigma_m_s2);
+        if !(sv.is_finite() && sb.is_finite() && sv >= 0.0 && sb >= 0.0) {
+            return Err(EstError::NonFiniteInput);
+        }
+        for k in 0..3 {
+            self.p[(I_V + k, I_V + k)] += sv * sv;
+            self.p[(I_BA + k, I_BA + k)] += sb * sb;
+        }
+        self.check_health()
+    }
+
     /// ZUPT at the current state; `t_us` is the time the rover was known to be stopped (within
     /// [`super::EkfConfig::max_measurement_skew_us`] of the state time).
     pub fn update_zero_velocity(&mut self, t_us: u64) -> Result<(), EstError> {

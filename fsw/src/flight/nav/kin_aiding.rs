@@ -82,27 +82,10 @@ impl Navigator {
         self.cycles_since_vo = self.cycles_since_vo.saturating_add(1);
         let vo_lost = self.cycles_since_vo > self.config.vo_timeout_cycles;
         let holding = self.cycles_since_reject < self.config.slip_hold_cycles;
-        let result = if vo_lost {
-            self.counters.kin_ungated = self.counters.kin_ungated.saturating_add(1);
-            // Without VO the slip is unobservable: the kinematics is fused without the gate but
-            // with a slip allowance (`vo_loss_slip_fraction` of the step on x, y and yaw), so
-            // that slip is not learnt as a heading error; and since nothing else observes the
-            // vertical, with the ground vehicle's constraint that it does not move along its
-            // own z axis (1-sigma 20 % of the step plus 0.5 mm; H04 sec. 3 leaves it unobserved).
-            let step = rp.trans_0_1_m.norm();
-            let yaw = libm::fabs(crate::estimation::state::log_quat(&rp.rot_0_1).z);
-            let f = self.config.vo_loss_slip_fraction;
-            let sigma_z = 0.2 * step + 5.0e-4;
-            if let Some(o) = rp.observed.get_mut(5) {
-                *o = true;
-            }
-            rp.covariance[(5, 5)] += sigma_z * sigma_z;
-            rp.covariance[(3, 3)] += (f * step) * (f * step);
-            rp.covariance[(4, 4)] += (f * step) * (f * step);
-            rp.covariance[(2, 2)] += (f * yaw) * (f * yaw) + 1.0e-8;
-            self.recorder.relative_pose(&rp, false);
-            ekf.update_relative_pose(&rp, false)
-        } else if holding {
+        // The gate test (eq. 46) at the odometry's own covariance: the slip detector. With VO
+        // alive an accepted interval is fused by the same call (unless holding); without VO the
+        // interval is tested here and then fused with the slip allowance below.
+        let result = if vo_lost || holding {
             ekf.gate_relative_pose(&rp)
         } else {
             self.recorder.relative_pose(&rp, true);
@@ -128,22 +111,27 @@ impl Navigator {
                 };
                 if d.accepted {
                     self.cycles_since_reject = self.cycles_since_reject.saturating_add(1);
+                    self.reject_streak = 0;
+                    // H04: no slip when the kinematics agrees with the estimate.
+                    self.slip = SlipVector::default();
+                    if holding && !vo_lost {
+                        self.counters.kin_held = self.counters.kin_held.saturating_add(1);
+                    }
                 } else {
                     self.counters.kin_rejected = self.counters.kin_rejected.saturating_add(1);
                     self.cycles_since_reject = 0;
-                }
-                if d.applied {
-                    self.slip = SlipVector::default();
-                } else {
-                    if d.accepted {
-                        self.counters.kin_held = self.counters.kin_held.saturating_add(1);
-                    }
+                    self.reject_streak = self.reject_streak.saturating_add(1);
                     // Slip = EKF minus kinematics = -(measured - predicted), rover frame R0.
                     self.slip = SlipVector {
                         x_m: -d.residual[3],
                         y_m: -d.residual[4],
                         phi_rad: -d.residual[2],
                     };
+                }
+                if vo_lost {
+                    self.fuse_without_vo(&mut rp);
+                } else if self.reject_streak >= self.config.reject_streak_cycles {
+                    self.recover_from_streak();
                 }
             }
             Err(e) => {
@@ -200,5 +188,58 @@ impl Navigator {
             && j.drive_rate_rad_s
                 .iter()
                 .all(|r| libm::fabs(*r) < self.config.stopped_wheel_rate_rad_s)
+    }
+
+    /// VO lost or off: the interval (already tested by the gate) is fused with a slip allowance
+    /// (`vo_loss_slip_fraction` of the step on x, y and yaw), so that slip is not learnt as a
+    /// heading error, and, since nothing else observes the vertical, with the ground vehicle's
+    /// constraint that it does not move along its own z axis (1-sigma 20 % of the step plus
+    /// 0.5 mm; H04 sec. 3 leaves it unobserved). Without VO slip is unobservable: fusing with
+    /// the allowance keeps the EKF from running on the IMU alone.
+    fn fuse_without_vo(&mut self, rp: &mut RelativePose) {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        self.counters.kin_ungated = self.counters.kin_ungated.saturating_add(1);
+        let step = rp.trans_0_1_m.norm();
+        let yaw = libm::fabs(crate::estimation::state::log_quat(&rp.rot_0_1).z);
+        let f = self.config.vo_loss_slip_fraction;
+        let sigma_z = 0.2 * step + 5.0e-4;
+        if let Some(o) = rp.observed.get_mut(5) {
+            *o = true;
+        }
+        rp.covariance[(5, 5)] += sigma_z * sigma_z;
+        rp.covariance[(3, 3)] += (f * step) * (f * step);
+        rp.covariance[(4, 4)] += (f * step) * (f * step);
+        rp.covariance[(2, 2)] += (f * yaw) * (f * yaw) + 1.0e-8;
+        self.recorder.relative_pose(rp, false);
+        if let Err(e) = ekf.update_relative_pose(rp, false) {
+            self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
+            self.ekf_error(e);
+        }
+    }
+
+    /// A streak of [`NavConfig::reject_streak_cycles`] gate rejections in a row with no VO
+    /// fused in between: either sustained slip or a filter whose velocity has drifted beyond
+    /// what its covariance admits (an IMU worse than its configured noise), which would
+    /// otherwise coast on the IMU for ever. The velocity and accelerometer-bias covariances
+    /// are inflated ([`NavConfig::streak_velocity_sigma_m_s`],
+    /// [`NavConfig::streak_accel_bias_sigma_m_s2`]) so that the next kinematic interval can pull
+    /// the filter back; counted in [`NavCounters::kin_streaks`].
+    fn recover_from_streak(&mut self) {
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        let (v, b) = (
+            self.config.streak_velocity_sigma_m_s,
+            self.config.streak_accel_bias_sigma_m_s2,
+        );
+        self.reject_streak = 0;
+        self.counters.kin_streaks = self.counters.kin_streaks.saturating_add(1);
+        let result = ekf.inflate_velocity(v, b);
+        self.recorder.inflate_velocity(v, b);
+        if let Err(e) = result {
+            self.ekf_error(e);
+        }
     }
 }

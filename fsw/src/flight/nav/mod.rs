@@ -107,7 +107,9 @@ pub struct NavConfig {
     /// Slip hold: after a kinematic interval is rejected, the next intervals are not fused for
     /// this many RG2 cycles even when the gate accepts them (a slipping rover produces some
     /// intervals whose slip is within the noise; fusing them would teach the filter the crab
-    /// angle as a heading error). The slip vector still comes from their residual.
+    /// angle as a heading error). Their slip vector is zero (H04: no slip when the gate
+    /// accepts); they count in [`NavCounters::kin_held`]. Measured effect in
+    /// `docs/estimation.md`.
     pub slip_hold_cycles: u32,
     /// VO fallback: when no VO update was fused for this many RG2 cycles (VO failing, camera
     /// lost, or VO off), kinematic intervals are fused without the gate, since without VO the
@@ -115,6 +117,13 @@ pub struct NavConfig {
     pub vo_timeout_cycles: u32,
     /// Slip allowance of the VO-loss fallback, as a fraction of the kinematic step.
     pub vo_loss_slip_fraction: f64,
+    /// Gate rejections in a row, with no VO fused meanwhile, after which the filter's velocity
+    /// covariance is inflated (RG2 cycles; see `kin_aiding`'s streak recovery).
+    pub reject_streak_cycles: u32,
+    /// Velocity 1-sigma added by the streak recovery, m/s per axis.
+    pub streak_velocity_sigma_m_s: f64,
+    /// Accelerometer-bias 1-sigma added by the streak recovery, m/s^2 per axis.
+    pub streak_accel_bias_sigma_m_s2: f64,
     /// Recorded filter operations replayed per background slice when a VO result is applied at
     /// its capture time ([`Recorder::replay_step`]): bounds the slice (an IMU propagation is
     /// about 10 000 instructions on the rover CPU, an update up to 95 000) while the replay
@@ -174,6 +183,11 @@ impl NavConfig {
             slip_hold_cycles: 20,
             vo_timeout_cycles: 60,
             vo_loss_slip_fraction: 0.3,
+            // 10 s of rejections (4 VO captures at 0.1 m/s): longer than the rover goes without
+            // VO while slipping with VO alive.
+            reject_streak_cycles: 200,
+            streak_velocity_sigma_m_s: 0.05,
+            streak_accel_bias_sigma_m_s2: 0.02,
             replay_ops_per_slice: 16,
             guidance: GuidanceConfig::rocky8(xy),
             imu_timeout_frames: 20,
@@ -224,8 +238,11 @@ pub struct NavCounters {
     pub kin_rejected: u32,
     /// Accepted by the gate but not fused because slip was detected within the hold time.
     pub kin_held: u32,
-    /// Fused without the gate because VO had not updated for the VO timeout (fallback).
+    /// Fused with the slip allowance because VO had not updated for the VO timeout (fallback;
+    /// each is also a gated test in `kin_tested`).
     pub kin_ungated: u32,
+    /// Streaks of gate rejections that triggered the covariance recovery.
+    pub kin_streaks: u32,
     /// Kinematic intervals that could not be formed (odometry or clone error).
     pub kin_errors: u32,
     /// Zero-velocity updates applied.
@@ -312,6 +329,8 @@ pub struct Navigator {
     frames_without_imu: u32,
     cycles_without_joints: u32,
     cycles_since_reject: u32,
+    /// Gate rejections in a row with no VO fused meanwhile.
+    reject_streak: u32,
     cycles_since_vo: u32,
 }
 
@@ -388,6 +407,7 @@ impl Navigator {
             frames_without_imu: 0,
             cycles_without_joints: 0,
             cycles_since_reject: u32::MAX,
+            reject_streak: 0,
             cycles_since_vo: 0,
         })
     }

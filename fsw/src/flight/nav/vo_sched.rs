@@ -283,6 +283,7 @@ impl Navigator {
                     self.counters.vo_large_d2 = self.counters.vo_large_d2.saturating_add(1);
                 }
                 self.cycles_since_vo = 0;
+                self.reject_streak = 0;
             }
             Err(e) => self.ekf_error(e),
         }
