@@ -130,6 +130,10 @@ pub struct NavConfig {
     /// Time fallback: a capture is due this long after the last one, us (EKF time), so that a
     /// stuck or slipping-in-place rover still gets VO.
     pub vo_capture_max_interval_us: u64,
+    /// While VO has no keyframe (after a VO failure or at the start of VO), a capture is due
+    /// this long after the last one, us (EKF time), whatever the motion: VO needs a keyframe
+    /// before it can measure, and a failing camera is not retriggered at the RG3 rate.
+    pub vo_capture_retry_us: u64,
     /// Slip compensation: guidance on the EKF pose with the slip vector (on) or on kinematic
     /// dead reckoning without slip vector (off); see the module doc.
     pub slip_compensation: bool,
@@ -203,6 +207,7 @@ impl NavConfig {
             vo_capture_distance_m: 0.10,
             vo_capture_angle_rad: 10.0_f64.to_radians(),
             vo_capture_max_interval_us: 10_000_000,
+            vo_capture_retry_us: 1_000_000,
             slip_compensation: true,
             slip_hold_cycles: 20,
             vo_timeout_cycles: 60,

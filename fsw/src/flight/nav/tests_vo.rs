@@ -288,8 +288,11 @@ fn nav_vo_4_capture_by_distance_heading_and_time() {
         (c.captures_time, c.captures_distance, c.captures_heading),
         (1, 1, 0)
     );
-    // Without a VO keyframe (VO failure) the capture is due at once.
-    set(&mut nav, 2_000_000, 0.26, 0.0);
+    // Without a VO keyframe (VO failure) a capture is due after the 1 s retry interval,
+    // whatever the motion.
     nav.key_clone = None;
+    set(&mut nav, 2_900_000, 0.80, 0.0);
+    assert_eq!(nav.capture_due(), None);
+    set(&mut nav, 3_000_000, 0.26, 0.0);
     assert_eq!(nav.capture_due(), Some(CaptureReason::Time));
 }

@@ -24,7 +24,8 @@
 //! **Capture policy** ([`Navigator::capture_due`]): a stereo capture is due when the EKF has
 //! travelled [`NavConfig::vo_capture_distance_m`] or rotated [`NavConfig::vo_capture_angle_rad`]
 //! since the last capture, or [`NavConfig::vo_capture_max_interval_us`] has passed (time
-//! fallback); the first capture after VO (re)starts is due at once.
+//! fallback); the first capture is due at once, and while VO has no keyframe (after a VO
+//! failure) a capture is due every [`NavConfig::vo_capture_retry_us`].
 
 use super::*;
 use crate::estimation::gate::chi2_999;
@@ -171,14 +172,19 @@ impl Navigator {
             return None;
         }
         let x = self.ekf.state();
-        // No capture yet, or VO lost its keyframe (failure, outage): capture at once, the next
-        // VO pose needs a keyframe first.
-        let Some(last) = self.last_capture.filter(|_| self.key_clone.is_some()) else {
+        // No capture yet: at once.
+        let Some(last) = self.last_capture else {
             return Some(CaptureReason::Time);
         };
+        let elapsed = x.t_us.saturating_sub(last.t_us);
+        // VO lost its keyframe (failure, outage): the next VO pose needs a keyframe first, so
+        // the next capture is due after the retry interval, whatever the motion.
+        if self.key_clone.is_none() {
+            let due = elapsed >= self.config.vo_capture_retry_us;
+            return due.then_some(CaptureReason::Time);
+        }
         let moved = (x.p_n - last.p_n).norm();
         let turned = (last.q_nr.inverse() * x.q_nr).angle();
-        let elapsed = x.t_us.saturating_sub(last.t_us);
         if moved >= self.config.vo_capture_distance_m {
             Some(CaptureReason::Distance)
         } else if turned >= self.config.vo_capture_angle_rad {
