@@ -4,6 +4,7 @@
 //! and handed to the HAL [`rover_hal::Telemetry`] sink. Each record starts with a one-byte
 //! [`RecordKind`] tag so a ground tool can split a mixed stream.
 
+use crate::flight::nav::vo_gate::VoGateVerdict;
 use crate::flight::nav::{NavCounters, NavMode, Navigator};
 use serde::{Deserialize, Serialize};
 
@@ -91,6 +92,14 @@ pub struct NavTelemetry {
     pub cross_track_m: f32,
     /// Distance to the goal, m (estimated pose).
     pub goal_distance_m: f32,
+    /// VO gate verdict on the last VO pose (the reason of the last rejection while it is one).
+    pub vo_gate_verdict: VoGateVerdict,
+    /// VO gate statistics of the last VO pose: `[d_rot^2, d_pose^2]` (dimensionless).
+    pub vo_gate_d2: [f32; 2],
+    /// Consecutive VO rejections.
+    pub vo_consecutive_rejections: u32,
+    /// A VO rejection streak was reached (the next rejected pose is fused inflated).
+    pub vo_reject_streak: bool,
     /// Navigation counters.
     pub counters: NavCounters,
 }
@@ -117,6 +126,7 @@ impl NavTelemetry {
         let slip = nav.slip();
         let gate = nav.gate();
         let cmd = nav.command();
+        let vo_gate = nav.vo_gate();
         let (cross, goal) = match nav.guidance_output() {
             Some(g) => (g.projection.cross_track_m as f32, g.goal_distance_m as f32),
             None => (0.0, 0.0),
@@ -139,6 +149,10 @@ impl NavTelemetry {
             ],
             cross_track_m: cross,
             goal_distance_m: goal,
+            vo_gate_verdict: vo_gate.verdict,
+            vo_gate_d2: [vo_gate.d2_rotation as f32, vo_gate.d2_pose as f32],
+            vo_consecutive_rejections: vo_gate.consecutive_rejections,
+            vo_reject_streak: vo_gate.streak,
             counters: *nav.counters(),
         }
     }
@@ -202,6 +216,65 @@ mod tests {
         assert_eq!(
             encode(RecordKind::FrameStatus, &record, &mut []),
             Err(EncodeError)
+        );
+    }
+
+    /// TLM-2: the navigation record with every counter and field at its largest encoding fits
+    /// MAX_RECORD_BYTES and decodes back to itself.
+    #[test]
+    fn tlm_2_nav_status_worst_case_fits() {
+        let c = u32::MAX;
+        let counters = NavCounters {
+            kin_tested: c,
+            kin_rejected: c,
+            kin_held: c,
+            kin_ungated: c,
+            kin_errors: c,
+            zupts: c,
+            vo_updates: c,
+            vo_fused: c,
+            vo_replayed: c,
+            vo_replay_lost: c,
+            vo_failures: c,
+            vo_large_d2: c,
+            vo_rejected: c,
+            vo_rejected_rotation: c,
+            vo_reject_streaks: c,
+            vo_forced: c,
+            captures_skipped: c,
+            captures_distance: c,
+            captures_heading: c,
+            captures_time: c,
+            sun_applied: c,
+            sun_refused: c,
+            ekf_errors: c,
+            command_errors: c,
+            sensor_holds: c,
+        };
+        let record = NavTelemetry {
+            tick: u64::MAX,
+            mode: NavMode::Safed,
+            gate_accepted: true,
+            vo_gate_verdict: VoGateVerdict::RejectedError,
+            vo_consecutive_rejections: c,
+            vo_reject_streak: true,
+            counters,
+            ..NavTelemetry::default()
+        };
+        let mut buffer = [0u8; MAX_RECORD_BYTES];
+        let bytes = match encode(RecordKind::NavStatus, &record, &mut buffer) {
+            Ok(b) => b,
+            Err(e) => panic!("encode failed: {e:?}"),
+        };
+        let decoded: NavTelemetry = match postcard::from_bytes(&bytes[1..]) {
+            Ok(d) => d,
+            Err(e) => panic!("decode failed: {e:?}"),
+        };
+        assert_eq!(decoded, record);
+        // Headroom left for the fields other changes add (reported when this test runs).
+        std::println!(
+            "NavStatus worst case: {} of {MAX_RECORD_BYTES} bytes",
+            bytes.len()
         );
     }
 }

@@ -464,10 +464,13 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
         (
             "VO",
             format!(
-                "{} updates, {} failures, {} fused, mean inliers {}",
+                "{} updates, {} failures, {} fused, {} rejected ({} rotation, {} forced), mean inliers {}",
                 summary.nav.vo_updates,
                 summary.nav.vo_failures,
                 summary.nav.vo_fused,
+                summary.nav.vo_rejected,
+                summary.nav.vo_rejected_rotation,
+                summary.nav.vo_forced,
                 fmt_opt(summary.vo.mean_inliers, "", 1)
             ),
         ),

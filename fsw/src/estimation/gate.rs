@@ -19,6 +19,19 @@ pub fn chi2_95(dof: usize) -> Option<f64> {
     }
 }
 
+/// 99.9% quantiles of the chi-square distribution for 0 to 6 degrees of freedom (index = dof;
+/// dof 0 is never used for a decision). The VO gate uses them (`docs/estimation.md`, "VO gate"):
+/// VO is the slip-correcting measurement, so a false rejection costs more than a 3-4 sigma pose.
+pub const CHI2_999: [f64; 7] = [0.0, 10.828, 13.816, 16.266, 18.467, 20.515, 22.458];
+
+/// The 99.9% chi-square threshold for `dof` degrees of freedom (1 to 6), or `None`.
+pub fn chi2_999(dof: usize) -> Option<f64> {
+    match dof {
+        1..=6 => CHI2_999.get(dof).copied(),
+        _ => None,
+    }
+}
+
 /// The outcome of the Mahalanobis test for one relative-pose measurement (eq. 46).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GateDecision {

@@ -50,7 +50,7 @@ mod zupt;
 mod tests;
 
 pub use clone::CloneHandle;
-pub use gate::{GateDecision, CHI2_95};
+pub use gate::{GateDecision, CHI2_95, CHI2_999};
 pub use propagate::PropagationStep;
 pub use replay::{Recorder, ReplayProgress};
 pub use state::{CoreCov, Cov, NominalState, CLONE_DIM, CORE_DIM, DIM, MAX_CLONES};

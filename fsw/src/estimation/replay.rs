@@ -130,6 +130,15 @@ impl Recorder {
         self.snapshot.is_some() && !self.overflowed
     }
 
+    /// The filter as it was at the start of the recording (the capture time), while a recording
+    /// is in progress and no replay has started: a late measurement can be tested there (e.g.
+    /// [`Ekf::gate_relative_pose`]) exactly as [`Self::start_late`] would apply it.
+    pub fn snapshot(&self) -> Option<&Ekf> {
+        self.snapshot
+            .as_ref()
+            .filter(|_| !self.overflowed && self.cursor.is_none())
+    }
+
     /// True when the recording ran out of capacity (the late measurement cannot be replayed).
     pub fn overflowed(&self) -> bool {
         self.overflowed

@@ -8,9 +8,9 @@
 //! |---|---|---|
 //! | RG1 | 200 Hz | `imu`: IMU read and checks; `propagate`: EKF propagation (eq. 26-27) |
 //! | RG2 | 20 Hz | `joints`: joint read and checks; `odometry`: kinematic interval, gate (eq. 46), EKF update or slip vector; `guidance`: carrot and slip loops (eq. 47-49), inverse kinematics, motor command; `telemetry`: status and navigation records |
-//! | RG3 | 1 Hz | `stereo`: capture trigger and clone (eq. 41) |
+//! | RG3 | 5 Hz | `stereo`: capture policy (H04 sec. 2: every 0.25 m or 10 deg of EKF motion, at the latest every 10 s; [`nav::Navigator::capture_due`]), capture trigger and clone (eq. 41); a capture not completed within [`CAPTURE_TIMEOUT_FRAMES`] is timed out |
 //! | RG4 | 0.2 Hz | `sun`: sun read and heading update (RB sec. 5.1) |
-//! | background | every frame | stereo polling, visual odometry work items, VO fusion at the capture clones |
+//! | background | every frame | stereo polling, visual odometry work items, VO gate and fusion at the capture clones |
 //!
 //! Every device reading is checked (error, device-flagged invalid, non-finite, time stamp not
 //! advancing, time going backwards) and counted in [`DeviceHealth`]; only checked readings are
@@ -82,9 +82,11 @@ pub const SCHEDULE_GROUPS: [GroupConfig; GROUP_COUNT] = [
         offset: 1,
         enabled: true,
     },
+    // 5 Hz: checks the distance-based capture policy often enough that a capture starts within
+    // 0.2 s (1 cm at the nominal 5 cm/s) of being due.
     GroupConfig {
         name: "RG3",
-        divisor: 200,
+        divisor: 40,
         offset: 2,
         enabled: true,
     },
@@ -95,6 +97,10 @@ pub const SCHEDULE_GROUPS: [GroupConfig; GROUP_COUNT] = [
         enabled: true,
     },
 ];
+
+/// Minor frames a stereo capture may take to complete before it is counted as a camera
+/// timeout and dropped (1 s, the former RG3 period).
+pub const CAPTURE_TIMEOUT_FRAMES: u64 = 200;
 
 /// Task table in call order, with budgets in microseconds of the rover CPU (300 MHz class;
 /// `docs/timing.md` measures them).
@@ -201,6 +207,8 @@ pub struct FlightState {
     pub sun: Option<SunReading>,
     /// Time stamp of the capture in progress, microseconds since boot.
     pub capture_pending_t_us: Option<u64>,
+    /// Minor-frame tick at which the capture in progress was triggered.
+    pub capture_pending_tick: u64,
     /// Time stamp of the last completed stereo capture, microseconds since boot.
     pub last_capture_t_us: Option<u64>,
     /// Device health counters, indexed by [`DeviceId`].
@@ -444,16 +452,13 @@ impl<P: Platform> Work<'_, P> {
         }
     }
 
-    fn trigger_stereo(&mut self) {
-        if self.nav.vo_busy() || self.nav.replaying() {
-            // VO still works on the last frame (the frame is held), or its result is still
-            // being replayed: this capture is skipped.
-            self.nav.capture_skipped();
-            return;
-        }
+    fn trigger_stereo(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Camera as usize];
         if self.state.capture_pending_t_us.is_some() {
-            // The previous capture has not completed in a whole RG3 period: count and retry.
+            if tick.saturating_sub(self.state.capture_pending_tick) < CAPTURE_TIMEOUT_FRAMES {
+                return;
+            }
+            // The capture has not completed within the timeout: count, drop and retry when due.
             count_error(health, ErrorKind::Timeout);
             if self.devices.camera.release().is_err() {
                 count_error(health, ErrorKind::Hardware);
@@ -461,12 +466,17 @@ impl<P: Platform> Work<'_, P> {
             self.state.capture_pending_t_us = None;
             self.nav.capture_lost();
         }
+        // The navigator decides (capture policy). No capture is triggered that VO cannot use:
+        // while VO works on the last frame (held) or its result is replayed, a due capture
+        // waits (the condition persists) and starts at the first RG3 after VO is idle.
+        let Some(reason) = self.nav.capture_due() else {
+            return;
+        };
         match self.devices.camera.trigger() {
             Ok(t_us) => {
                 self.state.capture_pending_t_us = Some(t_us);
-                if self.nav.wants_capture() {
-                    self.nav.capture_started(t_us);
-                }
+                self.state.capture_pending_tick = tick;
+                self.nav.capture_started(t_us, reason);
             }
             Err(e) => count_error(health, rover_hal::Error::kind(&e)),
         }
@@ -578,7 +588,7 @@ impl<P: Platform> TaskSet for Work<'_, P> {
             3 => self.nav.kinematic_cycle(self.fresh.joints.take().as_ref()),
             4 => self.command_motors(),
             5 => self.send_status(tick),
-            6 => self.trigger_stereo(),
+            6 => self.trigger_stereo(tick),
             7 => self.read_sun(),
             _ => {}
         }

@@ -12,10 +12,14 @@
 //!   residual). The interval starts at an EKF clone and ends at the current state.
 //!   [`Navigator::guidance_cycle`] then runs guidance (eq. 47-49) on the EKF pose and the slip
 //!   vector, and inverse kinematics (eq. 16-25) gives the motor command.
-//! - **RG3** [`Navigator::capture_started`]: the stereo capture time is cloned (eq. 41).
+//! - **RG3** [`Navigator::capture_due`], [`Navigator::capture_started`]: a stereo capture is
+//!   due every [`NavConfig::vo_capture_distance_m`] of EKF travel or
+//!   [`NavConfig::vo_capture_angle_rad`] of rotation, at the latest after
+//!   [`NavConfig::vo_capture_max_interval_us`] (H04 sec. 2); its time is cloned (eq. 41).
 //! - **background** [`Navigator::vo_start`], [`Navigator::vo_step`]: VO runs in the frames'
 //!   slack, work items up to a cost quantum per frame; its relative pose between the previous
-//!   and the current capture clone is applied at capture time by a replay of the recorded
+//!   and the current capture clone is tested by the VO gate ([`vo_gate`]: eq. 46 with a slip
+//!   allowance, rotation against the gyro) and, when accepted, applied at capture time by a replay of the recorded
 //!   filter operations ([`Navigator::replay_step`], 16 operations per frame), however many
 //!   frames later it ends.
 //! - **RG4** [`Navigator::sun`]: the sun-sensor heading update (RB sec. 5.1).
@@ -37,10 +41,14 @@ mod align;
 mod diagnostics;
 mod guidance_adapter;
 mod kin_aiding;
+#[cfg(test)]
+mod tests_vo;
+pub mod vo_gate;
 mod vo_sched;
 
 use align::Alignment;
 use diagnostics::Trajectories;
+use vo_gate::{CaptureMark, VoGateStatus};
 use vo_sched::StereoStage;
 
 use crate::estimation::{
@@ -97,10 +105,39 @@ pub struct NavConfig {
     pub vo: VoConfig,
     /// Run visual odometry on stereo captures.
     pub vo_enabled: bool,
-    /// A VO relative pose whose Mahalanobis distance `d_m^2` exceeds this is counted in
-    /// [`NavCounters::vo_large_d2`] (it is still fused: VO rejects its own outliers and is the
-    /// measurement that corrects slip).
+    /// A fused VO relative pose whose Mahalanobis distance `d_m^2` (eq. 46, the EKF's own
+    /// `S`, no slip allowance) exceeds this is counted in [`NavCounters::vo_large_d2`].
     pub vo_warn_d2: f64,
+    /// Gate VO relative poses (eq. 46 with a slip allowance, and the rotation against the
+    /// gyro-propagated rotation between the capture clones; [`vo_gate`] and
+    /// `docs/estimation.md` "VO gate"). Off: every VO pose is fused (the former behaviour).
+    pub vo_gate_enabled: bool,
+    /// Slip allowance of the VO gate: 1-sigma per translation axis (`R0`, m) added to the
+    /// gate's residual covariance, as a fraction of the EKF's travel between the clones
+    /// (dimensionless). The EKF prior between captures comes from IMU and kinematics, which
+    /// slip pulls away; 0.3 accepts 100 % slip at d^2 of about 7 and rejects a translation
+    /// error of twice the travel.
+    pub vo_gate_slip_fraction: f64,
+    /// Floor of the slip allowance, m (1-sigma per axis), for captures with little travel.
+    pub vo_gate_slip_floor_m: f64,
+    /// Consecutive VO rejections that make a streak ([`NavCounters::vo_reject_streaks`],
+    /// telemetry flag): the next VO pose after a streak is fused even when the gate rejects it,
+    /// with its covariance inflated by the smallest factor `4^n` (n <= 10) that passes the gate
+    /// ([`NavCounters::vo_forced`]), so that a wrong gate cannot lock VO out.
+    pub vo_reject_streak: u32,
+    /// VO capture by distance (H04 sec. 2: images every 20-30 cm): a capture is due when the
+    /// EKF position has moved this far since the last capture, m (3D distance in `N`).
+    pub vo_capture_distance_m: f64,
+    /// A capture is due when the EKF attitude has rotated this much since the last capture, rad
+    /// (angle of the relative rotation; on level ground the heading change).
+    pub vo_capture_angle_rad: f64,
+    /// Time fallback: a capture is due this long after the last one, us (EKF time), so that a
+    /// stuck or slipping-in-place rover still gets VO.
+    pub vo_capture_max_interval_us: u64,
+    /// While VO has no keyframe (after a VO failure or at the start of VO), a capture is due
+    /// this long after the last one, us (EKF time), whatever the motion: VO needs a keyframe
+    /// before it can measure, and a failing camera is not retriggered at the RG3 rate.
+    pub vo_capture_retry_us: u64,
     /// Slip compensation: guidance on the EKF pose with the slip vector (on) or on kinematic
     /// dead reckoning without slip vector (off); see the module doc.
     pub slip_compensation: bool,
@@ -179,6 +216,14 @@ impl NavConfig {
             },
             vo_enabled: true,
             vo_warn_d2: 1.0e3,
+            vo_gate_enabled: true,
+            vo_gate_slip_fraction: 0.3,
+            vo_gate_slip_floor_m: 0.02,
+            vo_reject_streak: 3,
+            vo_capture_distance_m: 0.10,
+            vo_capture_angle_rad: 10.0_f64.to_radians(),
+            vo_capture_max_interval_us: 10_000_000,
+            vo_capture_retry_us: 1_000_000,
             slip_compensation: true,
             slip_hold_cycles: 20,
             vo_timeout_cycles: 60,
@@ -259,8 +304,25 @@ pub struct NavCounters {
     pub vo_failures: u32,
     /// VO relative poses fused with `d_m^2 > vo_warn_d2` (the estimate had drifted).
     pub vo_large_d2: u32,
-    /// Captures skipped because VO was still busy or no clone slot was free.
+    /// VO relative poses rejected by the VO gate and not fused ([`vo_gate`]); the rejections
+    /// by the 6-dof pose test are `vo_rejected - vo_rejected_rotation`.
+    pub vo_rejected: u32,
+    /// Of those, rejected by the rotation check against the gyro-propagated rotation.
+    pub vo_rejected_rotation: u32,
+    /// Streaks of [`NavConfig::vo_reject_streak`] consecutive VO rejections.
+    pub vo_reject_streaks: u32,
+    /// VO poses fused after a streak although the gate rejected them, with inflated covariance.
+    pub vo_forced: u32,
+    /// Captures skipped because no clone slot was free ([`Navigator::capture_skipped`]); a
+    /// capture due while VO is busy waits for it instead.
     pub captures_skipped: u32,
+    /// Captures started because the EKF travelled [`NavConfig::vo_capture_distance_m`].
+    pub captures_distance: u32,
+    /// Captures started because the EKF attitude turned [`NavConfig::vo_capture_angle_rad`].
+    pub captures_heading: u32,
+    /// Captures started by the time fallback [`NavConfig::vo_capture_max_interval_us`] (or the
+    /// first capture of VO).
+    pub captures_time: u32,
     /// Sun updates applied.
     pub sun_applied: u32,
     /// Sun readings refused (gate, skew, not in view).
@@ -325,6 +387,10 @@ pub struct Navigator {
     /// Diagnostic trajectories (kin2d, kin3d, dead reckoning, VO-only).
     traj: Trajectories,
     vo_quality: Option<VoOutput>,
+    /// The VO gate's last verdict and rejection streak.
+    vo_gate: VoGateStatus,
+    /// EKF pose and time of the last capture (the capture policy's reference).
+    last_capture: Option<CaptureMark>,
     counters: NavCounters,
     frames_without_imu: u32,
     cycles_without_joints: u32,
@@ -403,6 +469,8 @@ impl Navigator {
             last_guidance: None,
             traj: Trajectories::new(p0, config.initial_yaw_rad),
             vo_quality: None,
+            vo_gate: VoGateStatus::default(),
+            last_capture: None,
             counters,
             frames_without_imu: 0,
             cycles_without_joints: 0,

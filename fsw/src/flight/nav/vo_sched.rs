@@ -2,6 +2,7 @@
 //! machine, VO work slices, and the fusion of VO relative poses at their capture time by a
 //! sliced replay of the recorded filter operations.
 
+use super::vo_gate::{vo_gate_test, VoGateVerdict, VO_FORCE_MAX_STEPS};
 use super::*;
 
 /// Where the stereo pipeline is.
@@ -78,9 +79,11 @@ impl Navigator {
         matches!(self.stereo, StereoStage::Capturing { .. })
     }
 
-    /// RG3: a capture was triggered at `t_us` (camera time base = IMU time base). Clones the
-    /// state there (eq. 41). Returns false when the capture cannot be used (no clone slot).
-    pub fn capture_started(&mut self, t_us: u64) -> bool {
+    /// RG3: a capture was triggered at `t_us` (camera time base = IMU time base) because it was
+    /// due for `reason` ([`Self::capture_due`]). Clones the state there (eq. 41) and makes the
+    /// current EKF pose the capture policy's reference. Returns false when the capture cannot be
+    /// used (no clone slot).
+    pub fn capture_started(&mut self, t_us: u64, reason: super::vo_gate::CaptureReason) -> bool {
         let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return false;
         };
@@ -90,6 +93,7 @@ impl Navigator {
                 // Record from here on, so that the VO result can be applied at capture time
                 // exactly (replay) however late it arrives.
                 self.recorder.begin(&self.ekf);
+                self.mark_capture(reason);
                 true
             }
             Err(_) => {
@@ -256,25 +260,35 @@ impl Navigator {
         else {
             return;
         };
-        // VO-only dead reckoning, started at the first keyframe's EKF pose.
+        // VO-only dead reckoning, started at the first keyframe's EKF pose. It chains every VO
+        // pose, rejected ones too: it is the diagnostic of VO alone, independent of the gate
+        // (whose verdicts are in the counters and telemetry).
         let anchor = ekf
             .clone_pose(key)
             .ok()
             .map(|(q, p)| PoseEstimate { p_n: p, q_nr: q });
         self.traj.vo_step(anchor, rp);
-        // VO is fused without the gate: it rejects its own outliers (LMedS, H04 sec. 2) and it
-        // is the measurement that corrects an estimate slip has pulled away; a large distance
-        // is counted for the ground.
+        // The VO gate (vo_gate.rs) decides once, before anything is applied, on the filter the
+        // pose is applied to: the recorder's snapshot at capture time when the result is
+        // replayed (so the decision is the one an instantaneous VO would have had), the live
+        // filter otherwise. The pose is then applied without eq. 46's own gate.
+        let Some(fused) = self.vo_gate_decide(rp) else {
+            // Rejected: not fused, counted. The recording since the capture is not needed.
+            if !self.recorder.replaying() {
+                self.recorder.end();
+            }
+            return;
+        };
         // Applied at capture time and replayed to now when the recording since the capture is
         // complete (exact); otherwise at the capture clones (exact there, first order now). The
         // replay runs in background slices (replay_step): the live filter takes the result when
         // the replay has caught up.
         let result = if self.recorder.active() {
             self.counters.vo_replayed = self.counters.vo_replayed.saturating_add(1);
-            self.recorder.start_late(rp, false)
+            self.recorder.start_late(&fused, false)
         } else {
             self.recorder.end();
-            ekf.update_relative_pose(rp, false)
+            self.ekf.update_relative_pose(&fused, false)
         };
         match result {
             Ok(d) => {
@@ -287,5 +301,78 @@ impl Navigator {
             }
             Err(e) => self.ekf_error(e),
         }
+    }
+
+    /// The VO gate (module `vo_gate`): returns the pose to fuse (`rp`, or `rp` with an inflated
+    /// covariance after a rejection streak), or `None` when it is rejected (counted, verdict
+    /// and streak in [`Self::vo_gate`]). An estimator error on the test (clone missing...) is
+    /// counted in [`NavCounters::ekf_errors`] and the pose is not fused.
+    fn vo_gate_decide(&mut self, rp: &RelativePose) -> Option<RelativePose> {
+        if !self.config.vo_gate_enabled {
+            self.vo_gate.verdict = VoGateVerdict::Accepted;
+            return Some(*rp);
+        }
+        let filter = match self.recorder.snapshot().filter(|_| self.recorder.active()) {
+            Some(snapshot) => snapshot,
+            None => &self.ekf,
+        };
+        let decision = match filter.gate_relative_pose(rp) {
+            Ok(d) => d,
+            Err(e) => {
+                self.ekf_error(e);
+                return None;
+            }
+        };
+        let (frac, floor) = (
+            self.config.vo_gate_slip_fraction,
+            self.config.vo_gate_slip_floor_m,
+        );
+        let test = vo_gate_test(&decision, rp, 1.0, frac, floor);
+        let verdict = test.map_or(VoGateVerdict::RejectedError, |t| t.verdict());
+        if let Some(t) = test {
+            self.vo_gate.d2_rotation = t.d2_rotation;
+            self.vo_gate.d2_pose = t.d2_pose;
+        }
+        if verdict == VoGateVerdict::Accepted {
+            self.vo_gate.verdict = verdict;
+            self.vo_gate.consecutive_rejections = 0;
+            self.vo_gate.streak = false;
+            return Some(*rp);
+        }
+        // After a streak the pose is fused with the smallest covariance scale 4^n that passes.
+        if self.vo_gate.streak && verdict != VoGateVerdict::RejectedError {
+            let mut scale = 1.0;
+            for _ in 0..VO_FORCE_MAX_STEPS {
+                scale *= 4.0;
+                let passes = vo_gate_test(&decision, rp, scale, frac, floor)
+                    .is_some_and(|t| t.verdict() == VoGateVerdict::Accepted);
+                if passes {
+                    break;
+                }
+            }
+            self.counters.vo_forced = self.counters.vo_forced.saturating_add(1);
+            self.vo_gate.verdict = VoGateVerdict::Forced;
+            // The streak is over: another one is needed before the next forced fusion (at most
+            // one pose in `vo_reject_streak + 1` is forced when VO is consistently wrong).
+            self.vo_gate.consecutive_rejections = 0;
+            self.vo_gate.streak = false;
+            let mut forced = *rp;
+            forced.covariance *= scale;
+            return Some(forced);
+        }
+        let c = &mut self.counters;
+        c.vo_rejected = c.vo_rejected.saturating_add(1);
+        if verdict == VoGateVerdict::RejectedRotation {
+            c.vo_rejected_rotation = c.vo_rejected_rotation.saturating_add(1);
+        }
+        self.vo_gate.verdict = verdict;
+        self.vo_gate.consecutive_rejections = self.vo_gate.consecutive_rejections.saturating_add(1);
+        if self.vo_gate.consecutive_rejections >= self.config.vo_reject_streak.max(1)
+            && !self.vo_gate.streak
+        {
+            self.vo_gate.streak = true;
+            c.vo_reject_streaks = c.vo_reject_streaks.saturating_add(1);
+        }
+        None
     }
 }
