@@ -303,3 +303,91 @@ fn nav_1_alignment_drive_command_and_sensor_loss_hold() {
     let nan = Navigator::new(NavConfig::rocky8([f64::NAN, 0.0, 0.0], 0.0), &path, &calib);
     assert!(matches!(nan, Err(NavError::BadConfig)));
 }
+
+/// NAV-2 (issue 14): an IMU worse than the filter is configured for. After alignment the
+/// accelerometer takes a 0.05 m/s^2 bias step along x (5 sigma of the configured turn-on
+/// bias, with the configured bias walk far too small to follow it); VO is off and the VO-loss
+/// fallback disabled, so only the gated kinematics corrects the filter. Without the streak
+/// recovery every interval is rejected once the velocity has drifted and the filter coasts
+/// on the IMU for ever; with it, the streak is flagged and the filter comes back.
+#[test]
+fn nav_2_rejection_streak_recovers_a_filter_tuned_too_tight() {
+    use nav::{NavConfig, Navigator};
+    let run = |recover: bool| {
+        let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+        config.vo_enabled = false;
+        config.vo_timeout_cycles = u32::MAX;
+        config.align_sun_wait_samples = 0;
+        if !recover {
+            config.reject_streak_cycles = u32::MAX;
+        }
+        let calib = crate::vo::rocky8_hazcam();
+        let mut nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calib) {
+            Ok(n) => n,
+            Err(e) => panic!("navigator refused: {e:?}"),
+        };
+        let r = config.geometry.wheel_radius_m;
+        let (g, v_cruise, t_start, t_ramp, t_bias) = (3.711, 0.1, 2.5, 0.5, 5.0);
+        let (mut x, mut v, mut error_30s) = (0.0_f64, 0.0_f64, 0.0_f64);
+        let dt = 0.005;
+        for k in 1..=60 * 200u64 {
+            let t = k as f64 * dt;
+            let a = if t > t_start && t <= t_start + t_ramp {
+                v_cruise / t_ramp
+            } else {
+                0.0
+            };
+            v += a * dt;
+            x += v * dt;
+            let bias = if t > t_bias { 0.05 } else { 0.0 };
+            let t_us = k * 5_000;
+            nav.propagate(Some(&ImuSample {
+                t_us,
+                gyro_rad_s: [0.0; 3],
+                accel_m_s2: [a + bias, 0.0, -g],
+                valid: true,
+            }));
+            if k % 10 == 0 {
+                nav.kinematic_cycle(Some(&JointState {
+                    drive_angle_rad: [x / r; 6],
+                    drive_rate_rad_s: [v / r; 6],
+                    ..joints(t_us)
+                }));
+                let _ = nav.guidance_cycle();
+                if k == 30 * 200 {
+                    error_30s = (nav.pose().p_n.x - x).abs();
+                }
+            }
+        }
+        let c = *nav.counters();
+        (
+            (nav.pose().p_n.x - x).abs(),
+            error_30s,
+            c.kin_streaks,
+            c.kin_tested,
+            c.kin_rejected,
+        )
+    };
+    let (final_off, _, streaks_off, tested, rejected) = run(false);
+    assert_eq!(streaks_off, 0);
+    assert!(
+        final_off > 10.0 && rejected > tested * 9 / 10,
+        "without recovery the filter should diverge: {final_off} m, {rejected}/{tested} rejected"
+    );
+    // With the recovery the position error of the streak stays (relative poses do not observe
+    // absolute position) but stops growing: velocity and bias are re-estimated.
+    let (final_on, at_30s, streaks_on, tested, rejected) = run(true);
+    std::eprintln!(
+        "NAV-2: without recovery {final_off:.2} m; with: {at_30s:.3} m at 30 s, {final_on:.3} m \
+         at 60 s, {streaks_on} streak(s), {rejected}/{tested} rejected"
+    );
+    assert!(
+        (1..=3).contains(&streaks_on),
+        "the streak is flagged: {streaks_on}"
+    );
+    assert!(
+        final_on < 1.0 && (final_on - at_30s).abs() < 0.05 && rejected < tested / 4,
+        "with recovery the error stays bounded: {at_30s} m at 30 s, {final_on} m at 60 s, \
+         {rejected}/{tested} rejected"
+    );
+}

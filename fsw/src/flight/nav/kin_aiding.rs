@@ -131,7 +131,13 @@ impl Navigator {
                 if vo_lost {
                     self.fuse_without_vo(&mut rp);
                 } else if self.reject_streak >= self.config.reject_streak_cycles {
-                    self.recover_from_streak();
+                    // The velocity error the last residual implies (translation residual over
+                    // the interval's duration).
+                    let dt_s = rp.t1_us.saturating_sub(rp.t0_us) as f64 * 1e-6;
+                    let r =
+                        libm::sqrt(d.residual[3] * d.residual[3] + d.residual[4] * d.residual[4]);
+                    let implied = if dt_s > 0.0 { r / dt_s } else { 0.0 };
+                    self.recover_from_streak(implied);
                 }
             }
             Err(e) => {
@@ -222,18 +228,26 @@ impl Navigator {
     /// A streak of [`NavConfig::reject_streak_cycles`] gate rejections in a row with no VO
     /// fused in between: either sustained slip or a filter whose velocity has drifted beyond
     /// what its covariance admits (an IMU worse than its configured noise), which would
-    /// otherwise coast on the IMU for ever. The velocity and accelerometer-bias covariances
-    /// are inflated ([`NavConfig::streak_velocity_sigma_m_s`],
-    /// [`NavConfig::streak_accel_bias_sigma_m_s2`]) so that the next kinematic interval can pull
-    /// the filter back; counted in [`NavCounters::kin_streaks`].
-    fn recover_from_streak(&mut self) {
+    /// otherwise coast on the IMU for ever. The velocity covariance is inflated by the velocity
+    /// error the last residual implies, `implied_velocity_m_s` (at least
+    /// [`NavConfig::streak_velocity_sigma_m_s`], at most 1 m/s), and the accelerometer-bias
+    /// covariance by that velocity over the streak's duration (at least
+    /// [`NavConfig::streak_accel_bias_sigma_m_s2`], at most 0.5 m/s^2), so that the next
+    /// kinematic interval can pull the filter back; counted in [`NavCounters::kin_streaks`].
+    fn recover_from_streak(&mut self, implied_velocity_m_s: f64) {
         let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
         };
-        let (v, b) = (
-            self.config.streak_velocity_sigma_m_s,
-            self.config.streak_accel_bias_sigma_m_s2,
-        );
+        let c = &self.config;
+        let implied = if implied_velocity_m_s.is_finite() {
+            implied_velocity_m_s
+        } else {
+            0.0
+        };
+        let v = implied.clamp(c.streak_velocity_sigma_m_s, 1.0);
+        // RG2 period: 20 Hz.
+        let streak_s = f64::from(c.reject_streak_cycles.max(1)) * 0.05;
+        let b = (v / streak_s).clamp(c.streak_accel_bias_sigma_m_s2, 0.5);
         self.reject_streak = 0;
         self.counters.kin_streaks = self.counters.kin_streaks.saturating_add(1);
         let result = ekf.inflate_velocity(v, b);

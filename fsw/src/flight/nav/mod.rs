@@ -228,11 +228,11 @@ impl NavConfig {
             slip_hold_cycles: 20,
             vo_timeout_cycles: 60,
             vo_loss_slip_fraction: 0.3,
-            // 10 s of rejections (4 VO captures at 0.1 m/s): longer than the rover goes without
-            // VO while slipping with VO alive.
-            reject_streak_cycles: 200,
-            streak_velocity_sigma_m_s: 0.05,
-            streak_accel_bias_sigma_m_s2: 0.02,
+            // 4 s of rejections with no VO fused: longer than the rover goes without a VO
+            // update while slipping with VO alive (a capture every 0.1 m, 1-2 s).
+            reject_streak_cycles: 80,
+            streak_velocity_sigma_m_s: 0.01,
+            streak_accel_bias_sigma_m_s2: 0.01,
             replay_ops_per_slice: 16,
             guidance: GuidanceConfig::rocky8(xy),
             imu_timeout_frames: 20,
