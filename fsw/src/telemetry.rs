@@ -248,6 +248,7 @@ mod tests {
             captures_time: c,
             sun_applied: c,
             sun_refused: c,
+            sun_streaks: c,
             heading_from_sun: c,
             heading_from_plan: c,
             ekf_errors: c,

@@ -1,4 +1,4 @@
-//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2: closed-loop scenario runs of the flight software on the
+//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1: closed-loop scenario runs of the flight software on the
 //! simulator with rendered stereo, against the thresholds of `sim_host::sil::CASES` (the same
 //! table `sim-host sil` writes to `docs/sil-results.md`).
 
@@ -101,4 +101,19 @@ fn sil_slip_1_terramechanics_slope() {
 #[test]
 fn sil_slip_2_terramechanics_marsyard() {
     check("SIL-SLIP-2");
+}
+
+#[test]
+fn sil_gate_1_flat_firm_false_alarms() {
+    check("SIL-GATE-1");
+}
+
+#[test]
+fn sil_gate_2_rough_firm_false_alarms() {
+    check("SIL-GATE-2");
+}
+
+#[test]
+fn sil_rb_1_ekf_against_dead_reckoning_without_vo() {
+    check("SIL-RB-1");
 }

@@ -51,6 +51,8 @@ enum Measurement {
     Release { t_us: u64 },
     /// `inflate_velocity(velocity, accel_bias)`.
     Inflate { velocity: f64, accel_bias: f64 },
+    /// `inflate_heading(sigma)`.
+    InflateHeading { sigma: f64 },
 }
 
 /// Which list the next operation comes from.
@@ -225,6 +227,11 @@ impl Recorder {
         self.measurement(Measurement::Release { t_us });
     }
 
+    /// Record `inflate_heading(sigma_rad)`.
+    pub fn inflate_heading(&mut self, sigma_rad: f64) {
+        self.measurement(Measurement::InflateHeading { sigma: sigma_rad });
+    }
+
     /// Record `inflate_velocity(velocity_sigma_m_s, accel_bias_sigma_m_s2)`.
     pub fn inflate_velocity(&mut self, velocity_sigma_m_s: f64, accel_bias_sigma_m_s2: f64) {
         self.measurement(Measurement::Inflate {
@@ -336,6 +343,9 @@ fn replay_one(ekf: &mut Ekf, m: &Measurement) {
             accel_bias,
         } => {
             let _ = ekf.inflate_velocity(*velocity, *accel_bias);
+        }
+        Measurement::InflateHeading { sigma } => {
+            let _ = ekf.inflate_heading(*sigma);
         }
     }
 }

@@ -8,7 +8,7 @@
 //! `w_m - b_hat_g`, `R = sigma_rate^2 I`. It makes the vertical gyro bias observable too.
 
 use super::fusion::Innovation;
-use super::state::{I_BA, I_BG, I_V};
+use super::state::{I_BA, I_BG, I_THETA, I_V};
 use super::{Ekf, EstError};
 use crate::types::{Mat3, Vec3};
 use nalgebra::SMatrix;
@@ -34,6 +34,28 @@ impl Ekf {
         for k in 0..3 {
             self.p[(I_V + k, I_V + k)] += sv * sv;
             self.p[(I_BA + k, I_BA + k)] += sb * sb;
+        }
+        self.check_health()
+    }
+
+    /// Heading-covariance inflation after the sun sensor was refused several times in a row
+    /// (`Navigator`'s sun streak): adds `sigma_rad^2` to the variance of the rotation about
+    /// `N`'s vertical (`P_tt += sigma^2 e e'`, `e = C' z_N` in the rover frame), so the next sun
+    /// reading can correct a heading that drifted beyond its covariance. `sigma_rad` must be
+    /// finite and non-negative.
+    pub fn inflate_heading(&mut self, sigma_rad: f64) -> Result<(), EstError> {
+        if self.fault {
+            return Err(EstError::Faulted);
+        }
+        if !(sigma_rad.is_finite() && sigma_rad >= 0.0) {
+            return Err(EstError::NonFiniteInput);
+        }
+        let e = super::state::rot(&self.x.q_nr).transpose() * Vec3::z();
+        let add = e * e.transpose() * (sigma_rad * sigma_rad);
+        for r in 0..3 {
+            for c in 0..3 {
+                self.p[(I_THETA + r, I_THETA + c)] += add[(r, c)];
+            }
         }
         self.check_health()
     }

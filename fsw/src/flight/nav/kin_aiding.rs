@@ -201,7 +201,10 @@ impl Navigator {
     /// heading error, and, since nothing else observes the vertical, with the ground vehicle's
     /// constraint that it does not move along its own z axis (1-sigma 20 % of the step plus
     /// 0.5 mm; H04 sec. 3 leaves it unobserved). Without VO slip is unobservable: fusing with
-    /// the allowance keeps the EKF from running on the IMU alone.
+    /// the allowance keeps the EKF from running on the IMU alone. With
+    /// [`NavConfig::vo_loss_translation_only`] the rotation is not fused: on slipping ground the
+    /// wheels' yaw carries the yaw slip, while the gyro (with the sun for its bias) is far
+    /// better over an interval.
     fn fuse_without_vo(&mut self, rp: &mut RelativePose) {
         let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
@@ -218,6 +221,11 @@ impl Navigator {
         rp.covariance[(3, 3)] += (f * step) * (f * step);
         rp.covariance[(4, 4)] += (f * step) * (f * step);
         rp.covariance[(2, 2)] += (f * yaw) * (f * yaw) + 1.0e-8;
+        if self.config.vo_loss_translation_only {
+            for o in rp.observed.iter_mut().take(3) {
+                *o = false;
+            }
+        }
         self.recorder.relative_pose(rp, false);
         if let Err(e) = ekf.update_relative_pose(rp, false) {
             self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);

@@ -154,6 +154,12 @@ pub struct NavConfig {
     pub vo_timeout_cycles: u32,
     /// Slip allowance of the VO-loss fallback, as a fraction of the kinematic step.
     pub vo_loss_slip_fraction: f64,
+    /// The VO-loss fallback fuses the kinematic translation only (rotation from the gyro and
+    /// the sun).
+    pub vo_loss_translation_only: bool,
+    /// Sun readings refused by the sun's gate in a row after which the heading covariance is
+    /// inflated (see [`Navigator::sun`]).
+    pub sun_streak: u32,
     /// Gate rejections in a row, with no VO fused meanwhile, after which the filter's velocity
     /// covariance is inflated (RG2 cycles; see `kin_aiding`'s streak recovery).
     pub reject_streak_cycles: u32,
@@ -228,9 +234,11 @@ impl NavConfig {
             slip_hold_cycles: 20,
             vo_timeout_cycles: 60,
             vo_loss_slip_fraction: 0.3,
+            vo_loss_translation_only: true,
             // 4 s of rejections with no VO fused: longer than the rover goes without a VO
             // update while slipping with VO alive (a capture every 0.1 m, 1-2 s).
             reject_streak_cycles: 80,
+            sun_streak: 3,
             streak_velocity_sigma_m_s: 0.01,
             streak_accel_bias_sigma_m_s2: 0.01,
             replay_ops_per_slice: 16,
@@ -327,6 +335,8 @@ pub struct NavCounters {
     pub sun_applied: u32,
     /// Sun readings refused (gate, skew, not in view).
     pub sun_refused: u32,
+    /// Streaks of sun readings refused by the gate that inflated the heading covariance.
+    pub sun_streaks: u32,
     /// Alignments whose heading came from the sun sensor.
     pub heading_from_sun: u32,
     /// Alignments that took the plan's heading (no usable sun reading in time).
@@ -397,6 +407,8 @@ pub struct Navigator {
     cycles_since_reject: u32,
     /// Gate rejections in a row with no VO fused meanwhile.
     reject_streak: u32,
+    /// Sun readings refused by the sun's gate in a row.
+    sun_rejections: u32,
     cycles_since_vo: u32,
 }
 
@@ -476,6 +488,7 @@ impl Navigator {
             cycles_without_joints: 0,
             cycles_since_reject: u32::MAX,
             reject_streak: 0,
+            sun_rejections: 0,
             cycles_since_vo: 0,
         })
     }
@@ -586,7 +599,12 @@ impl Navigator {
         }
     }
 
-    /// RG4: one checked sun reading with the sun in view.
+    /// RG4: one checked sun reading with the sun in view (RB sec. 5.1). While aligning it is
+    /// kept for the heading. Afterwards it updates the EKF; [`NavConfig::sun_streak`] refusals
+    /// in a row by the sun's gate (the filter's heading drifted beyond its covariance, e.g.
+    /// kinematic yaw fused while the wheels slip) inflate the heading covariance by the last
+    /// residual angle (at least 0.01 rad) so that the next reading corrects it; counted in
+    /// [`NavCounters::sun_streaks`].
     pub fn sun(&mut self, reading: &SunReading) {
         if self.mode == NavMode::Aligning {
             self.align.add_sun(reading);
@@ -599,11 +617,25 @@ impl Navigator {
         self.recorder.sun(reading);
         match result {
             Ok(u) if u.applied => {
+                self.sun_rejections = 0;
                 self.counters.sun_applied = self.counters.sun_applied.saturating_add(1)
             }
-            Ok(_) | Err(_) => {
-                self.counters.sun_refused = self.counters.sun_refused.saturating_add(1)
+            Ok(u) => {
+                self.counters.sun_refused = self.counters.sun_refused.saturating_add(1);
+                self.sun_rejections = self.sun_rejections.saturating_add(1);
+                if self.sun_rejections >= self.config.sun_streak {
+                    self.sun_rejections = 0;
+                    let angle = libm::sqrt(u.residual[0] * u.residual[0] + u.residual[1] * u.residual[1]);
+                    let sigma = if angle.is_finite() { angle.clamp(0.01, 1.0) } else { 0.01 };
+                    self.counters.sun_streaks = self.counters.sun_streaks.saturating_add(1);
+                    let r = ekf.inflate_heading(sigma);
+                    self.recorder.inflate_heading(sigma);
+                    if let Err(e) = r {
+                        self.ekf_error(e);
+                    }
+                }
             }
+            Err(_) => self.counters.sun_refused = self.counters.sun_refused.saturating_add(1),
         }
     }
 
