@@ -9,7 +9,7 @@ use crate::flight::nav::{NavCounters, NavMode, Navigator};
 use serde::{Deserialize, Serialize};
 
 /// Largest encoded record, bytes. Every record type is checked against it in the tests.
-pub const MAX_RECORD_BYTES: usize = 256;
+pub const MAX_RECORD_BYTES: usize = 288;
 
 /// Tag byte that starts every record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -249,6 +249,8 @@ mod tests {
             sun_applied: c,
             sun_refused: c,
             sun_streaks: c,
+            vo_start_holds: c,
+            vo_start_timeouts: c,
             heading_from_sun: c,
             heading_from_plan: c,
             ekf_errors: c,

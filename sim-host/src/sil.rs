@@ -726,7 +726,7 @@ fixed:
   which wheels spin and which one is pushed up. A quasi-static force model of the climb is the
   missing piece (simulator side).
 - **SIL-RB-1** (`dunes-long` without VO, EKF error at most 0.6 times dead reckoning's, RB's
-  "up to 40 %"): RB's gain came from a simulation whose errors were white sensor noise (20 %
+  'up to 40 %'): RB's gain came from a simulation whose errors were white sensor noise (20 %
   of each velocity) and heading; on our dunes the error of both is the systematic slip of the
   sand (mean slip ratio 0.2-0.25: the wheels turn a quarter more than the rover moves), which
   neither the IMU nor the sun observes, so both are about 35 % off along the track. The EKF

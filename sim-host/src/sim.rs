@@ -330,34 +330,6 @@ pub fn run_with<H: RunHooks>(
             let w = world.borrow();
             if w.steps % 10 == 0 {
                 records.push(record(&w, &scenario.waypoints, &fsw));
-                if let Ok(path) = std::env::var("SIM_GATE_DUMP") {
-                    use std::io::Write as _;
-                    let g = fsw.nav().gate();
-                    let c = fsw.nav().counters();
-                    if let Ok(mut f) = std::fs::OpenOptions::new()
-                        .create(true)
-                        .append(true)
-                        .open(path)
-                    {
-                        let sp = &w.truth.suspension;
-                        let _ = writeln!(
-                            f,
-                            "{} {} {} {} {:?} {:?} {:?}",
-                            w.truth.t_us,
-                            c.kin_tested,
-                            g.accepted,
-                            g.d2,
-                            g.residual,
-                            g.sigma,
-                            [
-                                sp.rocker_rad,
-                                sp.bogie_rad[0],
-                                sp.bogie_rad[1],
-                                w.truth.distance_m
-                            ]
-                        );
-                    }
-                }
             }
         }
         steps += 1;

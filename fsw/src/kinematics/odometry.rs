@@ -56,7 +56,12 @@ pub struct OdometryConfig {
     /// Estimate the wheel/terrain contact angles with the body displacement (V99 sec. 6,
     /// [`super::contact`]). Default `false`: the contacts are assumed below the axles (eq. 15).
     pub contact_angles: bool,
-    /// Tuning of the contact-angle estimator (used only with `contact_angles`).
+    /// Also run the contact-angle estimator as a diagnostic: its translation is available from
+    /// [`KinematicOdometry::contact_translation_m`] (the navigator's 3D kinematic dead
+    /// reckoning) while the relative pose stays eq. 15. Ignored with `contact_angles`.
+    pub contact_translation: bool,
+    /// Tuning of the contact-angle estimator (used with `contact_angles` or
+    /// `contact_translation`).
     pub contact: ContactConfig,
 }
 
@@ -80,6 +85,7 @@ impl Default for OdometryConfig {
             articulation_fraction: 1.5,
             observed: [true, true, true, true, true, false],
             contact_angles: false,
+            contact_translation: false,
             contact: ContactConfig::default(),
         }
     }
@@ -161,6 +167,7 @@ pub struct KinematicOdometry {
     covariance: Mat6,
     contact_rad: [f64; WHEEL_COUNT],
     window: SuspensionWindow,
+    contact_trans_0_k_m: Vec3,
 }
 
 fn skew(v: &Vec3) -> Mat3 {
@@ -191,6 +198,7 @@ impl KinematicOdometry {
             covariance: Mat6::zeros(),
             contact_rad: [0.0; WHEEL_COUNT],
             window: SuspensionWindow::new(),
+            contact_trans_0_k_m: Vec3::zeros(),
         }
     }
 
@@ -224,6 +232,7 @@ impl KinematicOdometry {
         self.t0_us = joints.t_us;
         self.rot_0_k = Quat::identity();
         self.trans_0_k_m = Vec3::zeros();
+        self.contact_trans_0_k_m = Vec3::zeros();
         self.covariance = Mat6::zeros();
         Ok(())
     }
@@ -304,52 +313,28 @@ impl KinematicOdometry {
         });
         let frames = wheel_frames_trusted(&self.geometry, &state);
         let radius = self.geometry.wheel_radius_m;
-        let (step, jacobians, lsq, contact) = if self.config.contact_angles {
-            let sol = contact_step_frames(
-                &self.geometry,
-                &frames,
-                &increments,
-                &drive,
-                &valid,
-                gyro_rad,
-                &self.contact_rad,
-                &self.config.contact,
-            )?;
-            // The common mode of the angles (all tangents tilted alike) is the direction of the
-            // body's motion in its own x-z plane, which the wheels barely observe (the same rim
-            // travels fit a body moving along x or climbing along a tilted x): with
-            // `ContactConfig::zero_mean` the angles are taken relative to their mean over the
-            // valid wheels, and the body step is the eq. 15 least squares along the resulting
-            // contact tangents.
-            let mut angles = sol.contact_angles_rad;
-            let (mut sum, mut n) = (0.0, 0.0);
-            for (a, v) in angles.iter().zip(valid.iter()) {
-                if *v {
-                    sum += a;
-                    n += 1.0;
-                }
-            }
-            let zero_mean = self.config.contact.zero_mean && n > 0.0;
-            if zero_mean {
-                let mean = sum / n;
-                for a in angles.iter_mut() {
-                    *a -= mean;
-                }
-            }
-            let jacobians = contact_jacobians(&frames, radius, &angles);
-            let lsq = ContactLeastSquares::new(&jacobians.map(|j| j.contact_point_m), &valid)?;
-            let step = if zero_mean {
-                lsq.solve(&contact_velocities(&jacobians, &increments, &drive))
+        let use_contacts = self.config.contact_angles || self.config.contact_translation;
+        // The contact-angle step (V99 sec. 6): the measurement with `contact_angles`, the
+        // diagnostic translation with `contact_translation` (then a failure only skips it).
+        let contact = if use_contacts {
+            let c = self.contact_solution(&frames, &increments, &drive, &valid, gyro_rad);
+            if self.config.contact_angles {
+                Some(c?)
             } else {
-                sol.body_step
-            };
-            (step, jacobians, lsq, Some(angles))
+                c.ok()
+            }
         } else {
-            let jacobians = frames.map(|f| WheelJacobian::from_frames(&f, radius));
-            let points = frames.map(|f| f.contact_point_m);
-            let lsq = ContactLeastSquares::new(&points, &valid)?;
-            let step = lsq.solve(&contact_velocities(&jacobians, &increments, &drive));
-            (step, jacobians, lsq, None)
+            None
+        };
+        let (step, jacobians, lsq) = match (&contact, self.config.contact_angles) {
+            (Some((step, jacobians, lsq, _)), true) => (*step, *jacobians, *lsq),
+            _ => {
+                let jacobians = frames.map(|f| WheelJacobian::from_frames(&f, radius));
+                let points = frames.map(|f| f.contact_point_m);
+                let lsq = ContactLeastSquares::new(&points, &valid)?;
+                let step = lsq.solve(&contact_velocities(&jacobians, &increments, &drive));
+                (step, jacobians, lsq)
+            }
         };
         if step.iter().any(|x| !x.is_finite()) {
             return Err(KinematicsError::NonFinite);
@@ -357,11 +342,96 @@ impl KinematicOdometry {
         self.window.push(cur);
         let articulation = self.window.mean_increment().unwrap_or(increments);
         let q = self.step_covariance(&lsq, &jacobians, &frames, &drive, &articulation, &valid);
+        if let Some((c_step, _, _, _)) = &contact {
+            if self.config.contact_translation && c_step.iter().all(|x| x.is_finite()) {
+                // The contact-angle translation in the interval's start frame, rotated like the
+                // measurement's own step.
+                let rot = self.rot_0_k.to_rotation_matrix().into_inner();
+                let half = Quat::from_scaled_axis(Vec3::new(step[3], step[4], step[5]) * 0.5);
+                self.contact_trans_0_k_m +=
+                    rot * (half * Vec3::new(c_step[0], c_step[1], c_step[2]));
+            }
+        }
         self.compose(&step, &q);
-        if let Some(angles) = contact {
+        if let Some((_, _, _, angles)) = contact {
             self.contact_rad = angles;
         }
         Ok(())
+    }
+
+    /// The contact-angle body step of one joint step (V99 sec. 6, [`super::contact`]): the
+    /// angles are estimated with the gyro rotation, taken relative to their mean
+    /// (`ContactConfig::zero_mean`), and the body step is the eq. 15 least squares along the
+    /// resulting contact tangents. Returns the step `[dp; dphi]`, the Jacobians, the least
+    /// squares and the angles.
+    #[allow(clippy::type_complexity)]
+    fn contact_solution(
+        &self,
+        frames: &[super::geometry::WheelFrames; WHEEL_COUNT],
+        increments: &SuspensionRates,
+        drive: &[f64; WHEEL_COUNT],
+        valid: &[bool; WHEEL_COUNT],
+        gyro_rad: Option<Vec3>,
+    ) -> Result<
+        (
+            Vec6,
+            [WheelJacobian; WHEEL_COUNT],
+            ContactLeastSquares,
+            [f64; WHEEL_COUNT],
+        ),
+        KinematicsError,
+    > {
+        let sol = contact_step_frames(
+            &self.geometry,
+            frames,
+            increments,
+            drive,
+            valid,
+            gyro_rad,
+            &self.contact_rad,
+            &self.config.contact,
+        )?;
+        // The common mode of the angles (all tangents tilted alike) is the direction of the
+        // body's motion in its own x-z plane, which the wheels barely observe (the same rim
+        // travels fit a body moving along x or climbing along a tilted x): with
+        // `ContactConfig::zero_mean` the angles are taken relative to their mean over the
+        // valid wheels, and the body step is the eq. 15 least squares along the resulting
+        // contact tangents.
+        let mut angles = sol.contact_angles_rad;
+        let (mut sum, mut n) = (0.0, 0.0);
+        for (a, v) in angles.iter().zip(valid.iter()) {
+            if *v {
+                sum += a;
+                n += 1.0;
+            }
+        }
+        let zero_mean = self.config.contact.zero_mean && n > 0.0;
+        if zero_mean {
+            let mean = sum / n;
+            for a in angles.iter_mut() {
+                *a -= mean;
+            }
+        }
+        let jacobians = contact_jacobians(frames, self.geometry.wheel_radius_m, &angles);
+        let lsq = ContactLeastSquares::new(&jacobians.map(|j| j.contact_point_m), valid)?;
+        let step = if zero_mean {
+            lsq.solve(&contact_velocities(&jacobians, increments, drive))
+        } else {
+            sol.body_step
+        };
+        Ok((step, jacobians, lsq, angles))
+    }
+
+    /// Translation of the current interval from the contact-angle step (m, `R` at the interval
+    /// start), accumulated with [`OdometryConfig::contact_translation`]; the measurement's own
+    /// translation otherwise. A diagnostic for the 3D kinematic dead reckoning: the
+    /// measurement fused by the EKF stays eq. 15 unless [`OdometryConfig::contact_angles`].
+    pub fn contact_translation_m(&self) -> Vec3 {
+        if self.config.contact_translation && !self.config.contact_angles {
+            self.contact_trans_0_k_m
+        } else {
+            self.trans_0_k_m
+        }
     }
 
     /// Covariance of the step `[dphi; dp]` (in the step-start frame) from the encoder noise.

@@ -98,10 +98,11 @@ impl Trajectories {
         self.dr.p_n += self.dr.q_nr.transform_vector(&Vec3::new(dx, dy, 0.0));
     }
 
-    /// RG2: the kinematic interval's translation (eq. 15, `R` at its start) rotated by the EKF
-    /// attitude `q0` of the start; the attitude becomes the EKF's current `q_now`.
-    pub fn kinematic_step(&mut self, q0: &Quat, rp: &RelativePose, q_now: &Quat) {
-        self.kin3d.p_n += q0.to_rotation_matrix() * rp.trans_0_1_m;
+    /// RG2: the kinematic interval's translation `trans_0_1_m` (m, `R` at its start: the
+    /// contact-angle estimator's, V99 sec. 6, or eq. 15's) rotated by the EKF attitude `q0` of
+    /// the start; the attitude becomes the EKF's current `q_now`.
+    pub fn kinematic_step(&mut self, q0: &Quat, trans_0_1_m: &Vec3, q_now: &Quat) {
+        self.kin3d.p_n += q0.to_rotation_matrix() * trans_0_1_m;
         self.kin3d.q_nr = *q_now;
     }
 

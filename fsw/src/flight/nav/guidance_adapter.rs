@@ -6,7 +6,12 @@ use super::*;
 impl Navigator {
     /// RG2, after [`Self::kinematic_cycle`]: guidance and inverse kinematics. Returns the motor
     /// command, or `None` when the rover must be stopped (aligning, arrived, safed, a sensor
-    /// lost, or a guidance/kinematics failure).
+    /// lost, waiting for VO's first keyframe, or a guidance/kinematics failure).
+    ///
+    /// With VO running the rover does not start before VO holds its first keyframe (at most
+    /// [`NavConfig::vo_start_timeout_cycles`], then it drives on the kinematic fallback,
+    /// counted in [`NavCounters::vo_start_timeouts`]): the first metres on a slope are where
+    /// slip, unseen without VO, is learnt as a heading error.
     pub fn guidance_cycle(&mut self) -> Option<MobilityCommand> {
         self.command = VehicleCommand::default();
         if self.mode != NavMode::Driving {
@@ -17,6 +22,15 @@ impl Navigator {
         {
             self.counters.sensor_holds = self.counters.sensor_holds.saturating_add(1);
             return None;
+        }
+        if self.vo.is_some() && !self.vo_started {
+            if self.cycles_waiting_vo < self.config.vo_start_timeout_cycles {
+                self.cycles_waiting_vo = self.cycles_waiting_vo.saturating_add(1);
+                self.counters.vo_start_holds = self.counters.vo_start_holds.saturating_add(1);
+                return None;
+            }
+            self.vo_started = true;
+            self.counters.vo_start_timeouts = self.counters.vo_start_timeouts.saturating_add(1);
         }
         let (ekf, guidance, joints) = match (
             self.ekf_running.then_some(&self.ekf),

@@ -53,12 +53,12 @@ impl Navigator {
             .gyro_since_joints
             .replace(crate::types::Quat::identity())
             .map(|q| crate::estimation::state::log_quat(&q));
-        let pose = self
-            .odometry
-            .update_with_gyro(j, gyro)
-            .and_then(|()| self.odometry.take());
-        let mut rp = match pose {
-            Ok(rp) => rp,
+        let pose = self.odometry.update_with_gyro(j, gyro).and_then(|()| {
+            let contact_translation = self.odometry.contact_translation_m();
+            self.odometry.take().map(|rp| (rp, contact_translation))
+        });
+        let (mut rp, contact_translation) = match pose {
+            Ok(p) => p,
             Err(KinematicsError::TimeNotAdvancing) => return,
             Err(_) => {
                 self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
@@ -77,7 +77,8 @@ impl Navigator {
         rp.t0_us = start.t_us();
         rp.t1_us = t_us;
         if let Ok((q0, _)) = ekf.clone_pose(start) {
-            self.traj.kinematic_step(&q0, &rp, &ekf.state().q_nr);
+            self.traj
+                .kinematic_step(&q0, &contact_translation, &ekf.state().q_nr);
         }
         self.cycles_since_vo = self.cycles_since_vo.saturating_add(1);
         let vo_lost = self.cycles_since_vo > self.config.vo_timeout_cycles;

@@ -157,6 +157,9 @@ pub struct NavConfig {
     /// The VO-loss fallback fuses the kinematic translation only (rotation from the gyro and
     /// the sun).
     pub vo_loss_translation_only: bool,
+    /// RG2 cycles the rover waits at the start for VO's first keyframe (VO running) before it
+    /// drives without VO.
+    pub vo_start_timeout_cycles: u32,
     /// Sun readings refused by the sun's gate in a row after which the heading covariance is
     /// inflated (see [`Navigator::sun`]).
     pub sun_streak: u32,
@@ -200,17 +203,22 @@ impl NavConfig {
             initial_yaw_sigma_rad: 0.05,
             initial_position_sigma_m: 0.05,
             align_samples: 400,
-            align_sun_wait_samples: 2000,
+            // One RG4 period (5 s) and a second of margin.
+            align_sun_wait_samples: 1200,
             ekf: EkfConfig::default(),
             gyro_bias_sigma_rad_s: 2.0e-4,
             accel_bias_sigma_m_s2: 1.0e-2,
-            // Eq. 15 kinematics (contacts below the axles) with the calibrated noise model.
-            // The contact-angle estimator (V99 sec. 6, `OdometryConfig::contact_angles`) cuts
-            // the 3D odometry's distance error on `undulating` from 1.31 % to 0.32 %, but its
-            // step takes the gyro rotation as an input and its covariance does not describe its
-            // residuals: with it the gate rejects 54 % of the intervals on firm flat ground
-            // without slip (`docs/kinematics.md`), so it stays off until its covariance is right.
-            odometry: OdometryConfig::default(),
+            // Eq. 15 kinematics (contacts below the axles) with the calibrated noise model for
+            // the gate and the EKF. The contact-angle estimator (V99 sec. 6) cuts the 3D
+            // odometry's distance error on `undulating` from 1.31 % to 0.32 %, but its step
+            // takes the gyro rotation as an input and its covariance does not describe its
+            // residuals (the gate rejected 54 % of the intervals on firm flat ground without
+            // slip, `docs/kinematics.md`): it runs as the diagnostic translation of the 3D
+            // kinematic dead reckoning (`contact_translation`) only.
+            odometry: OdometryConfig {
+                contact_translation: true,
+                ..OdometryConfig::default()
+            },
             // The EKF prior predicts each feature within a few pixels over a 1 s step, so the
             // tracking window is 8 px, not the stand-alone default of 24 px (9x less work), and
             // the stereo search of a tracked feature covers +-8 px around the disparity of the
@@ -239,6 +247,7 @@ impl NavConfig {
             // update while slipping with VO alive (a capture every 0.1 m, 1-2 s).
             reject_streak_cycles: 80,
             sun_streak: 3,
+            vo_start_timeout_cycles: 600,
             streak_velocity_sigma_m_s: 0.01,
             streak_accel_bias_sigma_m_s2: 0.01,
             replay_ops_per_slice: 16,
@@ -335,6 +344,10 @@ pub struct NavCounters {
     pub sun_applied: u32,
     /// Sun readings refused (gate, skew, not in view).
     pub sun_refused: u32,
+    /// RG2 cycles the rover was held at the start waiting for VO's first keyframe.
+    pub vo_start_holds: u32,
+    /// Starts that gave up waiting for VO's first keyframe.
+    pub vo_start_timeouts: u32,
     /// Streaks of sun readings refused by the gate that inflated the heading covariance.
     pub sun_streaks: u32,
     /// Alignments whose heading came from the sun sensor.
@@ -409,6 +422,10 @@ pub struct Navigator {
     reject_streak: u32,
     /// Sun readings refused by the sun's gate in a row.
     sun_rejections: u32,
+    /// VO has held a keyframe since the start (or its start wait timed out).
+    vo_started: bool,
+    /// RG2 cycles the rover waited for VO's first keyframe.
+    cycles_waiting_vo: u32,
     cycles_since_vo: u32,
 }
 
@@ -489,6 +506,8 @@ impl Navigator {
             cycles_since_reject: u32::MAX,
             reject_streak: 0,
             sun_rejections: 0,
+            vo_started: false,
+            cycles_waiting_vo: 0,
             cycles_since_vo: 0,
         })
     }
@@ -583,7 +602,7 @@ impl Navigator {
             if let Err(e) = result {
                 self.ekf_error(e);
             }
-            if self.config.odometry.contact_angles {
+            if self.config.odometry.contact_angles || self.config.odometry.contact_translation {
                 self.integrate_gyro(s);
             }
             self.traj.gyro(s);
@@ -625,8 +644,13 @@ impl Navigator {
                 self.sun_rejections = self.sun_rejections.saturating_add(1);
                 if self.sun_rejections >= self.config.sun_streak {
                     self.sun_rejections = 0;
-                    let angle = libm::sqrt(u.residual[0] * u.residual[0] + u.residual[1] * u.residual[1]);
-                    let sigma = if angle.is_finite() { angle.clamp(0.01, 1.0) } else { 0.01 };
+                    let angle =
+                        libm::sqrt(u.residual[0] * u.residual[0] + u.residual[1] * u.residual[1]);
+                    let sigma = if angle.is_finite() {
+                        angle.clamp(0.01, 1.0)
+                    } else {
+                        0.01
+                    };
                     self.counters.sun_streaks = self.counters.sun_streaks.saturating_add(1);
                     let r = ekf.inflate_heading(sigma);
                     self.recorder.inflate_heading(sigma);

@@ -247,6 +247,9 @@ impl Navigator {
         };
         self.release(drop);
         self.key_clone = keep;
+        if keep.is_some() {
+            self.vo_started = true;
+        }
         if keep.is_none() {
             if let Some(vo) = self.vo.as_mut() {
                 // A keyframe without its clone cannot be used: rebuild at the next capture.
