@@ -478,12 +478,14 @@ impl KinematicOdometry {
         let articulation = contact_velocities(jacobians, articulation_rate, &[0.0; WHEEL_COUNT]);
         for i in 0..WHEEL_COUNT {
             let moved = articulation[i].norm();
-            if !valid[i] || !(moved > 0.0) {
+            let moving = moved > 0.0;
+            if !valid[i] || !moving {
                 continue;
             }
             let rolling = jacobians[i].drive;
             let n = rolling.norm();
-            if !(n > 0.0) {
+            let rolls = n > 0.0;
+            if !rolls {
                 continue;
             }
             let along = rolling / n;

@@ -30,7 +30,8 @@ impl Alignment {
     pub(super) fn add_sun(&mut self, reading: &SunReading) {
         let s = reading.sun_dir_rover;
         let norm = libm::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
-        if !reading.sun_in_view || !(libm::fabs(norm - 1.0) < 0.01) {
+        let unit = libm::fabs(norm - 1.0) < 0.01;
+        if !reading.sun_in_view || !unit {
             return;
         }
         for (acc, v) in self.sun.iter_mut().zip(s.iter()) {
