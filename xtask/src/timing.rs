@@ -407,9 +407,11 @@ fn groups(m: &Measured) -> Vec<Group> {
         },
         Group {
             name: "RG3",
-            period_s: 1.0,
+            period_s: 0.2,
             insns: exec_group_insns(m, "RG3"),
-            content: "stereo trigger, capture clone and recorder snapshot".into(),
+            content: "capture decision (distance, heading, time), stereo trigger, capture \
+                      clone and recorder snapshot"
+                .into(),
         },
         Group {
             name: "RG4",
@@ -421,8 +423,8 @@ fn groups(m: &Measured) -> Vec<Group> {
             name: "VO",
             period_s: 1.0,
             insns: m.task("vo_update").max,
-            content: "one visual-odometry update per stereo pair (largest measured), run in \
-                      the background slices of the frames"
+            content: "one visual-odometry update per stereo pair (largest measured; a capture \
+                      every 0.1 m, 1 s at 0.1 m/s), run in the background slices of the frames"
                 .into(),
         },
     ]
