@@ -370,6 +370,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
             },
             renderer,
             progress,
+            configure: None,
         },
     )?;
     if let Some(b) = bar {
