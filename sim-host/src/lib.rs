@@ -14,12 +14,15 @@
 //! - [`driver`]: the simulator's reference driver (not flight code).
 //! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
 //! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
+//! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
+//!   policy (`docs/slip-detection.md`).
 //! - [`devices`], [`run`]: the standing-still devices of the `still` command.
 //! - [`record`], [`replay`]: call tapes of the HAL inputs (`record`) and their replay through
 //!   the flight software with per-frame output digests (`replay`), for bit-identical
 //!   host/target comparison (`docs/timing.md`).
 
 pub mod camera;
+pub mod detection;
 pub mod devices;
 pub mod driver;
 pub mod hal_devices;

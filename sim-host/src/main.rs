@@ -49,6 +49,20 @@ enum Command {
         #[arg(long, default_value = "scenarios")]
         scenarios: PathBuf,
     },
+    /// Measure the slip gate's detection probability against the true slip magnitude (slope
+    /// sweeps of slope-10-cross, two seeds, in parallel) and the slip-hold policy; write the
+    /// results page and its figure.
+    Detection {
+        /// Results page to write.
+        #[arg(long, default_value = "docs/slip-detection.md")]
+        out: PathBuf,
+        /// Figure to write (SVG).
+        #[arg(long, default_value = "docs/figures/slip-detection.svg")]
+        figure: PathBuf,
+        /// Directory of the scenario files.
+        #[arg(long, default_value = "scenarios")]
+        scenarios: PathBuf,
+    },
     /// Run a scenario file in closed loop and write the outputs.
     Run {
         /// Scenario file (TOML), e.g. scenarios/slope-10-cross.toml.
@@ -370,6 +384,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
             },
             renderer,
             progress,
+            configure: None,
         },
     )?;
     if let Some(b) = bar {
@@ -516,6 +531,30 @@ fn sil(out: PathBuf, scenarios: PathBuf) -> anyhow::Result<()> {
     }
 }
 
+fn detection(out: PathBuf, figure: PathBuf, scenarios: PathBuf) -> anyhow::Result<()> {
+    use sim_host::detection;
+    let n = detection::jobs().len();
+    println!("sim-host detection: {n} runs with rendered stereo, 2 at a time");
+    let study = detection::run_study(&scenarios)?;
+    let page = detection::markdown(&study, detection::READING);
+    let svg = detection::svg(&study)?;
+    for path in [&out, &figure] {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)?;
+        }
+    }
+    std::fs::write(&out, &page)?;
+    std::fs::write(&figure, &svg)?;
+    print!("{page}");
+    println!(
+        "written to {} and {} ({:.0} s wall time)",
+        out.display(),
+        figure.display(),
+        study.wall_time_s
+    );
+    Ok(())
+}
+
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
@@ -527,6 +566,11 @@ fn main() -> anyhow::Result<()> {
             out,
         }) => compare(scenario, seed, out),
         Some(Command::Sil { out, scenarios }) => sil(out, scenarios),
+        Some(Command::Detection {
+            out,
+            figure,
+            scenarios,
+        }) => detection(out, figure, scenarios),
         Some(Command::Run {
             scenario,
             seed,

@@ -50,6 +50,11 @@ pub struct RunOptions {
     pub renderer: Option<Box<dyn StereoRenderer>>,
     /// Called every simulated second with the fraction done.
     pub progress: Option<Box<dyn FnMut(f64)>>,
+    /// Experiment hook: changes the flight configuration after [`flight_config`] has built it
+    /// from the scenario and the drive options (for example `nav.slip_hold_cycles`, measured by
+    /// `sim-host detection`). Never set by the `run`, `compare` and `sil` commands: the flight
+    /// configuration of a normal run comes from the nominal profile and the mission plan only.
+    pub configure: Option<fn(&mut FswConfig)>,
 }
 
 impl Default for RunOptions {
@@ -62,6 +67,7 @@ impl Default for RunOptions {
             counter: CounterMode::Host,
             renderer: None,
             progress: None,
+            configure: None,
         }
     }
 }
@@ -117,6 +123,9 @@ pub struct Estimates {
     pub slip: [f64; 3],
     /// The gate accepted the last kinematic interval.
     pub gate_accepted: bool,
+    /// Kinematic intervals tested by the gate so far ([`NavCounters::kin_tested`]): a record
+    /// whose count is larger than the previous record's carries a new gate decision.
+    pub kin_tested: u32,
 }
 
 /// One flight VO relative pose checked against the truth.
@@ -255,13 +264,16 @@ pub fn run_with<H: RunHooks>(
         sun: WorldSun::new(world.clone()),
         telemetry: CountingTelemetry::default(),
     };
-    let config = flight_config(
+    let mut config = flight_config(
         scenario,
         DriveOptions {
             slip_compensation: !options.no_slip_comp,
             vo_enabled: !options.no_vo,
         },
     );
+    if let Some(configure) = options.configure {
+        configure(&mut config);
+    }
     let mut fsw = Fsw::new(hooks.wrap(devices), &config, &scenario.waypoints)
         .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
     fsw.start_vo();
@@ -547,6 +559,7 @@ fn estimates<P: Platform>(fsw: &Fsw<P>) -> Option<Estimates> {
         },
         slip: [slip.x_m, slip.y_m, slip.phi_rad],
         gate_accepted: nav.gate().accepted,
+        kin_tested: nav.counters().kin_tested,
     })
 }
 
