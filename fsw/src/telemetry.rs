@@ -100,6 +100,8 @@ pub struct NavTelemetry {
     pub vo_consecutive_rejections: u32,
     /// A VO rejection streak was reached (the next rejected pose is fused inflated).
     pub vo_reject_streak: bool,
+    /// Why fault protection stopped the drive (`None` unless the mode is `Stopped`).
+    pub fault_response: crate::flight::nav::protection::FaultResponse,
     /// Navigation counters.
     pub counters: NavCounters,
 }
@@ -153,6 +155,7 @@ impl NavTelemetry {
             vo_gate_d2: [vo_gate.d2_rotation as f32, vo_gate.d2_pose as f32],
             vo_consecutive_rejections: vo_gate.consecutive_rejections,
             vo_reject_streak: vo_gate.streak,
+            fault_response: nav.fault_response(),
             counters: *nav.counters(),
         }
     }
@@ -249,6 +252,7 @@ mod tests {
             sun_applied: c,
             sun_refused: c,
             sun_streaks: c,
+            fault_stops: c,
             vo_start_holds: c,
             vo_start_timeouts: c,
             heading_from_sun: c,
@@ -264,6 +268,7 @@ mod tests {
             vo_gate_verdict: VoGateVerdict::RejectedError,
             vo_consecutive_rejections: c,
             vo_reject_streak: true,
+            fault_response: crate::flight::nav::protection::FaultResponse::MotorStall { wheel: 5 },
             counters,
             ..NavTelemetry::default()
         };

@@ -195,6 +195,8 @@ pub struct RunResult {
     pub nav: NavCounters,
     /// Final navigation mode.
     pub nav_mode: NavMode,
+    /// Why fault protection stopped the drive, if it did.
+    pub fault_response: fsw::flight::nav::protection::FaultResponse,
     /// Who drove: `"flight"` or `"reference"`.
     pub driver: String,
     /// Slip compensation on.
@@ -333,7 +335,10 @@ pub fn run_with<H: RunHooks>(
             }
         }
         if matches!(source, CommandSource::Flight)
-            && matches!(nav.mode(), NavMode::Arrived | NavMode::Safed)
+            && matches!(
+                nav.mode(),
+                NavMode::Arrived | NavMode::Safed | NavMode::Stopped
+            )
             && stop_countdown.is_none()
         {
             stop_countdown = Some(200);
@@ -395,6 +400,7 @@ pub fn run_with<H: RunHooks>(
         stereo_frames: state.stereo_frames,
         nav: *fsw.nav().counters(),
         nav_mode: fsw.nav().mode(),
+        fault_response: fsw.nav().fault_response(),
         driver: match source {
             CommandSource::Flight => "flight".to_string(),
             CommandSource::Reference(_) => "reference".to_string(),
@@ -445,6 +451,9 @@ pub struct Mission {
     pub sun: fsw::estimation::ephemeris::SunEphemeris,
     /// Cruise speed, m/s.
     pub cruise_speed_m_s: f64,
+    /// Distance from the goal that counts as arriving, m (the arrival must be supported by the
+    /// estimate to this tolerance, `ProtectionConfig::arrival_tolerance_m`).
+    pub goal_tolerance_m: f64,
 }
 
 impl Mission {
@@ -478,6 +487,7 @@ impl Mission {
                 site.local_solar_time_h,
             ),
             cruise_speed_m_s: scenario.speed_m_s,
+            goal_tolerance_m: scenario.goal_tolerance_m,
         }
     }
 }
@@ -497,6 +507,7 @@ pub fn flight_config(scenario: &Scenario, options: DriveOptions) -> FswConfig {
         .min(nav.guidance.max_wheel_speed_m_s);
     nav.slip_compensation = options.slip_compensation;
     nav.vo_enabled = options.vo_enabled;
+    nav.protection.arrival_tolerance_m = mission.goal_tolerance_m;
     config
 }
 

@@ -66,7 +66,7 @@ impl FlightSetup {
 /// The drive-dependent flight parameters a tape carries ([`rover_replay::TapeHeader::nav_params`]):
 /// the mission inputs on top of the nominal profile [`FswConfig::rocky8`]: sun ephemeris
 /// (latitude, declination, hour angle at clock zero, in use), cruise speed, slip compensation,
-/// VO enabled, 9 spare zeros. Nothing else of the configuration depends on the drive.
+/// VO enabled, arrival tolerance, 8 spare zeros. Nothing else of the configuration depends on the drive.
 pub fn nav_params(config: &FswConfig) -> [f64; NAV_PARAMS] {
     let n = &config.nav;
     let flag = |b: bool| if b { 1.0 } else { 0.0 };
@@ -83,6 +83,7 @@ pub fn nav_params(config: &FswConfig) -> [f64; NAV_PARAMS] {
         n.guidance.cruise_speed_m_s,
         flag(n.slip_compensation),
         flag(n.vo_enabled),
+        n.protection.arrival_tolerance_m,
     ];
     for (slot, v) in p.iter_mut().zip(values) {
         *slot = v;
@@ -108,6 +109,7 @@ pub fn flight_config(setup: &FlightSetup) -> FswConfig {
     nav.guidance.cruise_speed_m_s = p[4];
     nav.slip_compensation = p[5] != 0.0;
     nav.vo_enabled = p[6] != 0.0;
+    nav.protection.arrival_tolerance_m = p[7];
     config
 }
 

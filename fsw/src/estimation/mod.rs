@@ -177,7 +177,8 @@ pub enum EstError {
     /// full error state). The update that produced it has been applied; the fault is latched
     /// ([`Ekf::fault`]) until [`Ekf::reset`].
     CovarianceUnhealthy {
-        /// Index of the first bad diagonal entry.
+        /// Index of the first bad diagonal entry (`usize::MAX`: the nominal state is not
+        /// finite).
         index: usize,
     },
     /// The filter has a latched covariance fault and refuses to run until reset.

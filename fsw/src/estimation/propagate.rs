@@ -246,11 +246,25 @@ impl Ekf {
         }
     }
 
-    /// Quick health check of the core diagonal after a propagation step.
+    /// Health check after a propagation step (issue 20: every cycle, not only after updates):
+    /// the nominal state finite, and the core diagonal finite, non-negative and, for attitude
+    /// and position, under [`super::EkfConfig::max_attitude_var_rad2`] and
+    /// [`super::EkfConfig::max_position_var_m2`]. A failure latches the fault.
     fn check_core_health(&mut self) -> Result<(), EstError> {
+        if !self.x.is_finite() {
+            self.fault = true;
+            return Err(EstError::CovarianceUnhealthy { index: usize::MAX });
+        }
         for i in 0..CORE_DIM {
             let d = self.p[(i, i)];
-            if !d.is_finite() || d < 0.0 {
+            let limit = if i < 3 {
+                self.config.max_attitude_var_rad2
+            } else if (super::state::I_P..super::state::I_P + 3).contains(&i) {
+                self.config.max_position_var_m2
+            } else {
+                f64::INFINITY
+            };
+            if !d.is_finite() || d < 0.0 || d > limit {
                 self.fault = true;
                 return Err(EstError::CovarianceUnhealthy { index: i });
             }

@@ -128,11 +128,25 @@ pub struct Summary {
     pub slip_compensation: bool,
     /// Final navigation mode of the flight software.
     pub nav_mode: String,
+    /// Fault protection of the flight software.
+    pub fault_protection: FaultProtectionSummary,
     /// Navigation counters of the flight software.
     pub nav: fsw::flight::nav::NavCounters,
     /// Wall-clock time of the run, s (the only field that differs between identical runs when
     /// the counter is simulated time).
     pub wall_time_s: f64,
+}
+
+/// What fault protection did in a run.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct FaultProtectionSummary {
+    /// Fault-protection stops (0 or 1: a stop is latched).
+    pub responses: u32,
+    /// The stop's reason (`None` when the drive was not stopped).
+    pub last_response: String,
+    /// The rover ended stopped by fault protection (it reported why instead of driving on or
+    /// claiming an arrival it cannot support).
+    pub stopped_safe: bool,
 }
 
 /// A pose: position m, quaternion `[x, y, z, w]`.
@@ -293,6 +307,11 @@ pub fn summarise(run: &RunResult) -> Summary {
         driver: run.driver.clone(),
         slip_compensation: run.slip_compensation,
         nav_mode: format!("{:?}", run.nav_mode),
+        fault_protection: FaultProtectionSummary {
+            responses: run.nav.fault_stops,
+            last_response: format!("{:?}", run.fault_response),
+            stopped_safe: run.nav_mode == fsw::flight::nav::NavMode::Stopped,
+        },
         nav: run.nav,
         wall_time_s: run.wall_time_s,
     }

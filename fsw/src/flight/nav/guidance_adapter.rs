@@ -14,13 +14,36 @@ impl Navigator {
     /// slip, unseen without VO, is learnt as a heading error.
     pub fn guidance_cycle(&mut self) -> Option<MobilityCommand> {
         self.command = VehicleCommand::default();
+        self.last_wheel_rates = [0.0; 6];
         if self.mode != NavMode::Driving {
             return None;
         }
-        if self.frames_without_imu >= self.config.imu_timeout_frames
-            || self.cycles_without_joints >= self.config.joints_timeout_cycles
+        let holding = self.frames_without_imu >= self.config.imu_timeout_frames
+            || self.cycles_without_joints >= self.config.joints_timeout_cycles;
+        if let Some(r) = self
+            .protection
+            .sensor_hold(&self.config.protection, holding)
         {
+            self.fault_stop(r);
+            return None;
+        }
+        if holding {
             self.counters.sensor_holds = self.counters.sensor_holds.saturating_add(1);
+            return None;
+        }
+        if let Some(j) = self.last_joints {
+            let commanded = self.last_wheel_rates;
+            if let Some(r) =
+                self.protection
+                    .motors(&self.config.protection, &commanded, &j.drive_rate_rad_s)
+            {
+                self.fault_stop(r);
+                return None;
+            }
+        }
+        let sigma_h = self.horizontal_sigma_m();
+        if sigma_h > self.config.protection.max_position_sigma_m {
+            self.fault_stop(FaultResponse::PositionUncertain);
             return None;
         }
         if self.vo.is_some() && !self.vo_started {
@@ -66,7 +89,11 @@ impl Navigator {
         };
         self.last_guidance = Some(out);
         if out.goal_reached {
-            self.mode = NavMode::Arrived;
+            if 2.0 * sigma_h <= self.config.protection.arrival_tolerance_m {
+                self.mode = NavMode::Arrived;
+            } else {
+                self.fault_stop(FaultResponse::ArrivedUncertain);
+            }
             return None;
         }
         let mut cmd = VehicleCommand {
@@ -92,12 +119,25 @@ impl Navigator {
         match inverse_kinematics(geometry, &state, &cmd) {
             Ok(solution) => {
                 self.command = cmd;
+                self.last_wheel_rates = solution.command.wheel_rate_rad_s;
                 Some(solution.command)
             }
             Err(_) => {
                 self.counters.command_errors = self.counters.command_errors.saturating_add(1);
                 None
             }
+        }
+    }
+
+    /// Horizontal position 1-sigma of the EKF, m (`sqrt(P_nn + P_ee)`); 0 before alignment.
+    pub(super) fn horizontal_sigma_m(&self) -> f64 {
+        match self.ekf_running.then_some(&self.ekf) {
+            Some(e) => {
+                let p = e.covariance();
+                let i = crate::estimation::state::I_P;
+                libm::sqrt((p[(i, i)] + p[(i + 1, i + 1)]).max(0.0))
+            }
+            None => 0.0,
         }
     }
 }

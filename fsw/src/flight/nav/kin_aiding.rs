@@ -79,6 +79,23 @@ impl Navigator {
         if let Ok((q0, _)) = ekf.clone_pose(start) {
             self.traj
                 .kinematic_step(&q0, &contact_translation, &ekf.state().q_nr);
+            if let Ok((_, p0)) = ekf.clone_pose(start) {
+                let ekf_step = (ekf.state().p_n - p0).norm();
+                let vo_fused = core::mem::take(&mut self.vo_fused_since_interval);
+                if let Some(r) = self.protection.travel(
+                    &self.config.protection,
+                    rp.trans_0_1_m.norm(),
+                    ekf_step,
+                    vo_fused,
+                ) {
+                    // Latched like `fault_stop` (the filter is borrowed here).
+                    if self.mode == NavMode::Driving {
+                        self.mode = NavMode::Stopped;
+                        self.fault_response = r;
+                        self.counters.fault_stops = self.counters.fault_stops.saturating_add(1);
+                    }
+                }
+            }
         }
         self.cycles_since_vo = self.cycles_since_vo.saturating_add(1);
         let vo_lost = self.cycles_since_vo > self.config.vo_timeout_cycles;

@@ -41,6 +41,7 @@ mod align;
 mod diagnostics;
 mod guidance_adapter;
 mod kin_aiding;
+pub mod protection;
 #[cfg(test)]
 mod tests_vo;
 pub mod vo_gate;
@@ -48,6 +49,7 @@ mod vo_sched;
 
 use align::Alignment;
 use diagnostics::Trajectories;
+use protection::{FaultResponse, Protection, ProtectionConfig};
 use vo_gate::{CaptureMark, VoGateStatus};
 use vo_sched::StereoStage;
 
@@ -177,6 +179,8 @@ pub struct NavConfig {
     pub replay_ops_per_slice: u16,
     /// Guidance settings.
     pub guidance: GuidanceConfig,
+    /// Fault-protection limits (slip, stall, uncertainty, arrival, sensor loss).
+    pub protection: ProtectionConfig,
     /// Minor frames without a checked IMU sample after which the rover is stopped.
     pub imu_timeout_frames: u32,
     /// RG2 cycles without a checked joint reading after which the rover is stopped.
@@ -252,6 +256,7 @@ impl NavConfig {
             streak_accel_bias_sigma_m_s2: 0.01,
             replay_ops_per_slice: 16,
             guidance: GuidanceConfig::rocky8(xy),
+            protection: ProtectionConfig::default(),
             imu_timeout_frames: 20,
             joints_timeout_cycles: 10,
             stopped_wheel_rate_rad_s: 0.01,
@@ -271,6 +276,9 @@ pub enum NavMode {
     Arrived,
     /// Estimator fault latched; stopped until the ground resets the flight software.
     Safed,
+    /// Stopped by fault protection ([`Navigator::fault_response`] says why); latched until the
+    /// ground resets the flight software, the estimator keeps running.
+    Stopped,
 }
 
 /// A pose estimate in `N`: position (m) and attitude (`R` to `N`).
@@ -348,6 +356,8 @@ pub struct NavCounters {
     pub vo_start_holds: u32,
     /// Starts that gave up waiting for VO's first keyframe.
     pub vo_start_timeouts: u32,
+    /// Fault-protection stops (see [`Navigator::fault_response`]).
+    pub fault_stops: u32,
     /// Streaks of sun readings refused by the gate that inflated the heading covariance.
     pub sun_streaks: u32,
     /// Alignments whose heading came from the sun sensor.
@@ -424,6 +434,14 @@ pub struct Navigator {
     sun_rejections: u32,
     /// VO has held a keyframe since the start (or its start wait timed out).
     vo_started: bool,
+    /// Fault-protection state.
+    protection: Protection,
+    /// Why fault protection stopped the drive.
+    fault_response: FaultResponse,
+    /// A VO update was fused since the last kinematic interval.
+    vo_fused_since_interval: bool,
+    /// Wheel rates of the last motor command, rad/s (stall check).
+    last_wheel_rates: [f64; 6],
     /// RG2 cycles the rover waited for VO's first keyframe.
     cycles_waiting_vo: u32,
     cycles_since_vo: u32,
@@ -507,6 +525,10 @@ impl Navigator {
             reject_streak: 0,
             sun_rejections: 0,
             vo_started: false,
+            protection: Protection::default(),
+            fault_response: FaultResponse::None,
+            vo_fused_since_interval: false,
+            last_wheel_rates: [0.0; 6],
             cycles_waiting_vo: 0,
             cycles_since_vo: 0,
         })
@@ -515,6 +537,27 @@ impl Navigator {
     /// The current mode.
     pub fn mode(&self) -> NavMode {
         self.mode
+    }
+
+    /// Why fault protection stopped the drive ([`FaultResponse::None`] unless
+    /// [`NavMode::Stopped`]).
+    pub fn fault_response(&self) -> FaultResponse {
+        self.fault_response
+    }
+
+    /// The slip measured over the last complete fault-protection window (1 - EKF travel /
+    /// wheel travel), fraction.
+    pub fn window_slip(&self) -> f64 {
+        self.protection.last_slip
+    }
+
+    /// Latch a fault-protection stop.
+    fn fault_stop(&mut self, response: FaultResponse) {
+        if self.mode == NavMode::Driving {
+            self.mode = NavMode::Stopped;
+            self.fault_response = response;
+            self.counters.fault_stops = self.counters.fault_stops.saturating_add(1);
+        }
     }
 
     /// The EKF, once aligned.

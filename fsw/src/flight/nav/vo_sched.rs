@@ -301,6 +301,7 @@ impl Navigator {
                 }
                 self.cycles_since_vo = 0;
                 self.reject_streak = 0;
+                self.vo_fused_since_interval = true;
             }
             Err(e) => self.ekf_error(e),
         }
