@@ -34,6 +34,10 @@ pub struct DeviceHealth {
     pub time_backwards: u32,
     /// Readings flagged invalid by the device or containing non-finite or out-of-range values.
     pub invalid: u32,
+    /// Readings whose time stamp leapt ahead of the device's time base (refused).
+    pub time_jumps: u32,
+    /// Changes of the device's time base accepted after a leap persisted.
+    pub resyncs: u32,
 }
 
 impl DeviceHealth {
@@ -43,6 +47,7 @@ impl DeviceHealth {
             .saturating_add(self.stale)
             .saturating_add(self.time_backwards)
             .saturating_add(self.invalid)
+            .saturating_add(self.time_jumps)
     }
 }
 
@@ -196,6 +201,8 @@ mod tests {
                 stale: u32::MAX,
                 time_backwards: u32::MAX,
                 invalid: u32::MAX,
+                time_jumps: u32::MAX,
+                resyncs: u32::MAX,
             }; 4],
             stereo_frames: u32::MAX,
             telemetry_dropped: u32::MAX,

@@ -192,6 +192,10 @@ pub struct Scenario {
     /// Distance from the last waypoint that counts as reaching the goal, m.
     #[serde(default = "default_goal")]
     pub goal_tolerance_m: f64,
+    /// Slip limit of the drive (mission input of the flight's fault protection, MER style:
+    /// the ground sets it per terrain), fraction; default 0.4 (MER).
+    #[serde(default = "default_slip_limit")]
+    pub slip_limit: f64,
     /// Waypoints `[north, east]`, m; the rover starts at the first, facing the second.
     pub waypoints: Vec<[f64; 2]>,
     /// Reference driver mode (default: carrot on truth, i.e. with slip compensation).
@@ -223,6 +227,9 @@ fn default_speed() -> f64 {
 }
 fn default_goal() -> f64 {
     0.3
+}
+fn default_slip_limit() -> f64 {
+    0.4
 }
 fn default_driver() -> DriverMode {
     DriverMode::TruthCarrot

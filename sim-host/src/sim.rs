@@ -454,6 +454,8 @@ pub struct Mission {
     /// Distance from the goal that counts as arriving, m (the arrival must be supported by the
     /// estimate to this tolerance, `ProtectionConfig::arrival_tolerance_m`).
     pub goal_tolerance_m: f64,
+    /// Slip limit of the drive (fault protection), fraction.
+    pub slip_limit: f64,
 }
 
 impl Mission {
@@ -488,6 +490,7 @@ impl Mission {
             ),
             cruise_speed_m_s: scenario.speed_m_s,
             goal_tolerance_m: scenario.goal_tolerance_m,
+            slip_limit: scenario.slip_limit,
         }
     }
 }
@@ -508,6 +511,7 @@ pub fn flight_config(scenario: &Scenario, options: DriveOptions) -> FswConfig {
     nav.slip_compensation = options.slip_compensation;
     nav.vo_enabled = options.vo_enabled;
     nav.protection.arrival_tolerance_m = mission.goal_tolerance_m;
+    nav.protection.slip_limit = mission.slip_limit;
     config
 }
 

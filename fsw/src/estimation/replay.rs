@@ -53,6 +53,8 @@ enum Measurement {
     Inflate { velocity: f64, accel_bias: f64 },
     /// `inflate_heading(sigma)`.
     InflateHeading { sigma: f64 },
+    /// `inflate_position(delta)`.
+    InflatePosition { delta: f64 },
 }
 
 /// Which list the next operation comes from.
@@ -227,6 +229,11 @@ impl Recorder {
         self.measurement(Measurement::Release { t_us });
     }
 
+    /// Record `inflate_position(delta_m)`.
+    pub fn inflate_position(&mut self, delta_m: f64) {
+        self.measurement(Measurement::InflatePosition { delta: delta_m });
+    }
+
     /// Record `inflate_heading(sigma_rad)`.
     pub fn inflate_heading(&mut self, sigma_rad: f64) {
         self.measurement(Measurement::InflateHeading { sigma: sigma_rad });
@@ -346,6 +353,9 @@ fn replay_one(ekf: &mut Ekf, m: &Measurement) {
         }
         Measurement::InflateHeading { sigma } => {
             let _ = ekf.inflate_heading(*sigma);
+        }
+        Measurement::InflatePosition { delta } => {
+            let _ = ekf.inflate_position(*delta);
         }
     }
 }

@@ -60,6 +60,25 @@ impl Ekf {
         self.check_health()
     }
 
+    /// Horizontal position-covariance growth for travel nobody verified (issue 20: odometry
+    /// fused without VO while the gate says it slips): the north and east 1-sigma each grow by
+    /// `delta_m` (`P += 2 sigma delta + delta^2` on both diagonals), a systematic error that
+    /// does not average out like white noise. `delta_m` must be finite and non-negative.
+    pub fn inflate_position(&mut self, delta_m: f64) -> Result<(), EstError> {
+        if self.fault {
+            return Err(EstError::Faulted);
+        }
+        if !(delta_m.is_finite() && delta_m >= 0.0) {
+            return Err(EstError::NonFiniteInput);
+        }
+        for k in 0..2 {
+            let i = super::state::I_P + k;
+            let sigma = libm::sqrt(self.p[(i, i)].max(0.0));
+            self.p[(i, i)] += 2.0 * sigma * delta_m + delta_m * delta_m;
+        }
+        self.check_health()
+    }
+
     /// ZUPT at the current state; `t_us` is the time the rover was known to be stopped (within
     /// [`super::EkfConfig::max_measurement_skew_us`] of the state time).
     pub fn update_zero_velocity(&mut self, t_us: u64) -> Result<(), EstError> {

@@ -155,6 +155,63 @@ pub struct FswConfig {
     pub exec: ExecConfig,
     /// Navigation settings.
     pub nav: NavConfig,
+    /// Plausibility limits of the device readings.
+    pub plausibility: Plausibility,
+}
+
+/// Plausibility limits of device readings (issue 20): a finite reading outside them is refused
+/// and counted in [`DeviceHealth::invalid`]; a time stamp that leaps ahead is refused and
+/// counted in [`DeviceHealth::time_jumps`] so that it cannot poison the device's time base.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plausibility {
+    /// Largest angular rate reading, rad/s: the measurement range of a tactical MEMS IMU of the
+    /// rover's class (ADIS16488-class, +-450 deg/s); a reading beyond it cannot come from the
+    /// sensor working.
+    pub gyro_max_rad_s: f64,
+    /// Largest specific-force reading, m/s^2 (the same class: +-18 g0; wheel shocks on rocks
+    /// stay inside it).
+    pub accel_max_m_s2: f64,
+    /// Largest wheel rate reading, as a multiple of the motor limit.
+    pub drive_rate_factor: f64,
+    /// Margin beyond the steering, rocker and bogie limits of the geometry, rad.
+    pub angle_margin_rad: f64,
+    /// A time stamp may lead the last accepted one by at most this many minor frames per frame
+    /// elapsed since (plus one frame).
+    pub stamp_lead_factor: u64,
+    /// Readings in a row that continue a leaped time base before it is accepted as the
+    /// device's new time base ([`DeviceHealth::resyncs`]).
+    pub resync_readings: u32,
+}
+
+impl Default for Plausibility {
+    fn default() -> Self {
+        Self {
+            gyro_max_rad_s: 450.0 * core::f64::consts::PI / 180.0,
+            accel_max_m_s2: 18.0 * 9.80665,
+            drive_rate_factor: 2.0,
+            angle_margin_rad: 0.2,
+            stamp_lead_factor: 4,
+            resync_readings: 20,
+        }
+    }
+}
+
+/// Time-base state of one device: the frame of its last accepted reading and a candidate new
+/// time base after a leap.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TimeBase {
+    /// Minor frame of the last accepted reading.
+    pub last_tick: u64,
+    /// A leaped stamp and its frame, and how many readings in a row continued it.
+    pub candidate: Option<(u64, u64, u32)>,
+}
+
+impl TimeBase {
+    /// A reading at minor frame `tick` passed every check and was kept.
+    pub fn accept(&mut self, tick: u64) {
+        self.last_tick = tick;
+        self.candidate = None;
+    }
 }
 
 impl FswConfig {
@@ -169,6 +226,7 @@ impl FswConfig {
                 ..ExecConfig::default()
             },
             nav: NavConfig::rocky8(position, yaw_rad),
+            plausibility: Plausibility::default(),
         }
     }
 }
@@ -213,6 +271,8 @@ pub struct FlightState {
     pub last_capture_t_us: Option<u64>,
     /// Device health counters, indexed by [`DeviceId`].
     pub health: [DeviceHealth; 4],
+    /// Time-base state of each device, indexed by [`DeviceId`].
+    pub time_bases: [TimeBase; 4],
     /// Stereo frames completed.
     pub stereo_frames: u32,
     /// Telemetry records the sink refused.
@@ -242,6 +302,7 @@ pub struct Fsw<P: Platform> {
     state: FlightState,
     nav: Navigator,
     fresh: Fresh,
+    plausibility: Plausibility,
 }
 
 struct DevicesNoClock<P: Platform> {
@@ -281,12 +342,14 @@ impl<P: Platform> Fsw<P> {
             state: FlightState::default(),
             nav,
             fresh: Fresh::default(),
+            plausibility: config.plausibility,
         })
     }
 
     /// Run one minor frame (call once per tick).
     pub fn tick(&mut self) -> FrameReport {
         let mut work = Work {
+            limits: &self.plausibility,
             devices: &mut self.devices,
             state: &mut self.state,
             nav: &mut self.nav,
@@ -326,14 +389,75 @@ impl<P: Platform> Fsw<P> {
 }
 
 struct Work<'a, P: Platform> {
+    limits: &'a Plausibility,
     devices: &'a mut DevicesNoClock<P>,
     state: &'a mut FlightState,
     nav: &'a mut Navigator,
     fresh: &'a mut Fresh,
 }
 
-/// Check a time stamp against the previous one: stale or backwards are faults.
-fn check_time(health: &mut DeviceHealth, previous: Option<u64>, t_us: u64) -> bool {
+/// Frame period of the schedule, us (200 Hz).
+const FRAME_PERIOD_US: u64 = 5_000;
+
+/// Check a time stamp against the previous accepted one at minor frame `tick`: stale or
+/// backwards are faults; a stamp that leads the previous one by more than
+/// `stamp_lead_factor` frames per elapsed frame (plus a frame) is a leap, refused and counted,
+/// unless `resync_readings` readings in a row continue it (a real change of the device's time
+/// base, accepted and counted in [`DeviceHealth::resyncs`]). The caller records a reading that
+/// passes every check with [`TimeBase::accept`].
+fn check_time(
+    health: &mut DeviceHealth,
+    base: &mut TimeBase,
+    previous: Option<u64>,
+    t_us: u64,
+    tick: u64,
+    limits: &Plausibility,
+) -> bool {
+    let Some(p) = previous else {
+        return true;
+    };
+    if t_us == p {
+        health.stale = health.stale.saturating_add(1);
+        return false;
+    }
+    if t_us < p {
+        health.time_backwards = health.time_backwards.saturating_add(1);
+        return false;
+    }
+    let frames = tick.saturating_sub(base.last_tick).saturating_add(1);
+    let allowed = frames
+        .saturating_mul(limits.stamp_lead_factor)
+        .saturating_mul(FRAME_PERIOD_US)
+        .saturating_add(FRAME_PERIOD_US);
+    if t_us - p <= allowed {
+        return true;
+    }
+    // A leap: does it continue a candidate time base?
+    let continues = match base.candidate {
+        Some((c_t, c_tick, _)) if t_us > c_t => {
+            let f = tick.saturating_sub(c_tick).saturating_add(1);
+            t_us - c_t
+                <= f.saturating_mul(limits.stamp_lead_factor)
+                    .saturating_mul(FRAME_PERIOD_US)
+                    .saturating_add(FRAME_PERIOD_US)
+        }
+        _ => false,
+    };
+    let count = match (continues, base.candidate) {
+        (true, Some((_, _, n))) => n.saturating_add(1),
+        _ => 1,
+    };
+    if count >= limits.resync_readings {
+        health.resyncs = health.resyncs.saturating_add(1);
+        return true;
+    }
+    base.candidate = Some((t_us, tick, count));
+    health.time_jumps = health.time_jumps.saturating_add(1);
+    false
+}
+
+/// Stale or backwards time stamps (the camera, whose stamps are its trigger times).
+fn check_order(health: &mut DeviceHealth, previous: Option<u64>, t_us: u64) -> bool {
     match previous {
         Some(p) if t_us == p => {
             health.stale = health.stale.saturating_add(1);
@@ -363,31 +487,43 @@ fn count_error(health: &mut DeviceHealth, kind: ErrorKind) {
 }
 
 impl<P: Platform> Work<'_, P> {
-    fn read_imu(&mut self) {
+    fn read_imu(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Imu as usize];
+        let base = &mut self.state.time_bases[DeviceId::Imu as usize];
         match self.devices.imu.read() {
             Err(e) => count_error(health, rover_hal::Error::kind(&e)),
             Ok(s) => {
-                if !check_time(health, self.state.imu.map(|p| p.t_us), s.t_us) {
+                let previous = self.state.imu.map(|p| p.t_us);
+                if !check_time(health, base, previous, s.t_us, tick, self.limits) {
                     return;
                 }
-                if !s.valid || !all_finite(&s.gyro_rad_s) || !all_finite(&s.accel_m_s2) {
+                let l = self.limits;
+                let in_range = |v: &[f64; 3], max: f64| {
+                    all_finite(v) && v.iter().all(|x| libm::fabs(*x) <= max)
+                };
+                if !s.valid
+                    || !in_range(&s.gyro_rad_s, l.gyro_max_rad_s)
+                    || !in_range(&s.accel_m_s2, l.accel_max_m_s2)
+                {
                     count_invalid(health);
                     return;
                 }
                 health.good = health.good.saturating_add(1);
+                base.accept(tick);
                 self.state.imu = Some(s);
                 self.fresh.imu = Some(s);
             }
         }
     }
 
-    fn read_joints(&mut self) {
+    fn read_joints(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Joints as usize];
+        let base = &mut self.state.time_bases[DeviceId::Joints as usize];
         match self.devices.mobility.read_joints() {
             Err(e) => count_error(health, rover_hal::Error::kind(&e)),
             Ok(j) => {
-                if !check_time(health, self.state.joints.map(|p| p.t_us), j.t_us) {
+                let previous = self.state.joints.map(|p| p.t_us);
+                if !check_time(health, base, previous, j.t_us, tick, self.limits) {
                     return;
                 }
                 let finite = all_finite(&j.drive_angle_rad)
@@ -395,11 +531,26 @@ impl<P: Platform> Work<'_, P> {
                     && all_finite(&j.steer_angle_rad)
                     && all_finite(&j.bogie_rad)
                     && j.rocker_rad.is_finite();
-                if !finite || !j.suspension_valid {
+                let limits = &self.nav.config().geometry.limits;
+                let (l, m) = (self.limits, self.limits.angle_margin_rad);
+                let rate_max = l.drive_rate_factor * limits.wheel_rate_rad_s;
+                let plausible = j
+                    .drive_rate_rad_s
+                    .iter()
+                    .all(|r| libm::fabs(*r) <= rate_max)
+                    && j.steer_angle_rad
+                        .iter()
+                        .all(|a| libm::fabs(*a) <= limits.steer_rad + m)
+                    && libm::fabs(j.rocker_rad) <= limits.rocker_rad + m
+                    && j.bogie_rad
+                        .iter()
+                        .all(|a| libm::fabs(*a) <= limits.bogie_rad + m);
+                if !finite || !plausible || !j.suspension_valid {
                     count_invalid(health);
                     return;
                 }
                 health.good = health.good.saturating_add(1);
+                base.accept(tick);
                 self.state.joints = Some(j);
                 self.fresh.joints = Some(j);
             }
@@ -520,7 +671,7 @@ impl<P: Platform> Work<'_, P> {
                     Ok(frame) if frame.capture_t_us == t_us => {
                         let size_ok = frame.left.len() == rover_hal::IMAGE_PIXELS
                             && frame.right.len() == rover_hal::IMAGE_PIXELS;
-                        if size_ok && check_time(health, self.state.last_capture_t_us, t_us) {
+                        if size_ok && check_order(health, self.state.last_capture_t_us, t_us) {
                             health.good = health.good.saturating_add(1);
                             self.state.stereo_frames = self.state.stereo_frames.saturating_add(1);
                             self.state.last_capture_t_us = Some(t_us);
@@ -555,12 +706,14 @@ impl<P: Platform> Work<'_, P> {
         }
     }
 
-    fn read_sun(&mut self) {
+    fn read_sun(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Sun as usize];
+        let base = &mut self.state.time_bases[DeviceId::Sun as usize];
         match self.devices.sun.read() {
             Err(e) => count_error(health, rover_hal::Error::kind(&e)),
             Ok(r) => {
-                if !check_time(health, self.state.sun.map(|p| p.t_us), r.t_us) {
+                let previous = self.state.sun.map(|p| p.t_us);
+                if !check_time(health, base, previous, r.t_us, tick, self.limits) {
                     return;
                 }
                 let norm2: f64 = r.sun_dir_rover.iter().map(|v| v * v).sum();
@@ -572,6 +725,7 @@ impl<P: Platform> Work<'_, P> {
                     return;
                 }
                 health.good = health.good.saturating_add(1);
+                base.accept(tick);
                 self.state.sun = Some(r);
                 self.nav.sun(&r);
             }
@@ -582,14 +736,14 @@ impl<P: Platform> Work<'_, P> {
 impl<P: Platform> TaskSet for Work<'_, P> {
     fn run_task(&mut self, task: usize, tick: u64) {
         match task {
-            0 => self.read_imu(),
+            0 => self.read_imu(tick),
             1 => self.nav.propagate(self.fresh.imu.take().as_ref()),
-            2 => self.read_joints(),
+            2 => self.read_joints(tick),
             3 => self.nav.kinematic_cycle(self.fresh.joints.take().as_ref()),
             4 => self.command_motors(),
             5 => self.send_status(tick),
             6 => self.trigger_stereo(tick),
-            7 => self.read_sun(),
+            7 => self.read_sun(tick),
             _ => {}
         }
     }

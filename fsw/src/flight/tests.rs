@@ -391,3 +391,72 @@ fn nav_2_rejection_streak_recovers_a_filter_tuned_too_tight() {
          {rejected}/{tested} rejected"
     );
 }
+
+/// FP-3 (issue 20): a finite but implausible IMU sample (1e6 m/s^2) is refused as invalid; a
+/// stamp one hour ahead is refused as a time leap and does not poison the time base (the next
+/// normal readings are accepted); a leap that persists for `resync_readings` readings becomes
+/// the new time base (counted).
+#[test]
+fn fp_3_implausible_values_and_time_leaps() {
+    let mut spike = imu(20);
+    spike.accel_m_s2[0] = 1.0e6;
+    let imu_script = Script::new([
+        Ok(imu(10)),
+        Ok(spike),
+        Ok(imu(30)),
+        Ok(imu(3_600_000_000)),
+        Ok(imu(40)),
+        Ok(imu(50)),
+        Err(ErrorKind::NotReady),
+    ]);
+    let devices = Devices::<TestPlatform> {
+        clock: TestClock,
+        imu: TestImu(imu_script),
+        mobility: TestMobility(Script::new([Err(ErrorKind::NotReady); 4])),
+        camera: StuckCamera,
+        sun: TestSun(Script::new([Err(ErrorKind::NotReady); 3])),
+        telemetry: RefusingTelemetry,
+    };
+    let config = FswConfig::rocky8([0.0; 3], 0.0);
+    let mut fsw = match Fsw::new(devices, &config, &[[0.0, 0.0], [1.0, 0.0]]) {
+        Ok(f) => f,
+        Err(e) => panic!("schedule refused: {e:?}"),
+    };
+    for _ in 0..8 {
+        fsw.tick();
+    }
+    let s = fsw.state();
+    let h = s.health[DeviceId::Imu as usize];
+    assert_eq!((h.good, h.invalid, h.time_jumps, h.resyncs), (4, 1, 1, 0));
+    assert_eq!(s.imu.map(|i| i.t_us), Some(50));
+
+    // A persistent leap: the device's clock really moved on by an hour.
+    let limits = Plausibility::default();
+    let mut health = DeviceHealth::default();
+    let mut base = TimeBase::default();
+    let mut previous = None;
+    for tick in 0..10u64 {
+        let t = 5_000 * tick + 5_000;
+        if check_time(&mut health, &mut base, previous, t, tick, &limits) {
+            previous = Some(t);
+            base.accept(tick);
+        }
+    }
+    let mut accepted_at = None;
+    for tick in 10..40u64 {
+        let t = 3_600_000_000 + 5_000 * tick;
+        if check_time(&mut health, &mut base, previous, t, tick, &limits) {
+            previous = Some(t);
+            base.accept(tick);
+            accepted_at.get_or_insert(tick);
+        }
+    }
+    assert_eq!(
+        accepted_at,
+        Some(10 + u64::from(limits.resync_readings) - 1)
+    );
+    assert_eq!(
+        (health.time_jumps, health.resyncs),
+        (limits.resync_readings - 1, 1)
+    );
+}

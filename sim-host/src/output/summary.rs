@@ -147,6 +147,8 @@ pub struct FaultProtectionSummary {
     /// The rover ended stopped by fault protection (it reported why instead of driving on or
     /// claiming an arrival it cannot support).
     pub stopped_safe: bool,
+    /// The EKF's horizontal position 1-sigma at the end, m.
+    pub final_position_sigma_m: Option<f64>,
 }
 
 /// A pose: position m, quaternion `[x, y, z, w]`.
@@ -311,6 +313,12 @@ pub fn summarise(run: &RunResult) -> Summary {
             responses: run.nav.fault_stops,
             last_response: format!("{:?}", run.fault_response),
             stopped_safe: run.nav_mode == fsw::flight::nav::NavMode::Stopped,
+            final_position_sigma_m: run
+                .records
+                .iter()
+                .rev()
+                .find_map(|r| r.est)
+                .map(|e| e.ekf_pos_sigma_m[0].hypot(e.ekf_pos_sigma_m[1])),
         },
         nav: run.nav,
         wall_time_s: run.wall_time_s,

@@ -89,7 +89,8 @@ impl Navigator {
         };
         self.last_guidance = Some(out);
         if out.goal_reached {
-            if 2.0 * sigma_h <= self.config.protection.arrival_tolerance_m {
+            let p = &self.config.protection;
+            if out.goal_distance_m + p.arrival_sigmas * sigma_h <= p.arrival_tolerance_m {
                 self.mode = NavMode::Arrived;
             } else {
                 self.fault_stop(FaultResponse::ArrivedUncertain);

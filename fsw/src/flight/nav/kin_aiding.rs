@@ -147,7 +147,7 @@ impl Navigator {
                     };
                 }
                 if vo_lost {
-                    self.fuse_without_vo(&mut rp);
+                    self.fuse_without_vo(&mut rp, d.accepted);
                 } else if self.reject_streak >= self.config.reject_streak_cycles {
                     // The velocity error the last residual implies (translation residual over
                     // the interval's duration).
@@ -223,7 +223,13 @@ impl Navigator {
     /// [`NavConfig::vo_loss_translation_only`] the rotation is not fused: on slipping ground the
     /// wheels' yaw carries the yaw slip, while the gyro (with the sun for its bias) is far
     /// better over an interval.
-    fn fuse_without_vo(&mut self, rp: &mut RelativePose) {
+    ///
+    /// The travel fused this way is not verified: the horizontal position sigma grows by the
+    /// whole step when the gate rejected it (the slip is unknown, up to 100 %) and by
+    /// [`NavConfig::vo_loss_drift_fraction`] of it otherwise (`Ekf::inflate_position`), so that
+    /// the position uncertainty honestly covers a rover that spins its wheels in place and
+    /// fault protection can refuse an arrival it cannot support.
+    fn fuse_without_vo(&mut self, rp: &mut RelativePose, accepted: bool) {
         let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
         };
@@ -247,6 +253,22 @@ impl Navigator {
         self.recorder.relative_pose(rp, false);
         if let Err(e) = ekf.update_relative_pose(rp, false) {
             self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
+            self.ekf_error(e);
+            return;
+        }
+        let horizontal =
+            libm::sqrt(rp.trans_0_1_m.x * rp.trans_0_1_m.x + rp.trans_0_1_m.y * rp.trans_0_1_m.y);
+        let delta = if accepted {
+            self.config.vo_loss_drift_fraction * horizontal
+        } else {
+            horizontal
+        };
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        let result = ekf.inflate_position(delta);
+        self.recorder.inflate_position(delta);
+        if let Err(e) = result {
             self.ekf_error(e);
         }
     }

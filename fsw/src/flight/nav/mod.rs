@@ -159,6 +159,9 @@ pub struct NavConfig {
     /// The VO-loss fallback fuses the kinematic translation only (rotation from the gyro and
     /// the sun).
     pub vo_loss_translation_only: bool,
+    /// Growth of the horizontal position sigma per metre of accepted travel fused without VO
+    /// (a systematic slip the gate cannot see), fraction.
+    pub vo_loss_drift_fraction: f64,
     /// RG2 cycles the rover waits at the start for VO's first keyframe (VO running) before it
     /// drives without VO.
     pub vo_start_timeout_cycles: u32,
@@ -247,6 +250,9 @@ impl NavConfig {
             vo_timeout_cycles: 60,
             vo_loss_slip_fraction: 0.3,
             vo_loss_translation_only: true,
+            // Slip below the gate's detection on firm ground (about 8 % of a step,
+            // docs/slip-detection.md).
+            vo_loss_drift_fraction: 0.05,
             // 4 s of rejections with no VO fused: longer than the rover goes without a VO
             // update while slipping with VO alive (a capture every 0.1 m, 1-2 s).
             reject_streak_cycles: 80,

@@ -6,7 +6,7 @@
 //! | [`FaultResponse::SlipLimit`] | slip over [`ProtectionConfig::slip_limit`] (1 - EKF travel / wheel travel) over a window of [`ProtectionConfig::slip_window_m`] of wheel travel, with VO fusing (MER stops at 40 % slip) | stop, latched |
 //! | [`FaultResponse::MotorStall`] | a wheel commanded above [`ProtectionConfig::stall_min_rate_rad_s`] turns at less than [`ProtectionConfig::stall_fraction`] of it for [`ProtectionConfig::stall_cycles`] RG2 cycles | stop, latched |
 //! | [`FaultResponse::PositionUncertain`] | horizontal position 1-sigma over [`ProtectionConfig::max_position_sigma_m`] | stop, latched |
-//! | [`FaultResponse::ArrivedUncertain`] | guidance reached the goal but `2 sigma` of the horizontal position exceeds [`ProtectionConfig::arrival_tolerance_m`] | stop (not `Arrived`), latched |
+//! | [`FaultResponse::ArrivedUncertain`] | guidance reached the goal, but its distance to the goal plus [`ProtectionConfig::arrival_sigmas`] times the horizontal position sigma `sqrt(P_nn + P_ee)` exceeds [`ProtectionConfig::arrival_tolerance_m`] | stop (not `Arrived`), latched |
 //! | [`FaultResponse::SensorLoss`] | a sensor hold lasting [`ProtectionConfig::sensor_loss_cycles`] RG2 cycles | stop, latched |
 //!
 //! A latched stop ([`super::NavMode::Stopped`]) holds the rover until the ground resets the
@@ -50,17 +50,20 @@ pub struct ProtectionConfig {
     pub stall_cycles: u32,
     /// Largest horizontal position 1-sigma to drive on, m.
     pub max_position_sigma_m: f64,
-    /// Goal tolerance the arrival must be supported to (mission input), m: `Arrived` only when
-    /// `2 sigma_h` of the position is within it.
+    /// Goal tolerance the arrival must be supported to (mission input), m.
     pub arrival_tolerance_m: f64,
+    /// `Arrived` only when the estimated distance to the goal plus this many horizontal sigmas
+    /// is within [`Self::arrival_tolerance_m`] (1: the true position is within the tolerance
+    /// with about 63 % probability for a circular 2D error).
+    pub arrival_sigmas: f64,
     /// RG2 cycles of a sensor hold before the stop is latched.
     pub sensor_loss_cycles: u32,
 }
 
 impl Default for ProtectionConfig {
     /// MER's 40 % slip limit over 0.5 m of wheel travel (5 s at 0.1 m/s); a stall is under 10 %
-    /// of a command above 0.2 rad/s for 2 s; 1 m of position sigma; 0.3 m arrival tolerance;
-    /// 60 s of sensor loss.
+    /// of a command above 0.2 rad/s for 2 s; 1 m of position sigma; 0.3 m arrival tolerance at
+    /// one sigma; 60 s of sensor loss.
     fn default() -> Self {
         Self {
             slip_limit: 0.4,
@@ -70,6 +73,7 @@ impl Default for ProtectionConfig {
             stall_cycles: 40,
             max_position_sigma_m: 1.0,
             arrival_tolerance_m: 0.3,
+            arrival_sigmas: 1.0,
             sensor_loss_cycles: 1200,
         }
     }
