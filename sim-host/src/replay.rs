@@ -148,10 +148,11 @@ mod tests {
 
     #[test]
     fn host_replay_reproduces_the_recording_digests() {
-        // 4 s: captures start after the 2 s alignment (capture policy, docs/vo.md), so two
-        // stereo pairs need the first 0.10 m of travel after it.
-        let rec = recording(4.0);
-        assert_eq!(rec.digests.len(), 800);
+        // 6 s: captures start after the 2 s alignment (capture policy, docs/vo.md), the rover
+        // waits for VO's first keyframe, and two stereo pairs need the first 0.10 m of travel
+        // after it.
+        let rec = recording(6.0);
+        assert_eq!(rec.digests.len(), 1200);
         assert!(rec.image_pairs >= 2, "{} stereo pairs", rec.image_pairs);
         let outcome = match replay(&rec.tape) {
             Ok(o) => o,
@@ -159,9 +160,9 @@ mod tests {
         };
         assert!(outcome.passed(), "{}", outcome.text);
         assert_eq!(outcome.digests, rec.digests);
-        assert!(outcome.text.contains("replay end frames 800 mismatches 0"));
+        assert!(outcome.text.contains("replay end frames 1200 mismatches 0"));
         // Recording is deterministic.
-        assert_eq!(recording(4.0).tape, rec.tape);
+        assert_eq!(recording(6.0).tape, rec.tape);
     }
 
     #[test]
