@@ -14,7 +14,7 @@
 //! `(x_i, y_i)` in `R` must move at `(vx - omega y_i, vy + omega x_i)`.
 
 use crate::scenario::{DriverMode, Scenario};
-use crate::vehicle::geometry::{VehicleGeometry, WHEELS};
+use crate::vehicle::geometry::WHEELS;
 use crate::world::{wrap_pi, World, FRAME_US};
 use rover_hal::MobilityCommand;
 
@@ -74,9 +74,9 @@ impl ReferenceDriver {
     /// The motor command for the next step.
     pub fn command(&mut self, world: &World) -> MobilityCommand {
         let t = &world.truth;
-        let r = world.geometry.wheel_radius_m();
+        let r = world.geometry.wheel_radius_m;
         let rim: f64 = (0..WHEELS)
-            .map(|i| r * t.wheel_rate_rad_s[i] * t.steer_rad[i].cos())
+            .map(|i| r[i] * t.wheel_rate_rad_s[i] * t.steer_rad[i].cos())
             .sum::<f64>()
             / WHEELS as f64;
         self.odometer_m += rim * FRAME_US as f64 * 1e-6;
@@ -127,7 +127,7 @@ impl ReferenceDriver {
         } else {
             self.speed_m_s * error.cos()
         };
-        inverse_kinematics(&world.wheel_xy(), r, [vx, 0.0, omega])
+        inverse_kinematics(&world.wheel_xy(), &r, [vx, 0.0, omega])
     }
 }
 
@@ -140,10 +140,11 @@ fn hold(world: &World) -> MobilityCommand {
 }
 
 /// Planar inverse kinematics of the simulator: steering angles (positive turns the wheel right,
-/// as in `fsw::kinematics`) and wheel rates for the body twist `[vx, vy, omega]` (m/s, m/s, rad/s in `R`).
+/// as in `fsw::kinematics`) and wheel rates for the body twist `[vx, vy, omega]` (m/s, m/s, rad/s in `R`),
+/// for wheels of radii `radius_m` (wheel order; the reference driver uses the true radii).
 pub fn inverse_kinematics(
     xy: &[[f64; 2]; WHEELS],
-    radius_m: f64,
+    radius_m: &[f64; WHEELS],
     twist: [f64; 3],
 ) -> MobilityCommand {
     let mut c = MobilityCommand::default();
@@ -155,7 +156,7 @@ pub fn inverse_kinematics(
             continue;
         }
         let mut psi = vy.atan2(vx);
-        let mut rate = speed / radius_m;
+        let mut rate = speed / radius_m[i];
         if psi.abs() > std::f64::consts::FRAC_PI_2 {
             psi -= std::f64::consts::PI.copysign(psi);
             rate = -rate;

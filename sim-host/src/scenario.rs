@@ -138,6 +138,12 @@ pub struct SensorSpec {
     /// Per-seed error of each vehicle dimension seen by the simulator, m (1-sigma); the flight
     /// code keeps the nominal geometry.
     pub dimension_error_m: f64,
+    /// Per-seed error of each wheel's radius on its own, m (1-sigma), on top of the common
+    /// radius error of `dimension_error_m` (which shifts all six radii together): wheels differ
+    /// by manufacturing and wear. Default 0.5 mm, a simulator assumption (no published Rocky 8
+    /// figure found; Borenstein & Feng 1996 name unequal wheel diameters a dominant systematic
+    /// odometry error, without a tolerance for machined rover wheels).
+    pub wheel_radius_error_m: f64,
     /// Per-seed calibration errors of the hazcam head (the flight software is given the
     /// nominal calibration; the images are rendered with the true one). `false`: the true head
     /// is the nominal one.
@@ -156,6 +162,7 @@ impl Default for SensorSpec {
             sun_hz: 200,
             camera_latency_polls: 3,
             dimension_error_m: 0.002,
+            wheel_radius_error_m: 0.0005,
             camera_calibration_errors: true,
             camera_tolerances: CameraTolerances::default(),
         }

@@ -85,6 +85,7 @@ impl Variant {
         }
         if self.exact_dimensions {
             scenario.sensors.dimension_error_m = 0.0;
+            scenario.sensors.wheel_radius_error_m = 0.0;
         }
         if self.terramechanics {
             scenario.slip_model = crate::scenario::SlipModelKind::Terramechanics;

@@ -24,8 +24,8 @@
 //!    deliver its share spins (`s = 1`) or slides at the largest slip angle.
 //!
 //! The rolling solve ([`crate::vehicle::rolling`]) then moves each axle at
-//! `(1 - s_i) r theta_dot_i` along its tangent (`r theta_dot_i / (1 + s_i)` when skidding) and
-//! at `tan(alpha_i)` times that sideways. A wheel that is not turning holds (its motor is not
+//! `(1 - s_i) r_i theta_dot_i` (`r_i` its own radius) along its tangent
+//! (`r_i theta_dot_i / (1 + s_i)` when skidding) and at `tan(alpha_i)` times that sideways. A wheel that is not turning holds (its motor is not
 //! back-drivable): no slip is computed for it.
 //!
 //! Per seed the soil parameters (`c`, `phi`, `K`, `K_y`, `k_phi`) are scaled by
@@ -100,7 +100,7 @@ pub struct WheelGround {
     pub tangent: Vector3<f64>,
     /// Unit spin axis.
     pub spin: Vector3<f64>,
-    /// Rim speed `r theta_dot`, m/s.
+    /// Rim speed `r_i theta_dot_i` (the wheel's own radius), m/s.
     pub rim_speed_m_s: f64,
 }
 
@@ -135,7 +135,8 @@ pub struct SlipState {
 #[derive(Debug, Clone)]
 pub struct SlipModel {
     soil: Soil,
-    wheel: Wheel,
+    /// The six wheels (each its own radius; width as [`Wheel::rocky8`]).
+    wheels: [Wheel; WHEELS],
     enabled: bool,
     weight_n: f64,
 }
@@ -144,9 +145,15 @@ pub struct SlipModel {
 const STILL_M_S: f64 = 1e-5;
 
 impl SlipModel {
-    /// A slip model for `soil` and a wheel of `wheel_radius_m`, with the per-seed scatter
-    /// drawn from `rng`. `enabled = false` turns slip off (every axle moves at its rim speed).
-    pub fn new(soil: Soil, wheel_radius_m: f64, enabled: bool, rng: &mut ChaCha8Rng) -> Self {
+    /// A slip model for `soil` and wheels of radii `wheel_radii_m` (wheel order), with the
+    /// per-seed scatter drawn from `rng`. `enabled = false` turns slip off (every axle moves at
+    /// its rim speed). Each wheel's contact patch uses its own radius.
+    pub fn new(
+        soil: Soil,
+        wheel_radii_m: [f64; WHEELS],
+        enabled: bool,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
         let mut scale = |v: f64| {
             let n: f64 = StandardNormal.sample(rng);
             v * (1.0 + SOIL_SCATTER * n).max(0.5)
@@ -161,10 +168,10 @@ impl SlipModel {
         };
         Self {
             soil: drawn,
-            wheel: Wheel {
-                radius_m: wheel_radius_m,
+            wheels: wheel_radii_m.map(|radius_m| Wheel {
+                radius_m,
                 ..Wheel::rocky8()
-            },
+            }),
             enabled,
             weight_n: ROCKY8_MASS_KG * MARS_GRAVITY,
         }
@@ -235,7 +242,7 @@ impl SlipModel {
             if !g.touching || normal <= 0.0 {
                 continue;
             }
-            let p = patch(&self.soil, &self.wheel, normal);
+            let p = patch(&self.soil, &self.wheels[i], normal);
             let still = g.rim_speed_m_s.abs() < STILL_M_S;
             if still {
                 out[i].load_n = normal;
@@ -291,7 +298,7 @@ mod tests {
         let up = -Vector3::z();
         std::array::from_fn(|i| WheelGround {
             touching: true,
-            point: w[i].axle_m - up * g.wheel_radius_m,
+            point: w[i].axle_m - up * g.wheel_radius_m[i],
             normal: up,
             tangent: up.cross(&w[i].spin_axis).normalize(),
             spin: w[i].spin_axis,
@@ -301,7 +308,7 @@ mod tests {
 
     fn model(soil: Soil) -> SlipModel {
         let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let mut m = SlipModel::new(soil, 0.1, true, &mut rng);
+        let mut m = SlipModel::new(soil, [0.1; WHEELS], true, &mut rng);
         m.soil = soil;
         m
     }
@@ -346,7 +353,7 @@ mod tests {
             .iter()
             .all(|x| x.ground_speed_m_s == 0.0 && x.lateral_m_s == 0.0));
         let mut rng = ChaCha8Rng::seed_from_u64(1);
-        let off = SlipModel::new(Soil::dry_sand(), 0.1, false, &mut rng);
+        let off = SlipModel::new(Soil::dry_sand(), [0.1; WHEELS], false, &mut rng);
         let (w, _) = off.wheel_slips(&g, 0.0, &level_ground(&g, 0.1, grav), &grav);
         assert!(w
             .iter()

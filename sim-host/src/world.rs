@@ -58,6 +58,8 @@ pub struct Streams {
     pub camera: ChaCha8Rng,
     /// Scale-factor and misalignment errors of the IMU.
     pub imu_calibration: ChaCha8Rng,
+    /// The wheels' individual radius errors.
+    pub wheel_radius: ChaCha8Rng,
 }
 
 impl Streams {
@@ -76,6 +78,7 @@ impl Streams {
             geometry: s(5),
             camera: s(6),
             imu_calibration: s(7),
+            wheel_radius: s(8),
         }
     }
 }
@@ -127,7 +130,7 @@ pub struct World {
     /// Terrain.
     pub terrain: Terrain,
     /// The simulator's (true) vehicle geometry: Rocky 8's published dimensions with the
-    /// per-seed dimension errors.
+    /// per-seed dimension errors and the wheels' individual radius errors.
     pub geometry: TruthGeometry,
     /// Joint limits.
     pub limits: JointLimits,
@@ -175,7 +178,8 @@ pub struct World {
     /// Newton iterations of the placement solver, summed over all steps (diagnostics).
     pub placement_iterations: u64,
     /// Averaged wheel odometry, m: the mean increment of the six drive encoders (as read)
-    /// times the nominal wheel radius (0.10 m, published) times the cosine of the true pitch;
+    /// times the nominal wheel radius (0.10 m, published: what the flight software knows, not
+    /// the wheels' true radii) times the cosine of the true pitch;
     /// the pitch-compensated baseline of V99 sec. 6 (diagnostics, not seen by the flight
     /// software).
     pub wheel_average_m: f64,
@@ -190,10 +194,16 @@ impl World {
         let mut streams = Streams::new(seed);
         let terrain = Terrain::new(scenario.terrain.clone(), seed, &scenario.waypoints);
         let sigma = scenario.sensors.dimension_error_m;
-        let geometry = rocky8().perturbed(|_| {
-            let n: f64 = StandardNormal.sample(&mut streams.geometry);
-            sigma * n
-        });
+        let sigma_wheel = scenario.sensors.wheel_radius_error_m;
+        let geometry = rocky8()
+            .perturbed(|_| {
+                let n: f64 = StandardNormal.sample(&mut streams.geometry);
+                sigma * n
+            })
+            .with_wheel_radius_errors(|_| {
+                let n: f64 = StandardNormal.sample(&mut streams.wheel_radius);
+                sigma_wheel * n
+            });
         let slip = match scenario.slip_model {
             SlipModelKind::Lumped => Slip::Lumped(LumpedSlip::new(
                 scenario.soil.lumped()?,
@@ -202,7 +212,7 @@ impl World {
             )),
             SlipModelKind::Terramechanics => Slip::Terramechanics(SlipModel::new(
                 scenario.soil.bekker()?,
-                geometry.wheel_radius_m(),
+                geometry.wheel_radius_m,
                 scenario.slip,
                 &mut streams.slip,
             )),
@@ -219,7 +229,8 @@ impl World {
         );
         let [start, next] = [scenario.waypoints[0], scenario.waypoints[1]];
         let yaw = (next[1] - start[1]).atan2(next[0] - start[0]);
-        let r = geometry.wheel_radius_m();
+        // Start height for the placement, which then sets each wheel on the ground.
+        let r = geometry.mean_wheel_radius_m();
         let pose = BodyPose {
             pos_m: [
                 start[0],
@@ -343,7 +354,7 @@ impl World {
             }
             let c = p0 + rot * wheels[i].axle_m;
             let spin = rot * wheels[i].spin_axis;
-            let r_wheel = self.geometry.wheel_radius_m();
+            let r_wheel = self.geometry.wheel_radius_m(i);
             if let Some(k) = edge_contact_ahead(&self.terrain, &c, &spin, r_wheel, rate.signum()) {
                 if k.clearance_m < EDGE_PROBE_M
                     && k.clearance_m < self.contacts[i].clearance_m + EDGE_PROBE_M
@@ -361,15 +372,16 @@ impl World {
                 wheels[i].spin_axis,
             )
         });
-        // Per-wheel slip from the loads and the soil.
-        let r = self.geometry.wheel_radius_m();
+        // Per-wheel slip from the loads and the soil. A wheel's rim speed is its own radius
+        // times its rate.
+        let r = self.geometry.wheel_radius_m;
         let ground: [WheelGround; WHEELS] = std::array::from_fn(|i| WheelGround {
             touching: contacts[i].touching,
             point: rot_inv * (self.contacts[i].point_w - Vector3::from(pose0.pos_m)),
             normal: contacts[i].normal,
             tangent: contacts[i].tangent,
             spin: contacts[i].spin,
-            rim_speed_m_s: r * self.truth.wheel_rate_rad_s[i],
+            rim_speed_m_s: r[i] * self.truth.wheel_rate_rad_s[i],
         });
         let gravity_r = rot_inv * Vector3::z();
         let (wheel_slip, slip) = match &mut self.slip {
@@ -585,5 +597,101 @@ pub fn wrap_pi(a: f64) -> f64 {
         w + std::f64::consts::TAU
     } else {
         w
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vehicle::geometry::VehicleGeometry;
+    use std::path::Path;
+
+    /// `flat-firm` without slip, with the given 1-sigma dimension and per-wheel radius errors.
+    fn flat(dimension_error_m: f64, wheel_radius_error_m: f64) -> Scenario {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/flat-firm.toml");
+        let mut s = Scenario::load(&path).unwrap();
+        s.slip = false;
+        s.sensors.dimension_error_m = dimension_error_m;
+        s.sensors.wheel_radius_error_m = wheel_radius_error_m;
+        s
+    }
+
+    /// Drive the truth vehicle with wheel radii `radii` (published dimensions otherwise) on flat
+    /// ground, all six wheels straight at 1 rad/s for 2 s after 1.5 s of spin-up (the motor's rate limit and lag): distance
+    /// travelled and yaw change over the 2 s.
+    fn drive(radii: [f64; WHEELS]) -> (f64, f64) {
+        let mut w = World::new(&flat(0.0, 0.0), 1).unwrap();
+        w.geometry.wheel_radius_m = radii;
+        w.command.wheel_rate_rad_s = [1.0; WHEELS];
+        for _ in 0..300 {
+            w.step();
+        }
+        let (d0, yaw0) = (w.truth.distance_m, w.truth.pose.yaw_rad);
+        for _ in 0..400 {
+            w.step();
+        }
+        (
+            w.truth.distance_m - d0,
+            wrap_pi(w.truth.pose.yaw_rad - yaw0),
+        )
+    }
+
+    /// SIM-18: without dimension and wheel-radius errors all six radii are the published
+    /// 0.10 m; the per-wheel errors make them differ, from their own stream (the other
+    /// dimensions are the same draws with and without them).
+    #[test]
+    fn sim_18_wheel_radii_per_seed() {
+        let exact = World::new(&flat(0.0, 0.0), 3).unwrap();
+        assert_eq!(exact.geometry.wheel_radius_m, [0.10; WHEELS]);
+        let common = World::new(&flat(0.002, 0.0), 3).unwrap().geometry;
+        let own = World::new(&flat(0.002, 0.0005), 3).unwrap().geometry;
+        assert_eq!(own.axle_m, common.axle_m);
+        assert_eq!(own.rocker_pivot_m, common.rocker_pivot_m);
+        assert_eq!(own.bogie_pivot_m, common.bogie_pivot_m);
+        assert!(common
+            .wheel_radius_m
+            .iter()
+            .all(|r| *r == common.wheel_radius_m[0]));
+        let spread = own.wheel_radius_m.iter().fold(0.0f64, |m, r| m.max(*r))
+            - own.wheel_radius_m.iter().fold(1.0f64, |m, r| m.min(*r));
+        assert!(spread > 1e-5 && spread < 0.005, "{:?}", own.wheel_radius_m);
+        for i in 0..WHEELS {
+            assert!((own.wheel_radius_m(i) - common.wheel_radius_m(i)).abs() < 0.0025);
+        }
+    }
+
+    /// SIM-18: on flat ground without slip a larger wheel advances more per rotation (radii
+    /// 1 % larger: 1 % more distance), and with the right wheels (1, 3, 5) 1 mm larger than the
+    /// left ones the rover yaws towards the smaller (left) side at the rate of the rolling
+    /// solve's least squares on level ground, `w_z = -sum(y_i r_i theta_dot) / (sum(y_i^2) +
+    /// sum((x_i - mean x)^2))` (tangent rows `v_x - y_i w_z = r_i theta_dot`, lateral rows
+    /// `v_y + x_i w_z = 0`).
+    #[test]
+    fn sim_18_larger_wheel_advances_more() {
+        let (d_nominal, yaw_nominal) = drive([0.10; WHEELS]);
+        let (d_large, _) = drive([0.101; WHEELS]);
+        assert!((d_nominal - 0.2).abs() < 2e-3, "{d_nominal}");
+        assert!(yaw_nominal.abs() < 1e-6, "{yaw_nominal}");
+        assert!(
+            (d_large / d_nominal - 1.01).abs() < 1e-3,
+            "{d_large} / {d_nominal}"
+        );
+        let right_larger: [f64; WHEELS] =
+            std::array::from_fn(|i| if i % 2 == 0 { 0.101 } else { 0.100 });
+        let (_, yaw) = drive(right_larger);
+        let g = rocky8();
+        let mean_x = g.axle_m.iter().map(|a| a.x).sum::<f64>() / WHEELS as f64;
+        let den: f64 = g
+            .axle_m
+            .iter()
+            .map(|a| a.y * a.y + (a.x - mean_x).powi(2))
+            .sum();
+        let num: f64 = (0..WHEELS).map(|i| g.axle_m[i].y * right_larger[i]).sum();
+        let expected = -num / den * 2.0;
+        assert!(yaw < 0.0, "turns left (towards the smaller wheels): {yaw}");
+        assert!(
+            (yaw - expected).abs() < 0.01 * expected.abs(),
+            "{yaw} vs {expected}"
+        );
     }
 }

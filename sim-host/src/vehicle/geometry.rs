@@ -38,8 +38,8 @@ pub struct WheelPose {
 
 /// What the simulator needs from a vehicle geometry.
 pub trait VehicleGeometry {
-    /// Wheel radius, m.
-    fn wheel_radius_m(&self) -> f64;
+    /// Radius of wheel `i` (0..6, the order of [`VehicleGeometry::wheels`]), m.
+    fn wheel_radius_m(&self, i: usize) -> f64;
     /// The six wheels in `R` for rocker `beta`, bogies `[rho1, rho2]` and steering angles, rad.
     /// `None` if an angle is not finite.
     fn wheels(
@@ -63,8 +63,9 @@ pub fn on_bogie(i: usize) -> bool {
 /// Rocky 8 as the simulator's truth vehicle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TruthGeometry {
-    /// Wheel radius, m.
-    pub wheel_radius_m: f64,
+    /// Radius of each wheel (1..6 as `axle_m`), m: the published 0.10 m for all six at the
+    /// published dimensions; the per-seed errors make them differ (manufacturing, wear).
+    pub wheel_radius_m: [f64; WHEELS],
     /// Rocker pivots `[right, left]` in `R` at zero joint angles, m.
     pub rocker_pivot_m: [Vector3<f64>; 2],
     /// Bogie pivots `[right, left]` in `R` at zero joint angles, m.
@@ -103,7 +104,7 @@ impl TruthGeometry {
             Vector3::new(x, y, 0.0)
         };
         Self {
-            wheel_radius_m: 0.10,
+            wheel_radius_m: [0.10; WHEELS],
             rocker_pivot_m: both(-0.1420, -0.2022),
             bogie_pivot_m: both(0.1291, -0.1273),
             axle_m: [
@@ -119,7 +120,9 @@ impl TruthGeometry {
 
     /// This geometry with every published length shifted by `delta(k)` metres (`k` counts the
     /// lengths: pivot and axle coordinates in `x` and `z`, the half track of each axle, the
-    /// wheel radius): the per-seed manufacturing errors of the truth vehicle.
+    /// wheel radius, one `delta` common to all six wheels): the per-seed manufacturing errors of
+    /// the truth vehicle. The wheels' individual radius errors are
+    /// [`TruthGeometry::with_wheel_radius_errors`].
     pub fn perturbed(&self, mut delta: impl FnMut(usize) -> f64) -> Self {
         let mut g = *self;
         let mut k = 0;
@@ -142,8 +145,27 @@ impl TruthGeometry {
         for a in g.axle_m.iter_mut() {
             bump(a, true);
         }
-        g.wheel_radius_m += delta(k);
+        let common = delta(k);
+        for r in g.wheel_radius_m.iter_mut() {
+            *r += common;
+        }
         g
+    }
+
+    /// This geometry with the radius of wheel `i` shifted by `delta(i)` metres (`i` = 0..6 in
+    /// wheel order): the wheels' individual radius errors (manufacturing, wear), on top of the
+    /// common one of [`TruthGeometry::perturbed`].
+    pub fn with_wheel_radius_errors(&self, mut delta: impl FnMut(usize) -> f64) -> Self {
+        let mut g = *self;
+        for (i, r) in g.wheel_radius_m.iter_mut().enumerate() {
+            *r += delta(i);
+        }
+        g
+    }
+
+    /// Mean of the six wheel radii, m.
+    pub fn mean_wheel_radius_m(&self) -> f64 {
+        self.wheel_radius_m.iter().sum::<f64>() / WHEELS as f64
     }
 
     /// Side-plane rotation of the rocker of side `s` (`+beta` right, `-beta` left).
@@ -205,8 +227,8 @@ impl TruthGeometry {
 }
 
 impl VehicleGeometry for TruthGeometry {
-    fn wheel_radius_m(&self) -> f64 {
-        self.wheel_radius_m
+    fn wheel_radius_m(&self, i: usize) -> f64 {
+        self.wheel_radius_m[i]
     }
 
     fn wheels(
@@ -245,8 +267,9 @@ mod tests {
     /// SIM-2: zero joint angles put all six axles at `z = 0`, right wheels at `+y`, front
     /// wheels ahead, rolling directions forward; a positive rocker angle lifts the right front
     /// wheel and lowers the left front; a positive steering angle turns the wheel right; the
-    /// per-seed dimension errors change the lengths by the drawn amounts; the analytic
-    /// suspension Jacobian equals finite differences.
+    /// per-seed dimension errors change the lengths by the drawn amounts (the common radius
+    /// error all six radii, a per-wheel error its own wheel's only); the analytic suspension
+    /// Jacobian equals finite differences.
     #[test]
     fn sim_2_truth_geometry_layout() {
         let g = rocky8();
@@ -278,7 +301,15 @@ mod tests {
             "positive steering turns right"
         );
         let p = g.perturbed(|_| 0.002);
-        assert!((p.wheel_radius_m - g.wheel_radius_m - 0.002).abs() < 1e-12);
+        for i in 0..WHEELS {
+            assert!((p.wheel_radius_m[i] - g.wheel_radius_m[i] - 0.002).abs() < 1e-12);
+        }
+        let q = g.with_wheel_radius_errors(|i| 1e-4 * i as f64);
+        for i in 0..WHEELS {
+            assert!((q.wheel_radius_m(i) - 0.10 - 1e-4 * i as f64).abs() < 1e-15);
+        }
+        assert_eq!(q.axle_m, g.axle_m);
+        assert!((q.mean_wheel_radius_m() - 0.10025).abs() < 1e-12);
         let wp = p.wheels(0.0, [0.0, 0.0], &[0.0; 6]).unwrap();
         assert!((wp[0].axle_m - w[0].axle_m).norm() > 1e-3);
         assert!(g.wheels(f64::NAN, [0.0, 0.0], &[0.0; 6]).is_none());

@@ -2,7 +2,7 @@
 //! bogie angles so that all six wheels touch the ground.
 //!
 //! Unknowns `u = [z, roll, pitch, beta, rho1, rho2]` (the body's north, east and yaw are given
-//! by the motion model). Each wheel is a disc of radius `r` centred on its axle, in the plane
+//! by the motion model). Each wheel is a disc of its own radius `r_i` centred on its axle, in the plane
 //! normal to its spin axis; its contact is the rim point of largest penetration
 //! ([`wheel_contact`]: on a step the rim rests on the edge). The residual of wheel `i` is its
 //! clearance `e_i(u)`. Newton's method with a finite-difference 6x6 Jacobian drives `e` to zero.
@@ -115,9 +115,9 @@ fn residuals(
         // Not finite: a large residual pushes Newton back.
         return Residuals::repeat(1.0);
     };
-    let r = geometry.wheel_radius_m();
     let mut e = Residuals::zeros();
     for i in 0..WHEELS {
+        let r = geometry.wheel_radius_m(i);
         let c = p + rot * wheels[i].axle_m;
         let s = rot * wheels[i].spin_axis;
         let k = &mut contacts[i];

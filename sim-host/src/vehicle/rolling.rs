@@ -12,8 +12,9 @@
 //!
 //! - `n_i . v_i = 0`: the wheel neither sinks into nor leaves the ground (weight
 //!   [`NORMAL_WEIGHT`]);
-//! - `t_i . v_i = (1 - s_i) r theta_dot_i`: the wheel centre moves along the contact tangent
-//!   at the rim speed reduced by the wheel's own longitudinal slip ratio `s_i`;
+//! - `t_i . v_i = (1 - s_i) r_i theta_dot_i`: the wheel centre moves along the contact tangent
+//!   at the rim speed (its own radius `r_i` times its rate) reduced by the wheel's own
+//!   longitudinal slip ratio `s_i`;
 //! - `l_i . v_i = lateral_i`: the wheel's own sideways slip velocity.
 //!
 //! Least squares over all rows gives the 9 rates. A wheel in the air contributes nothing; with
@@ -82,10 +83,10 @@ pub struct Twist {
 
 /// Solve the rolling constraints of all wheels on the ground for the body twist and the
 /// suspension rates. `wheels` are the wheel poses in `R` at `rocker_rad`, `bogie_rad`;
-/// `ground_speed[i]` is the wheel's rim speed `r theta_dot_i` after its slip (m/s along the
+/// `ground_speed[i]` is the wheel's rim speed `r_i theta_dot_i` after its slip (m/s along the
 /// tangent), `slip_factor[i]` the ratio of ground speed to rim speed (`1 - s_i` when driving;
 /// it scales the link-rotation term too), `lateral[i]` the sideways slip velocity along the
-/// spin axis (m/s) and `wheel_radius_m` the wheel radius.
+/// spin axis (m/s); the link-rotation terms use each wheel's own radius `r_i` from `geometry`.
 #[allow(clippy::too_many_arguments)]
 pub fn solve_rolling(
     geometry: &TruthGeometry,
@@ -97,7 +98,6 @@ pub fn solve_rolling(
     slip_factor: &[f64; WHEELS],
     lateral: &[f64; WHEELS],
 ) -> Twist {
-    let r = geometry.wheel_radius_m;
     let mut ata = SMatrix::<f64, 9, 9>::zeros();
     let mut atb = SVector::<f64, 9>::zeros();
     let mut touching = 0;
@@ -107,6 +107,7 @@ pub fn solve_rolling(
             continue;
         }
         touching += 1;
+        let r = geometry.wheel_radius_m[i];
         let a = wheels[i].axle_m;
         let jac: Matrix3<f64> = geometry.axle_jacobian(i, rocker_rad, bogie_rad);
         // Link rotation about the spin axis per unit of [w; q_dot], times k r.

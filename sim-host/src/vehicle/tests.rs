@@ -45,7 +45,7 @@ fn sim_3_flat_ground() {
         assert!(c.abs() < 1e-9);
     }
     assert!(
-        (p.pose.pos_m[2] + g.wheel_radius_m()).abs() < 2e-4,
+        (p.pose.pos_m[2] + g.wheel_radius_m(0)).abs() < 2e-4,
         "{:?}",
         p.pose
     );
@@ -173,7 +173,7 @@ fn sim_3_planar_slope() {
         p.pose.roll_rad
     );
     assert!(p.suspension.rocker_rad.abs() < 1e-3);
-    let _ = g.wheel_radius_m();
+    let _ = g.wheel_radius_m(0);
 }
 
 /// SIM-3: at a mechanical stop the joint is held at its limit, no wheel penetrates the ground,
