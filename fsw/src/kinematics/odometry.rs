@@ -42,6 +42,10 @@ pub struct OdometryConfig {
     /// grouser wear, sinkage on firm ground), 1-sigma fraction of the radius. A systematic
     /// scale: one perturbation of all wheels' rolling travel together.
     pub radius_scale_sigma: f64,
+    /// Uncertainty of each wheel's own radius relative to the others (manufacturing, wear),
+    /// 1-sigma fraction: one perturbation per wheel of its rolling travel, so that unequal
+    /// radii (a systematic yaw rate, Borenstein & Feng 1996) are inside the model.
+    pub wheel_radius_sigma: f64,
     /// Model error of the fixed-contact assumption while the suspension articulates: each
     /// wheel's contact velocity is uncertain along its rolling, lateral and normal directions by this
     /// fraction of the wheel's displacement relative to the body from the rocker/bogie
@@ -82,6 +86,7 @@ impl Default for OdometryConfig {
             steer_noise_rad: 1.0e-3 * CALIBRATION,
             suspension_increment_noise_rad: 1.55e-3 * CALIBRATION,
             radius_scale_sigma: 0.02 * CALIBRATION,
+            wheel_radius_sigma: 0.005 * CALIBRATION,
             articulation_fraction: 1.5,
             observed: [true, true, true, true, true, false],
             contact_angles: false,
@@ -473,6 +478,14 @@ impl KinematicOdometry {
             }
         });
         add(&scaled, c.radius_scale_sigma);
+        // Each wheel's own radius.
+        for (i, travel) in scaled.iter().enumerate() {
+            let mut b = [Vec3::zeros(); WHEEL_COUNT];
+            if let Some(slot) = b.get_mut(i) {
+                *slot = *travel;
+            }
+            add(&b, c.wheel_radius_sigma);
+        }
         // Articulation: each wheel's mean displacement per step relative to the body from the
         // suspension, over the articulation window.
         let articulation = contact_velocities(jacobians, articulation_rate, &[0.0; WHEEL_COUNT]);

@@ -76,6 +76,25 @@ impl Navigator {
         // IMU sample of a frame carry the same time stamp on this rover).
         rp.t0_us = start.t_us();
         rp.t1_us = t_us;
+        // The wheel travel as the EKF measured it (before the radius scale is applied), for the
+        // scale's own estimate below.
+        let wheel_step = rp.trans_0_1_m.norm();
+        let ekf_step = ekf
+            .clone_pose(start)
+            .map(|(_, p0)| (ekf.state().p_n - p0).norm())
+            .ok();
+        // Effective wheel radius scale learnt from VO on firm ground (`radius_scale`).
+        let k = self.radius_scale.scale;
+        rp.trans_0_1_m *= k;
+        for r in 3..6 {
+            for c in 0..6 {
+                let f = if c >= 3 { k * k } else { k };
+                rp.covariance[(r, c)] *= f;
+                if c < 3 {
+                    rp.covariance[(c, r)] *= k;
+                }
+            }
+        }
         if let Ok((q0, _)) = ekf.clone_pose(start) {
             self.traj
                 .kinematic_step(&q0, &contact_translation, &ekf.state().q_nr);
@@ -127,6 +146,17 @@ impl Navigator {
                         )
                     }),
                 };
+                if let Some(e) = ekf_step {
+                    // Learn only from intervals the gate accepted while VO anchors the EKF.
+                    let anchored =
+                        self.cycles_since_vo <= self.config.radius_scale.vo_recent_cycles;
+                    self.radius_scale.add(
+                        &self.config.radius_scale,
+                        wheel_step,
+                        e,
+                        d.accepted && anchored,
+                    );
+                }
                 if d.accepted {
                     self.cycles_since_reject = self.cycles_since_reject.saturating_add(1);
                     self.reject_streak = 0;

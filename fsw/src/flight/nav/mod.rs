@@ -42,6 +42,7 @@ mod diagnostics;
 mod guidance_adapter;
 mod kin_aiding;
 pub mod protection;
+mod radius;
 #[cfg(test)]
 mod tests_vo;
 pub mod vo_gate;
@@ -50,6 +51,7 @@ mod vo_sched;
 use align::Alignment;
 use diagnostics::Trajectories;
 use protection::{FaultResponse, Protection, ProtectionConfig};
+pub use radius::{RadiusScale, RadiusScaleConfig};
 use vo_gate::{CaptureMark, VoGateStatus};
 use vo_sched::StereoStage;
 
@@ -184,6 +186,8 @@ pub struct NavConfig {
     pub guidance: GuidanceConfig,
     /// Fault-protection limits (slip, stall, uncertainty, arrival, sensor loss).
     pub protection: ProtectionConfig,
+    /// Online estimate of the effective wheel-radius scale.
+    pub radius_scale: RadiusScaleConfig,
     /// Minor frames without a checked IMU sample after which the rover is stopped.
     pub imu_timeout_frames: u32,
     /// RG2 cycles without a checked joint reading after which the rover is stopped.
@@ -263,6 +267,7 @@ impl NavConfig {
             replay_ops_per_slice: 16,
             guidance: GuidanceConfig::rocky8(xy),
             protection: ProtectionConfig::default(),
+            radius_scale: RadiusScaleConfig::default(),
             imu_timeout_frames: 20,
             joints_timeout_cycles: 10,
             stopped_wheel_rate_rad_s: 0.01,
@@ -442,6 +447,8 @@ pub struct Navigator {
     vo_started: bool,
     /// Fault-protection state.
     protection: Protection,
+    /// Effective wheel-radius scale estimate.
+    radius_scale: RadiusScale,
     /// Why fault protection stopped the drive.
     fault_response: FaultResponse,
     /// A VO update was fused since the last kinematic interval.
@@ -532,6 +539,7 @@ impl Navigator {
             sun_rejections: 0,
             vo_started: false,
             protection: Protection::default(),
+            radius_scale: RadiusScale::new(),
             fault_response: FaultResponse::None,
             vo_fused_since_interval: false,
             last_wheel_rates: [0.0; 6],
@@ -549,6 +557,11 @@ impl Navigator {
     /// [`NavMode::Stopped`]).
     pub fn fault_response(&self) -> FaultResponse {
         self.fault_response
+    }
+
+    /// The effective wheel-radius scale applied to the kinematic translation (1 = nominal).
+    pub fn radius_scale(&self) -> f64 {
+        self.radius_scale.scale
     }
 
     /// The slip measured over the last complete fault-protection window (1 - EKF travel /
