@@ -275,6 +275,9 @@ impl SunSensor for FixedSun {
     }
 }
 
+/// A telemetry sink's injected refusal: the error to answer with now, if any.
+pub type TelemetryRefusal = Box<dyn Fn() -> Option<ErrorKind>>;
+
 /// Telemetry sink that counts records and bytes and keeps the last record.
 #[derive(Default)]
 pub struct CountingTelemetry {
@@ -284,11 +287,29 @@ pub struct CountingTelemetry {
     pub bytes: u64,
     /// The last record.
     pub last: Vec<u8>,
+    /// Records refused by an injected fault.
+    pub refused: u64,
+    /// Injected refusal (scenario faults on `telemetry`); `None`: every record is taken.
+    pub refusal: Option<TelemetryRefusal>,
+}
+
+impl CountingTelemetry {
+    /// A sink that refuses records when `refusal` says so.
+    pub fn with_refusal(refusal: TelemetryRefusal) -> Self {
+        Self {
+            refusal: Some(refusal),
+            ..Self::default()
+        }
+    }
 }
 
 impl Telemetry for CountingTelemetry {
     type Error = ErrorKind;
     fn send(&mut self, record: &[u8]) -> Result<(), ErrorKind> {
+        if let Some(e) = self.refusal.as_ref().and_then(|r| r()) {
+            self.refused += 1;
+            return Err(e);
+        }
         self.records += 1;
         self.bytes += record.len() as u64;
         self.last.clear();

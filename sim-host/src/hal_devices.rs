@@ -14,6 +14,9 @@ use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::Instant;
 
+/// Rows per band of the `stripes` camera fault.
+const STRIPE_ROWS: usize = 16;
+
 /// The world shared by the simulation loop and the devices.
 pub type SharedWorld = Rc<RefCell<World>>;
 
@@ -50,6 +53,12 @@ impl Clock for WorldClock {
     type Error = ErrorKind;
     fn now_us(&mut self) -> Result<u64, ErrorKind> {
         let w = self.world.borrow();
+        if w.faults
+            .active(FaultDevice::Clock, FaultKind::Dropout, w.truth.t_us)
+            .is_some()
+        {
+            return Err(ErrorKind::Timeout);
+        }
         Ok(w.faults.stamp(FaultDevice::Clock, w.truth.t_us))
     }
     fn counter(&mut self) -> Result<u64, ErrorKind> {
@@ -111,15 +120,44 @@ impl Imu for WorldImu {
     type Error = ErrorKind;
     fn read(&mut self) -> Result<ImuSample, ErrorKind> {
         let w = self.world.borrow();
+        let fresh = imu_faults(&w, w.imu_sample);
         faulted(
             &w,
             FaultDevice::Imu,
-            w.imu_sample,
+            fresh,
             &mut self.last,
             |s| s.gyro_rad_s = [f64::NAN; 3],
             |s, t| s.t_us = t,
         )
     }
+}
+
+/// The IMU's own faults on a fresh sample: bias jumps, saturation, the invalid flag.
+fn imu_faults(w: &World, mut s: ImuSample) -> ImuSample {
+    let t = w.truth.t_us;
+    let f = &w.faults;
+    for spec in f.all_active(FaultDevice::Imu, FaultKind::GyroBias, t) {
+        for k in (0..3).filter(|&k| spec.applies_to_axis(k)) {
+            s.gyro_rad_s[k] += spec.value();
+        }
+    }
+    for spec in f.all_active(FaultDevice::Imu, FaultKind::AccelBias, t) {
+        for k in (0..3).filter(|&k| spec.applies_to_axis(k)) {
+            s.accel_m_s2[k] += spec.value();
+        }
+    }
+    if let Some(spec) = f.active(FaultDevice::Imu, FaultKind::GyroSaturation, t) {
+        let l = spec.value().abs();
+        s.gyro_rad_s = s.gyro_rad_s.map(|v| v.clamp(-l, l));
+    }
+    if let Some(spec) = f.active(FaultDevice::Imu, FaultKind::AccelSaturation, t) {
+        let l = spec.value().abs();
+        s.accel_m_s2 = s.accel_m_s2.map(|v| v.clamp(-l, l));
+    }
+    if f.active(FaultDevice::Imu, FaultKind::Invalid, t).is_some() {
+        s.valid = false;
+    }
+    s
 }
 
 /// Mobility device: joint encoders and motor commands.
@@ -139,16 +177,59 @@ impl Mobility for WorldMobility {
     type Error = ErrorKind;
     fn read_joints(&mut self) -> Result<JointState, ErrorKind> {
         let w = self.world.borrow();
+        let t = w.truth.t_us;
+        // Per-wheel encoder faults on the fresh reading: a stuck wheel repeats its last drive
+        // and steering values, a NaN wheel reads NaN, an invalid wheel is flagged.
+        let mut fresh = w.joints;
+        for i in 0..rover_hal::WHEEL_COUNT {
+            let wheel = |kind| {
+                w.faults
+                    .active_wheel(FaultDevice::Joints, kind, t, i)
+                    .is_some_and(|f| f.wheel.is_some())
+            };
+            if wheel(FaultKind::Stuck) {
+                if let Some(previous) = self.last {
+                    fresh.drive_angle_rad[i] = previous.drive_angle_rad[i];
+                    fresh.drive_rate_rad_s[i] = previous.drive_rate_rad_s[i];
+                    fresh.steer_angle_rad[i] = previous.steer_angle_rad[i];
+                }
+            }
+            if wheel(FaultKind::Nan) {
+                fresh.drive_angle_rad[i] = f64::NAN;
+                fresh.drive_rate_rad_s[i] = f64::NAN;
+                fresh.steer_angle_rad[i] = f64::NAN;
+            }
+            if w.faults
+                .active_wheel(FaultDevice::Joints, FaultKind::Invalid, t, i)
+                .is_some()
+            {
+                fresh.wheel_valid[i] = false;
+            }
+        }
         faulted(
             &w,
             FaultDevice::Joints,
-            w.joints,
+            fresh,
             &mut self.last,
-            |j| j.rocker_rad = f64::NAN,
+            |j| {
+                j.rocker_rad = f64::NAN;
+                j.drive_angle_rad = [f64::NAN; rover_hal::WHEEL_COUNT];
+                j.drive_rate_rad_s = [f64::NAN; rover_hal::WHEEL_COUNT];
+                j.steer_angle_rad = [f64::NAN; rover_hal::WHEEL_COUNT];
+            },
             |j, t| j.t_us = t,
         )
     }
     fn command(&mut self, command: &MobilityCommand) -> Result<(), ErrorKind> {
+        {
+            let w = self.world.borrow();
+            if w.faults
+                .active(FaultDevice::Motors, FaultKind::Refuse, w.truth.t_us)
+                .is_some()
+            {
+                return Err(ErrorKind::Hardware);
+            }
+        }
         let finite = command
             .steer_angle_rad
             .iter()
@@ -188,10 +269,23 @@ impl SunSensor for WorldSun {
     type Error = ErrorKind;
     fn read(&mut self) -> Result<SunReading, ErrorKind> {
         let w = self.world.borrow();
+        let t = w.truth.t_us;
+        let mut fresh = w.sun_reading;
+        if let Some(f) = w
+            .faults
+            .active(FaultDevice::Sun, FaultKind::WrongDirection, t)
+        {
+            let (sn, cs) = f.value().sin_cos();
+            let [x, y, z] = fresh.sun_dir_rover;
+            fresh.sun_dir_rover = [cs * x - sn * y, sn * x + cs * y, z];
+        }
+        if let Some(f) = w.faults.active(FaultDevice::Sun, FaultKind::NonUnit, t) {
+            fresh.sun_dir_rover = fresh.sun_dir_rover.map(|v| v * f.value());
+        }
         faulted(
             &w,
             FaultDevice::Sun,
-            w.sun_reading,
+            fresh,
             &mut self.last,
             |s| s.sun_dir_rover = [f64::NAN; 3],
             |s, t| s.t_us = t,
@@ -215,6 +309,9 @@ pub struct WorldStereo {
     right: Vec<u8>,
     capture: CaptureProtocol,
     seed: u64,
+    /// The capture in progress was started inside a `never_complete` window: it never
+    /// completes (until the next trigger or release).
+    never_completes: bool,
     /// Frames rendered.
     pub rendered: u32,
 }
@@ -240,6 +337,7 @@ impl WorldStereo {
             right: vec![0; IMAGE_PIXELS],
             capture: CaptureProtocol::new(latency_polls),
             seed,
+            never_completes: false,
             rendered: 0,
         }
     }
@@ -296,18 +394,85 @@ impl StereoCamera for WorldStereo {
                 .set(w.sim_overhead_ns.get().saturating_add(spent));
             self.rendered += 1;
         }
+        if let Some(f) = w.faults.active(FaultDevice::Camera, FaultKind::Noise, t) {
+            let amplitude = f.value().abs().min(255.0);
+            let mut state =
+                (self.seed ^ u64::from(sequence).wrapping_mul(0xD1B5_4A32_D192_ED03)) | 1;
+            for p in self.left.iter_mut().chain(self.right.iter_mut()) {
+                // xorshift64: uniform noise in [-amplitude, amplitude].
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let u = (state >> 11) as f64 / (1u64 << 53) as f64;
+                let v = f64::from(*p) + amplitude * (2.0 * u - 1.0);
+                *p = v.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        if w.faults
+            .active(FaultDevice::Camera, FaultKind::Stripes, t)
+            .is_some()
+        {
+            for image in [&mut self.left, &mut self.right] {
+                for (row, pixels) in image.chunks_mut(rover_hal::IMAGE_WIDTH_PX).enumerate() {
+                    if (row / STRIPE_ROWS) % 2 == 1 {
+                        pixels.fill(255);
+                    }
+                }
+            }
+        }
         let stamp = w.faults.stamp(FaultDevice::Camera, t);
         self.capture.trigger(stamp);
+        self.never_completes = w
+            .faults
+            .active(FaultDevice::Camera, FaultKind::NeverComplete, t)
+            .is_some();
+        if w.faults
+            .active(FaultDevice::Camera, FaultKind::LostCapture, t)
+            .is_some()
+        {
+            // Accepted, then lost: the camera forgets the capture (poll answers Idle).
+            self.capture.release();
+        }
         Ok(stamp)
     }
     fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
+        if self.never_completes {
+            return Ok(CaptureStatus::InProgress);
+        }
         Ok(self.capture.poll())
     }
     fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
+        if self.never_completes {
+            return Err(ErrorKind::NotReady);
+        }
         self.capture.frame(&self.left, &self.right)
     }
     fn release(&mut self) -> Result<(), ErrorKind> {
+        self.never_completes = false;
         self.capture.release();
         Ok(())
     }
+}
+
+/// The telemetry faults of `world` as a [`CountingTelemetry`] refusal hook: `refuse` answers
+/// `ErrorKind::Busy`, `dropout` `ErrorKind::Timeout`, inside their windows.
+pub fn telemetry_faults(world: SharedWorld) -> crate::devices::TelemetryRefusal {
+    Box::new(move || {
+        let w = world.borrow();
+        let t = w.truth.t_us;
+        if w.faults
+            .active(FaultDevice::Telemetry, FaultKind::Refuse, t)
+            .is_some()
+        {
+            Some(ErrorKind::Busy)
+        } else if w
+            .faults
+            .active(FaultDevice::Telemetry, FaultKind::Dropout, t)
+            .is_some()
+        {
+            Some(ErrorKind::Timeout)
+        } else {
+            None
+        }
+    })
 }

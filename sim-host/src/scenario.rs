@@ -280,6 +280,10 @@ impl Scenario {
         for hz in [self.sensors.encoder_hz, self.sensors.sun_hz] {
             anyhow::ensure!(hz > 0 && 200 % hz == 0, "sensor rates must divide 200 Hz");
         }
+        for (k, f) in self.faults.iter().enumerate() {
+            f.check()
+                .map_err(|e| anyhow::anyhow!("faults[{k}] ({:?} {:?}): {e}", f.device, f.kind))?;
+        }
         match self.slip_model {
             SlipModelKind::Lumped => self.soil.lumped().map(|_| ())?,
             SlipModelKind::Terramechanics => self.soil.bekker().map(|_| ())?,

@@ -264,7 +264,9 @@ pub fn run_with<H: RunHooks>(
             seed,
         ),
         sun: WorldSun::new(world.clone()),
-        telemetry: CountingTelemetry::default(),
+        telemetry: CountingTelemetry::with_refusal(crate::hal_devices::telemetry_faults(
+            world.clone(),
+        )),
     };
     let mut config = flight_config(
         scenario,

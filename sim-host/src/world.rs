@@ -15,7 +15,7 @@ use crate::scenario::SlipModelKind;
 use crate::scenario::{Scenario, Site};
 use crate::sensors::camera_model::HazcamModel;
 use crate::sensors::encoders::EncoderParams;
-use crate::sensors::faults::Faults;
+use crate::sensors::faults::{FaultDevice, FaultKind, Faults};
 use crate::sensors::imu::ImuModel;
 use crate::sensors::sun::SunParams;
 use crate::slip::{SlipModel, SlipState, WheelGround, WheelSlip};
@@ -333,6 +333,15 @@ impl World {
             t.wheel_rate_rad_s[i] =
                 self.drive_motor
                     .step(t.wheel_rate_rad_s[i], self.command.wheel_rate_rad_s[i], dt);
+            // A stalled motor does not turn its wheel whatever the command (the vehicle drags
+            // the wheel: its rim speed is zero in the rolling solve below).
+            if self
+                .faults
+                .active_wheel(FaultDevice::Motors, FaultKind::Stall, t.t_us, i)
+                .is_some()
+            {
+                t.wheel_rate_rad_s[i] = 0.0;
+            }
             t.wheel_angle_rad[i] += t.wheel_rate_rad_s[i] * dt;
         }
         // Contacts of the last placement, in R, with the current steering.
@@ -401,6 +410,26 @@ impl World {
                 (lumped_wheels(&ground, &state), state)
             }
         };
+        // Slip override (fault `ground`/`slip`): the wheel's ground speed is `1 - value` of its
+        // rim speed whatever the soil (value 1: the wheel spins in place).
+        let (mut wheel_slip, mut slip) = (wheel_slip, slip);
+        let mut overridden = 0;
+        for i in 0..WHEELS {
+            if let Some(f) =
+                self.faults
+                    .active_wheel(FaultDevice::Ground, FaultKind::Slip, self.truth.t_us, i)
+            {
+                let s = f.value();
+                let w = &mut wheel_slip[i];
+                w.ground_speed_m_s = (1.0 - s) * ground[i].rim_speed_m_s;
+                w.lateral_m_s *= 1.0 - s;
+                w.slip_ratio = s;
+                overridden += 1;
+            }
+        }
+        if overridden == WHEELS {
+            slip.slip_ratio = wheel_slip.iter().map(|w| w.slip_ratio).sum::<f64>() / WHEELS as f64;
+        }
         let ground_speed = wheel_slip.map(|w| w.ground_speed_m_s);
         let slip_factor: [f64; WHEELS] = std::array::from_fn(|i| {
             let rim = ground[i].rim_speed_m_s;

@@ -6,6 +6,9 @@
 //! - `cargo xtask setup`: only the setup (adds `thumbv7em-none-eabihf`, installs
 //!   `qemu-system-arm` when missing).
 //! - `cargo xtask qemu`: build the rover-CPU image and run it in QEMU `mps2-an500`.
+//! - `cargo xtask fuzz --frames N [--seed S] [--no-vo]`: the seeded adversarial-HAL fuzzer of
+//!   the flight software (crate `fuzz-hal`, `docs/fault-protection.md` "Fuzzing"); a short run
+//!   ([`FUZZ_TEST_FRAMES`] frames) is a step of `test`.
 //! - `cargo xtask timing`: timing analysis on the rover CPU model (instruction counts per task,
 //!   utilisation, response times, stack, memory, panic sites) and the bit-identical host/target
 //!   replay check; writes `docs/timing.md`. Also the last step of `test`.
@@ -24,6 +27,8 @@ const TARGET: &str = "thumbv7em-none-eabihf";
 const FLIGHT_PROFILE: &str = "flight";
 /// QEMU machine modelling the rover CPU.
 const QEMU_MACHINE: &str = "mps2-an500";
+/// Frames of the fuzzer's short run in `cargo xtask test` (about 1-2 s of fuzzing).
+const FUZZ_TEST_FRAMES: u64 = 200_000;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -36,15 +41,19 @@ fn main() -> Result<()> {
             setup()?;
             qemu_run().map(|_| ())
         }
+        Some("fuzz") => fuzz(&args[1..]),
         Some("timing") => {
             setup()?;
             timing::timing()
         }
         _ => {
-            eprintln!("usage: cargo xtask <test|setup|qemu|timing>");
+            eprintln!("usage: cargo xtask <test|setup|qemu|fuzz|timing>");
             eprintln!("  test   everything CI checks (does its own setup first)");
             eprintln!("  setup  add the {TARGET} target and install qemu-system-arm if missing");
             eprintln!("  qemu   build the rover-CPU image and run it in QEMU {QEMU_MACHINE}");
+            eprintln!(
+                "  fuzz   --frames N [--seed S] [--no-vo]: adversarial-HAL fuzzer of the flight software"
+            );
             eprintln!("  timing timing analysis on the rover CPU model, writes docs/timing.md");
             bail!("unknown or missing command")
         }
@@ -179,6 +188,15 @@ fn test() -> Result<()> {
     run(cargo().args(["test", "--workspace", "--release"]))?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
 
+    let t = step("adversarial-HAL fuzzer, short run");
+    fuzz(&[
+        "--frames".to_string(),
+        FUZZ_TEST_FRAMES.to_string(),
+        "--seed".to_string(),
+        "1".to_string(),
+    ])?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
     let t = step("cross build of the flight crates (no_std, no alloc)");
     run(cargo().args([
         "build",
@@ -207,6 +225,15 @@ fn test() -> Result<()> {
         total.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// Run the adversarial-HAL fuzzer (release build of `fuzz-hal`) with `args`
+/// (`--frames N`, `--seed S`, `--no-vo`); fails on any invariant violation.
+fn fuzz(args: &[String]) -> Result<()> {
+    run(cargo()
+        .args(["run", "--release", "--quiet", "-p", "fuzz-hal", "--"])
+        .args(args))
+    .context("the adversarial-HAL fuzzer found invariant violations (see its summary above)")
 }
 
 /// Build the image and run it in QEMU; returns what it printed.
