@@ -231,6 +231,32 @@ const GOAL_REACHED: Check = req(
     "",
 );
 
+/// Requirement (issue 20): the drive ends honestly: either `Arrived` with the goal reached in
+/// truth, or stopped by fault protection or safed (with its reason in the summary); never
+/// `Arrived` outside the goal tolerance, never still driving.
+const HONEST_END: Check = req(
+    "arrived within tolerance, or stopped safe",
+    |s| {
+        flag(
+            (s.nav_mode == "Arrived" && s.goal_reached)
+                || s.fault_protection.stopped_safe
+                || s.nav_mode == "Safed",
+        )
+    },
+    Compare::AtLeast,
+    1.0,
+    "",
+);
+
+/// Requirement (issue 20): never `Arrived` outside the goal tolerance.
+const NO_FALSE_ARRIVAL: Check = req(
+    "no Arrived outside the tolerance",
+    |s| flag(!(s.nav_mode == "Arrived" && !s.goal_reached)),
+    Compare::AtLeast,
+    1.0,
+    "",
+);
+
 /// Goal (issue 7): EKF final error at most 0.5 % of the distance.
 const EKF_HALF_PERCENT: Check = goal(
     "EKF error / distance",
@@ -241,7 +267,7 @@ const EKF_HALF_PERCENT: Check = goal(
 );
 
 /// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
-pub const CASES: [Case; 16] = [
+pub const CASES: [Case; 23] = [
     Case {
         id: "SIL-GNC-1",
         scenario: "slope-10-cross",
@@ -644,6 +670,89 @@ pub const CASES: [Case; 16] = [
                 Compare::AtMost,
                 1.0,
                 "%",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-FP-1",
+        scenario: "fault-camera-blackout-30s",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "Mars Yard with 30 s of black frames (issue 20)",
+        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
+    },
+    Case {
+        id: "SIL-FP-2",
+        scenario: "fault-dead-camera",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "Mars Yard with a dead camera (issue 20)",
+        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
+    },
+    Case {
+        id: "SIL-FP-3",
+        scenario: "fault-stuck-imu",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "Mars Yard with the IMU stuck from 60 s (issue 20)",
+        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
+    },
+    Case {
+        id: "SIL-FP-4",
+        scenario: "fault-imu-bias",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "Mars Yard with large IMU bias jumps at 60 s (issue 20)",
+        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
+    },
+    Case {
+        id: "SIL-FP-5",
+        scenario: "fault-slope-20-combined",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "20 deg sand slope with combined faults (issue 20)",
+        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
+    },
+    Case {
+        id: "SIL-FP-6",
+        scenario: "fault-full-slip",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "100 % slip from 10 s: the drive stops within 10 s of the slip limit (issue 20)",
+        checks: &[
+            HONEST_END,
+            NO_FALSE_ARRIVAL,
+            req(
+                "stopped on the slip limit",
+                |s| flag(s.fault_protection.last_response == "SlipLimit"),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            req(
+                "end of the run (onset 10 s + 10 s + 1 s of run-out)",
+                |s| Some(s.sim_time_s),
+                Compare::AtMost,
+                21.0,
+                "s",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-FP-7",
+        scenario: "fault-motor-stall",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "10 deg slope with wheel 3's motor stalled from 10 s (issue 20)",
+        checks: &[
+            HONEST_END,
+            NO_FALSE_ARRIVAL,
+            req(
+                "stopped on the stall",
+                |s| flag(s.fault_protection.last_response.starts_with("MotorStall")),
+                Compare::AtLeast,
+                1.0,
+                "",
             ),
         ],
     },

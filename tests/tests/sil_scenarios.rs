@@ -1,4 +1,4 @@
-//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1: closed-loop scenario runs of the flight software on the
+//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7: closed-loop scenario runs of the flight software on the
 //! simulator with rendered stereo, against the thresholds of `sim_host::sil::CASES` (the same
 //! table `sim-host sil` writes to `docs/sil-results.md`).
 
@@ -116,4 +116,39 @@ fn sil_gate_2_rough_firm_false_alarms() {
 #[test]
 fn sil_rb_1_ekf_against_dead_reckoning_without_vo() {
     check("SIL-RB-1");
+}
+
+#[test]
+fn sil_fp_1_camera_blackout() {
+    check("SIL-FP-1");
+}
+
+#[test]
+fn sil_fp_2_dead_camera() {
+    check("SIL-FP-2");
+}
+
+#[test]
+fn sil_fp_3_stuck_imu() {
+    check("SIL-FP-3");
+}
+
+#[test]
+fn sil_fp_4_imu_bias() {
+    check("SIL-FP-4");
+}
+
+#[test]
+fn sil_fp_5_slope_20_combined() {
+    check("SIL-FP-5");
+}
+
+#[test]
+fn sil_fp_6_full_slip() {
+    check("SIL-FP-6");
+}
+
+#[test]
+fn sil_fp_7_motor_stall() {
+    check("SIL-FP-7");
 }

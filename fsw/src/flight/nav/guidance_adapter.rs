@@ -14,7 +14,9 @@ impl Navigator {
     /// slip, unseen without VO, is learnt as a heading error.
     pub fn guidance_cycle(&mut self) -> Option<MobilityCommand> {
         self.command = VehicleCommand::default();
-        self.last_wheel_rates = [0.0; 6];
+        // The wheel rates commanded in the previous cycle (stall check), then cleared until a
+        // new command is made.
+        let commanded = core::mem::replace(&mut self.last_wheel_rates, [0.0; 6]);
         if self.mode != NavMode::Driving {
             return None;
         }
@@ -32,7 +34,6 @@ impl Navigator {
             return None;
         }
         if let Some(j) = self.last_joints {
-            let commanded = self.last_wheel_rates;
             if let Some(r) =
                 self.protection
                     .motors(&self.config.protection, &commanded, &j.drive_rate_rad_s)
