@@ -114,7 +114,7 @@ pub struct FuzzReport {
     /// Device calls, per device.
     pub calls: [u64; 6],
     /// Frames that ended in each navigation mode: aligning, driving, arrived, safed.
-    pub mode_frames: [u64; 4],
+    pub mode_frames: [u64; 5],
     /// Episodes that reached driving, arrived, safed.
     pub episodes_reached: [u64; 3],
     /// Frames inside garbage bursts.
@@ -144,6 +144,7 @@ fn mode_index(m: NavMode) -> usize {
         NavMode::Driving => 1,
         NavMode::Arrived => 2,
         NavMode::Safed => 3,
+        NavMode::Stopped => 4,
     }
 }
 
@@ -300,7 +301,7 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
             {
                 let mut s = shared.borrow_mut();
                 s.advance();
-                s.must_stand = prev_mode == NavMode::Safed;
+                s.must_stand = matches!(prev_mode, NavMode::Safed | NavMode::Stopped);
             }
             let tick = catch_unwind(AssertUnwindSafe(|| fsw.tick()));
             let frame = report.frames;
@@ -343,6 +344,12 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
                     if prev_mode == NavMode::Safed && mode != NavMode::Safed {
                         found.push((ViolationKind::SafedNotLatched, format!("{mode:?}")));
                     }
+                    // A fault-protection stop is latched too (or escalates to Safed).
+                    if prev_mode == NavMode::Stopped
+                        && !matches!(mode, NavMode::Stopped | NavMode::Safed)
+                    {
+                        found.push((ViolationKind::SafedNotLatched, format!("{mode:?}")));
+                    }
                 }
             }
             {
@@ -369,7 +376,7 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
                 NavMode::Driving => reached[0] = true,
                 NavMode::Arrived => reached[1] = true,
                 NavMode::Safed => reached[2] = true,
-                NavMode::Aligning => {}
+                NavMode::Aligning | NavMode::Stopped => {}
             }
             if !found.is_empty() {
                 report.violations += found.len() as u64;
@@ -454,7 +461,7 @@ impl FuzzReport {
         );
         let _ = writeln!(
             out,
-            "  frames in garbage bursts: {} ({:.1} %); frames aligning/driving/arrived/safed: {:?}",
+            "  frames in garbage bursts: {} ({:.1} %); frames aligning/driving/arrived/safed/stopped: {:?}",
             self.garbage_frames,
             100.0 * self.garbage_frames as f64 / self.frames.max(1) as f64,
             self.mode_frames

@@ -251,7 +251,7 @@ const HONEST_END: Check = req(
 /// Requirement (issue 20): never `Arrived` outside the goal tolerance.
 const NO_FALSE_ARRIVAL: Check = req(
     "no Arrived outside the tolerance",
-    |s| flag(!(s.nav_mode == "Arrived" && !s.goal_reached)),
+    |s| flag(s.nav_mode != "Arrived" || s.goal_reached),
     Compare::AtLeast,
     1.0,
     "",
