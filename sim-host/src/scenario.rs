@@ -203,6 +203,10 @@ pub struct Scenario {
     /// the ground sets it per terrain), fraction; default 0.4 (MER).
     #[serde(default = "default_slip_limit")]
     pub slip_limit: f64,
+    /// Largest horizontal position sigma the ground accepts before fault protection stops the
+    /// drive (mission input), m; default 1.
+    #[serde(default = "default_max_sigma")]
+    pub max_position_sigma_m: f64,
     /// Waypoints `[north, east]`, m; the rover starts at the first, facing the second.
     pub waypoints: Vec<[f64; 2]>,
     /// Reference driver mode (default: carrot on truth, i.e. with slip compensation).
@@ -237,6 +241,9 @@ fn default_goal() -> f64 {
 }
 fn default_slip_limit() -> f64 {
     0.4
+}
+fn default_max_sigma() -> f64 {
+    1.0
 }
 fn default_driver() -> DriverMode {
     DriverMode::TruthCarrot

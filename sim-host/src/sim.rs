@@ -458,6 +458,8 @@ pub struct Mission {
     pub goal_tolerance_m: f64,
     /// Slip limit of the drive (fault protection), fraction.
     pub slip_limit: f64,
+    /// Largest horizontal position sigma the ground accepts for the drive (fault protection), m.
+    pub max_position_sigma_m: f64,
 }
 
 impl Mission {
@@ -493,6 +495,7 @@ impl Mission {
             cruise_speed_m_s: scenario.speed_m_s,
             goal_tolerance_m: scenario.goal_tolerance_m,
             slip_limit: scenario.slip_limit,
+            max_position_sigma_m: scenario.max_position_sigma_m,
         }
     }
 }
@@ -514,6 +517,7 @@ pub fn flight_config(scenario: &Scenario, options: DriveOptions) -> FswConfig {
     nav.vo_enabled = options.vo_enabled;
     nav.protection.arrival_tolerance_m = mission.goal_tolerance_m;
     nav.protection.slip_limit = mission.slip_limit;
+    nav.protection.max_position_sigma_m = mission.max_position_sigma_m;
     config
 }
 

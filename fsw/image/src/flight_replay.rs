@@ -66,7 +66,7 @@ impl FlightSetup {
 /// The drive-dependent flight parameters a tape carries ([`rover_replay::TapeHeader::nav_params`]):
 /// the mission inputs on top of the nominal profile [`FswConfig::rocky8`]: sun ephemeris
 /// (latitude, declination, hour angle at clock zero, in use), cruise speed, slip compensation,
-/// VO enabled, arrival tolerance, slip limit, 7 spare zeros. Nothing else of the configuration depends on the drive.
+/// VO enabled, arrival tolerance, slip limit, position-sigma limit, 6 spare zeros. Nothing else of the configuration depends on the drive.
 pub fn nav_params(config: &FswConfig) -> [f64; NAV_PARAMS] {
     let n = &config.nav;
     let flag = |b: bool| if b { 1.0 } else { 0.0 };
@@ -85,6 +85,7 @@ pub fn nav_params(config: &FswConfig) -> [f64; NAV_PARAMS] {
         flag(n.vo_enabled),
         n.protection.arrival_tolerance_m,
         n.protection.slip_limit,
+        n.protection.max_position_sigma_m,
     ];
     for (slot, v) in p.iter_mut().zip(values) {
         *slot = v;
@@ -112,6 +113,7 @@ pub fn flight_config(setup: &FlightSetup) -> FswConfig {
     nav.vo_enabled = p[6] != 0.0;
     nav.protection.arrival_tolerance_m = p[7];
     nav.protection.slip_limit = p[8];
+    nav.protection.max_position_sigma_m = p[9];
     config
 }
 
