@@ -563,21 +563,9 @@ impl FuzzCamera {
 impl StereoCamera for FuzzCamera {
     type Error = ErrorKind;
     fn calibration(&self) -> StereoCalibration {
-        // Rocky 8 hazcam (nominal): 640x480, 79.5 x 64 deg, 8.4 cm baseline, 45 deg down.
-        let fx = 320.0 / (79.5f64.to_radians() / 2.0).tan();
-        let fy = 240.0 / (64.0f64.to_radians() / 2.0).tan();
-        let (s, c) = 45f64.to_radians().sin_cos();
-        // Camera K (x right, y down, z optical axis) to rover R (x fwd, y right, z down),
-        // pitched 45 deg down.
-        StereoCalibration {
-            fx_px: fx,
-            fy_px: fy,
-            cx_px: 319.5,
-            cy_px: 239.5,
-            baseline_m: 0.084,
-            rot_rover_from_camera: [[0.0, -s, c], [1.0, 0.0, 0.0], [0.0, c, s]],
-            pos_camera_in_rover_m: [0.2, -0.042, -0.6],
-        }
+        // The flight software's own nominal hazcam (the fuzzer tests the flight code; it is not
+        // the simulator, which keeps an independent camera model).
+        fsw::vo::rocky8_hazcam()
     }
 
     fn trigger(&mut self) -> Result<u64, ErrorKind> {
