@@ -42,13 +42,19 @@ pub struct FlightSetup {
 }
 
 impl FlightSetup {
-    /// A rover standing still at the origin with no path.
-    pub const fn still() -> Self {
+    /// A rover standing still at the origin facing north with no path, under the fixed sun of
+    /// the still devices (30 deg up, due north: local noon at 60 deg S on the equinox), so that
+    /// the alignment takes its heading from the sun as on a real drive.
+    pub fn still() -> Self {
+        let mut config = FswConfig::rocky8([0.0; 3], 0.0);
+        config.nav.ekf.sun = Some(fsw::estimation::ephemeris::SunEphemeris::from_site(
+            -60.0, 0.0, 12.0,
+        ));
         Self {
             waypoints: [[0.0; 2]; MAX_WAYPOINTS],
             waypoint_count: 0,
             start_pose: [0.0; 6],
-            nav_params: None,
+            nav_params: Some(nav_params(&config)),
         }
     }
 

@@ -15,6 +15,8 @@ use fsw_image::flight_replay::FlightSetup;
 
 /// Minor frames to run: 10 s at 200 Hz.
 const FRAMES: u32 = 2_000;
+/// Stereo captures of the 10 s still run.
+const STILL_STEREO_FRAMES: u32 = 1;
 
 /// Run; true when the schedule's counts matched and no device fault was counted.
 pub fn run(mut core: cortex_m::Peripherals) -> bool {
@@ -99,7 +101,11 @@ pub fn run(mut core: cortex_m::Peripherals) -> bool {
     }
     let state = fsw.state();
     let faults: u32 = state.health.iter().map(|h| h.faults()).sum();
-    ok &= faults == 0 && state.stereo_frames == FRAMES / SCHEDULE_GROUPS[2].divisor;
+    // Captures follow the capture policy (docs/vo.md): the first right after the 2 s alignment.
+    // The target's still camera holds a test pattern, so VO keeps that frame as its keyframe;
+    // a rover standing still then needs no capture before the 10 s time fallback (the host's
+    // still run, SIL-EXEC-1, has uniform grey frames and retries every second instead).
+    ok &= faults == 0 && state.stereo_frames == STILL_STEREO_FRAMES;
     report(format_args!(
         "frames {} late {} cycle_slips {} stereo_frames {} device_faults {} frame_max_us {}\n",
         FRAMES,
