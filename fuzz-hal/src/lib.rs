@@ -406,9 +406,10 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
                 // One finding per episode is enough: the state is suspect from here on.
                 stop_episode = true;
             }
-            // Safed is latched: watch it for a while (no motion, stays safed), then start a
-            // new episode.
-            if mode == NavMode::Safed {
+            // Safed and a fault-protection stop are latched: watch them for a while (no motion,
+            // they stay), then start a new episode so that the frames keep exercising the
+            // drive.
+            if matches!(mode, NavMode::Safed | NavMode::Stopped) {
                 safed_frames += 1;
                 if safed_frames > SAFED_WATCH_FRAMES {
                     stop_episode = true;
