@@ -260,6 +260,7 @@ mod tests {
             sun_refused: c,
             sun_streaks: c,
             fault_stops: c,
+            time_rebases: c,
             vo_start_holds: c,
             vo_start_timeouts: c,
             heading_from_sun: c,

@@ -494,9 +494,11 @@ impl<P: Platform> Work<'_, P> {
             Err(e) => count_error(health, rover_hal::Error::kind(&e)),
             Ok(s) => {
                 let previous = self.state.imu.map(|p| p.t_us);
+                let resyncs = health.resyncs;
                 if !check_time(health, base, previous, s.t_us, tick, self.limits) {
                     return;
                 }
+                let rebased = health.resyncs != resyncs;
                 let l = self.limits;
                 let in_range = |v: &[f64; 3], max: f64| {
                     all_finite(v) && v.iter().all(|x| libm::fabs(*x) <= max)
@@ -510,6 +512,11 @@ impl<P: Platform> Work<'_, P> {
                 }
                 health.good = health.good.saturating_add(1);
                 base.accept(tick);
+                if rebased {
+                    // The filter's timeline restarts one frame before this sample.
+                    self.nav
+                        .imu_time_rebase(s.t_us.saturating_sub(FRAME_PERIOD_US));
+                }
                 self.state.imu = Some(s);
                 self.fresh.imu = Some(s);
             }

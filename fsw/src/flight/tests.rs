@@ -460,3 +460,42 @@ fn fp_3_implausible_values_and_time_leaps() {
         (limits.resync_readings - 1, 1)
     );
 }
+
+/// FP-4 (issue 20): after an accepted IMU time-base change the navigator re-anchors the
+/// filter's timeline: the next samples of the new base propagate one frame each (no hour-long
+/// gap), the state stays where it was, and the drive goes on.
+#[test]
+fn fp_4_imu_time_rebase_keeps_the_filter() {
+    use nav::{NavConfig, NavMode, Navigator};
+    let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+    config.align_sun_wait_samples = 0;
+    config.vo_enabled = false;
+    let calib = crate::vo::rocky8_hazcam();
+    let mut nav = match Navigator::new(config, &[[0.0, 0.0], [5.0, 0.0]], &calib) {
+        Ok(n) => n,
+        Err(e) => panic!("navigator refused: {e:?}"),
+    };
+    for k in 1..=600u64 {
+        nav.propagate(Some(&imu(5_000 * k)));
+    }
+    assert_eq!(nav.mode(), NavMode::Driving);
+    let before = nav.pose();
+    let leap = 3_600_000_000u64;
+    nav.imu_time_rebase(leap - 5_000);
+    for k in 0..200u64 {
+        nav.propagate(Some(&imu(leap + 5_000 * k)));
+    }
+    let Some(ekf) = nav.ekf() else {
+        panic!("filter stopped")
+    };
+    assert_eq!(ekf.time_us(), leap + 5_000 * 199);
+    assert_eq!(nav.counters().time_rebases, 1);
+    assert_eq!(nav.counters().ekf_errors, 0);
+    assert_eq!(nav.mode(), NavMode::Driving);
+    // One second at rest in the new base: the position and its uncertainty barely move (an
+    // hour-long propagation across the leap grows the position sigma to about 100 m).
+    assert!((nav.pose().p_n - before.p_n).norm() < 0.01);
+    let i = crate::estimation::state::I_P;
+    let sigma = (ekf.covariance()[(i, i)] + ekf.covariance()[(i + 1, i + 1)]).sqrt();
+    assert!(sigma < 0.5, "position sigma {sigma} m");
+}

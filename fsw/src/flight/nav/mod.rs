@@ -369,6 +369,8 @@ pub struct NavCounters {
     pub vo_start_timeouts: u32,
     /// Fault-protection stops (see [`Navigator::fault_response`]).
     pub fault_stops: u32,
+    /// Re-anchorings of the filter's timeline after an IMU time-base change.
+    pub time_rebases: u32,
     /// Streaks of sun readings refused by the gate that inflated the heading covariance.
     pub sun_streaks: u32,
     /// Alignments whose heading came from the sun sensor.
@@ -568,6 +570,34 @@ impl Navigator {
     /// wheel travel), fraction.
     pub fn window_slip(&self) -> f64 {
         self.protection.last_slip
+    }
+
+    /// The IMU's time base changed (a time-stamp leap that persisted and was accepted,
+    /// [`crate::telemetry::DeviceHealth::resyncs`]): the filter's timeline is re-anchored at
+    /// `t_us` (the state and its core covariance are kept, the clones, the kinematic interval,
+    /// the VO keyframe and any recording or replay are dropped, since their times belong to
+    /// the old base), so that the filter never propagates across the leap. Counted in
+    /// [`NavCounters::time_rebases`]. The clock jumped, the rover did not: the drive goes on.
+    pub fn imu_time_rebase(&mut self, t_us: u64) {
+        self.counters.time_rebases = self.counters.time_rebases.saturating_add(1);
+        if !self.ekf_running {
+            return;
+        }
+        let mut x = *self.ekf.state();
+        x.t_us = t_us;
+        let p = self.ekf.core_covariance();
+        self.recorder.end();
+        if let Err(e) = self.ekf.reset(x, &p) {
+            self.ekf_error(e);
+        }
+        self.interval = None;
+        self.key_clone = None;
+        self.stereo = StereoStage::Idle;
+        if let Some(vo) = self.vo.as_mut() {
+            vo.reset();
+        }
+        self.gyro_since_joints = None;
+        self.gyro_t_us = None;
     }
 
     /// Latch a fault-protection stop.
