@@ -257,6 +257,18 @@ const NO_FALSE_ARRIVAL: Check = req(
     "",
 );
 
+/// A fault scenario of issue 20 whose only requirement is an honest end.
+const fn fault_case(id: &'static str, scenario: &'static str, title: &'static str) -> Case {
+    Case {
+        id,
+        scenario,
+        no_slip_comp: false,
+        variant: BASE,
+        title,
+        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
+    }
+}
+
 /// Goal (issue 7): EKF final error at most 0.5 % of the distance.
 const EKF_HALF_PERCENT: Check = goal(
     "EKF error / distance",
@@ -681,46 +693,31 @@ pub const CASES: [Case; 23] = [
             ),
         ],
     },
-    Case {
-        id: "SIL-FP-1",
-        scenario: "fault-camera-blackout-30s",
-        no_slip_comp: false,
-        variant: BASE,
-        title: "Mars Yard with 30 s of black frames (issue 20)",
-        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
-    },
-    Case {
-        id: "SIL-FP-2",
-        scenario: "fault-dead-camera",
-        no_slip_comp: false,
-        variant: BASE,
-        title: "Mars Yard with a dead camera (issue 20)",
-        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
-    },
-    Case {
-        id: "SIL-FP-3",
-        scenario: "fault-stuck-imu",
-        no_slip_comp: false,
-        variant: BASE,
-        title: "Mars Yard with the IMU stuck from 60 s (issue 20)",
-        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
-    },
-    Case {
-        id: "SIL-FP-4",
-        scenario: "fault-imu-bias",
-        no_slip_comp: false,
-        variant: BASE,
-        title: "Mars Yard with large IMU bias jumps at 60 s (issue 20)",
-        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
-    },
-    Case {
-        id: "SIL-FP-5",
-        scenario: "fault-slope-20-combined",
-        no_slip_comp: false,
-        variant: BASE,
-        title: "20 deg sand slope with combined faults (issue 20)",
-        checks: &[HONEST_END, NO_FALSE_ARRIVAL],
-    },
+    fault_case(
+        "SIL-FP-1",
+        "fault-camera-blackout-30s",
+        "Mars Yard with 30 s of black frames (issue 20)",
+    ),
+    fault_case(
+        "SIL-FP-2",
+        "fault-dead-camera",
+        "Mars Yard with a dead camera (issue 20)",
+    ),
+    fault_case(
+        "SIL-FP-3",
+        "fault-stuck-imu",
+        "Mars Yard with the IMU stuck from 60 s (issue 20)",
+    ),
+    fault_case(
+        "SIL-FP-4",
+        "fault-imu-bias",
+        "Mars Yard with large IMU bias jumps at 60 s (issue 20)",
+    ),
+    fault_case(
+        "SIL-FP-5",
+        "fault-slope-20-combined",
+        "20 deg sand slope with combined faults (issue 20)",
+    ),
     Case {
         id: "SIL-FP-6",
         scenario: "fault-full-slip",
