@@ -263,6 +263,7 @@ mod tests {
             time_rebases: c,
             vo_start_holds: c,
             vo_start_timeouts: c,
+            align_restarts: c,
             heading_from_sun: c,
             heading_from_plan: c,
             ekf_errors: c,

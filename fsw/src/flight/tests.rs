@@ -499,3 +499,34 @@ fn fp_4_imu_time_rebase_keeps_the_filter() {
     let sigma = (ekf.covariance()[(i, i)] + ekf.covariance()[(i + 1, i + 1)]).sqrt();
     assert!(sigma < 0.5, "position sigma {sigma} m");
 }
+
+/// FP-5 (issue 20): a spike within the sensor's range during the alignment (3 m/s^2 in one of
+/// 400 samples) restarts the alignment instead of being averaged into the attitude; the next
+/// 400 clean samples align.
+#[test]
+fn fp_5_alignment_dispersion_restarts() {
+    use nav::{NavConfig, NavMode, Navigator};
+    let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+    config.align_sun_wait_samples = 0;
+    config.vo_enabled = false;
+    let calib = crate::vo::rocky8_hazcam();
+    let mut nav = match Navigator::new(config, &[[0.0, 0.0], [5.0, 0.0]], &calib) {
+        Ok(n) => n,
+        Err(e) => panic!("navigator refused: {e:?}"),
+    };
+    for k in 1..=400u64 {
+        let mut s = imu(5_000 * k);
+        if k == 100 {
+            s.accel_m_s2[0] = 3.0;
+        }
+        nav.propagate(Some(&s));
+    }
+    assert_eq!(nav.mode(), NavMode::Aligning);
+    assert_eq!(nav.counters().align_restarts, 1);
+    for k in 401..=800u64 {
+        nav.propagate(Some(&imu(5_000 * k)));
+    }
+    assert_eq!(nav.mode(), NavMode::Driving);
+    let (r, p, _) = nav.pose().q_nr.euler_angles();
+    assert!(r.abs() < 1e-9 && p.abs() < 1e-9, "tilt {r} {p}");
+}

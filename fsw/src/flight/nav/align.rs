@@ -17,6 +17,9 @@ pub(super) struct Alignment {
     count: u32,
     gyro: [f64; 3],
     accel: [f64; 3],
+    /// Sums of squares of the samples (dispersion test).
+    gyro_sq: [f64; 3],
+    accel_sq: [f64; 3],
     /// Sum of the unit sun vectors read in `R` during the alignment.
     sun: [f64; 3],
     /// Sun readings summed.
@@ -78,6 +81,8 @@ impl Navigator {
         for k in 0..3 {
             a.gyro[k] += s.gyro_rad_s[k];
             a.accel[k] += s.accel_m_s2[k];
+            a.gyro_sq[k] += s.gyro_rad_s[k] * s.gyro_rad_s[k];
+            a.accel_sq[k] += s.accel_m_s2[k] * s.accel_m_s2[k];
         }
         let sun_wait_over = a.count
             >= self
@@ -88,6 +93,23 @@ impl Navigator {
             return;
         }
         let n = f64::from(a.count);
+        // Dispersion test (issue 20): a rover that moved, a shock or a spike within the sensor's
+        // range would be averaged into the attitude and the gyro bias; restart instead.
+        let std = |sum: &[f64; 3], sq: &[f64; 3]| {
+            (0..3).fold(0.0_f64, |m, k| {
+                let mean = sum[k] / n;
+                m.max(libm::sqrt((sq[k] / n - mean * mean).max(0.0)))
+            })
+        };
+        let (gyro_std, accel_std) = (std(&a.gyro, &a.gyro_sq), std(&a.accel, &a.accel_sq));
+        let c = &self.config;
+        let steady =
+            gyro_std <= c.align_max_gyro_std_rad_s && accel_std <= c.align_max_accel_std_m_s2;
+        if !steady {
+            self.align = Alignment::default();
+            self.counters.align_restarts = self.counters.align_restarts.saturating_add(1);
+            return;
+        }
         let f = Vec3::new(a.accel[0] / n, a.accel[1] / n, a.accel[2] / n);
         let g = f.norm();
         if !(g.is_finite() && g > 0.1) {

@@ -94,6 +94,11 @@ pub struct NavConfig {
     pub initial_position_sigma_m: f64,
     /// IMU samples averaged at rest before the EKF starts (tilt and gyro bias alignment).
     pub align_samples: u32,
+    /// Largest standard deviation of any gyro axis over the alignment, rad/s (the rover must be
+    /// at rest; a larger dispersion restarts the alignment).
+    pub align_max_gyro_std_rad_s: f64,
+    /// Largest standard deviation of any accelerometer axis over the alignment, m/s^2.
+    pub align_max_accel_std_m_s2: f64,
     /// IMU samples the alignment waits beyond `align_samples` for a sun reading (heading)
     /// before it starts with the plan's heading [`Self::initial_yaw_rad`].
     pub align_sun_wait_samples: u32,
@@ -214,6 +219,11 @@ impl NavConfig {
             initial_yaw_sigma_rad: 0.05,
             initial_position_sigma_m: 0.05,
             align_samples: 400,
+            // Ten times the per-sample noise of the rover's IMU class (1 mrad/s, 5 mm/s^2 at
+            // 200 Hz): a rover at rest passes, a spike of 0.2 rad/s or 3 m/s^2 in one of 400
+            // samples does not.
+            align_max_gyro_std_rad_s: 0.01,
+            align_max_accel_std_m_s2: 0.1,
             // One RG4 period (5 s) and a second of margin.
             align_sun_wait_samples: 1200,
             ekf: EkfConfig::default(),
@@ -373,6 +383,8 @@ pub struct NavCounters {
     pub time_rebases: u32,
     /// Streaks of sun readings refused by the gate that inflated the heading covariance.
     pub sun_streaks: u32,
+    /// Alignments restarted because the IMU samples were not those of a rover at rest.
+    pub align_restarts: u32,
     /// Alignments whose heading came from the sun sensor.
     pub heading_from_sun: u32,
     /// Alignments that took the plan's heading (no usable sun reading in time).
