@@ -39,6 +39,7 @@ pub mod exec;
 pub mod flight;
 pub mod guidance;
 pub mod kinematics;
+pub mod linalg;
 pub mod telemetry;
 pub mod types;
 pub mod vo;

@@ -80,7 +80,10 @@ impl FrameOutputs {
         let fits = self.telemetry_len < MAX_TELEMETRY_RECORDS && end <= MAX_TELEMETRY_BYTES;
         match (fits, self.telemetry.get_mut(start..end)) {
             (true, Some(dst)) => {
-                dst.copy_from_slice(record);
+                // Equal lengths by construction; a zip copy has no length-mismatch panic.
+                for (d, s) in dst.iter_mut().zip(record.iter()) {
+                    *d = *s;
+                }
                 if let Some(e) = self.telemetry_ends.get_mut(self.telemetry_len) {
                     *e = end;
                 }

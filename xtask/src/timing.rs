@@ -336,6 +336,13 @@ pub fn timing() -> Result<()> {
         }
     );
     println!("{}", summary(&m, &report));
+    let flight_panics = report.flight_panic_sites();
+    if !flight_panics.is_empty() {
+        bail!(
+            "the image has panic sites outside its number formatting (issue 18: the flight code \
+             has no panic path); enclosing functions: {flight_panics:?}"
+        );
+    }
     println!(
         "timing: done in {:.1} s (one QEMU run {:.1} s)",
         total.elapsed().as_secs_f64(),
@@ -931,6 +938,22 @@ fn document(
         r.panic_total(),
         thousands(r.decoded_instructions as u64)
     )?;
+    let flight_panics: usize = r.flight_panic_sites().iter().map(|(_, n)| n).sum();
+    writeln!(
+        d,
+        "**Panic sites outside the image's number formatting: {flight_panics}** (required 0: \
+         `cargo xtask timing` fails otherwise). Every site left is in `core::fmt`, \
+         `core::num::flt2dec` or `core::num::bignum`, the float formatting of the image's \
+         semihosting reports and panic message, which the flight software does not call. The \
+         flight code avoids the checks the optimiser cannot prove away: checked accesses \
+         (`get`) where an index is computed, iterator zips instead of parallel indexing, \
+         `checked_rem`, and `fsw::linalg` for the 6x6 solve of the inverse kinematics, the 3x3 \
+         SVD of Schonemann's fit and a `clamp` without `f64::clamp`'s bound assertion \
+         (nalgebra's LU and SVD keep shape assertions and `unwrap`s). To find a new site: \
+         `llvm-objdump -d` the image, take the address of the branch to the panic function \
+         and `addr2line -i -f -C -e <image> <address>` (the `flight` profile keeps line \
+         tables).\n"
+    )?;
     writeln!(d, "| panic function | sites |\n|---|---:|")?;
     for (name, n) in &r.panic_sites {
         writeln!(d, "| `{name}` | {n} |")?;
@@ -1040,6 +1063,12 @@ fn document(
         "| host and rover CPU replay bit-identical | {} frames | {} |",
         m.tape.1,
         pass(end_ok)
+    )?;
+    writeln!(
+        d,
+        "| panic sites outside the image's number formatting = 0 (enforced) | {} | {} |",
+        flight_panics,
+        pass(flight_panics == 0)
     )?;
     Ok(d)
 }

@@ -66,19 +66,27 @@ impl Ekf {
         self.next_serial = self.next_serial.wrapping_add(1);
         let i = clone_index(slot);
         // Rows and columns [dtheta, dp] of the current state copied into the clone block.
+        // `slot` comes from the clone array, so `i + 5 < DIM`; the accesses are checked anyway
+        // (no panic path, issue 18).
         for (dst, src) in [(i, I_THETA), (i + 3, I_P)] {
             for k in 0..3 {
                 for j in 0..DIM {
-                    let v = self.p[(src + k, j)];
-                    self.p[(dst + k, j)] = v;
+                    if let Some(v) = self.p.get((src + k, j)).copied() {
+                        if let Some(d) = self.p.get_mut((dst + k, j)) {
+                            *d = v;
+                        }
+                    }
                 }
             }
         }
         for (dst, src) in [(i, I_THETA), (i + 3, I_P)] {
             for k in 0..3 {
                 for j in 0..DIM {
-                    let v = self.p[(j, src + k)];
-                    self.p[(j, dst + k)] = v;
+                    if let Some(v) = self.p.get((j, src + k)).copied() {
+                        if let Some(d) = self.p.get_mut((j, dst + k)) {
+                            *d = v;
+                        }
+                    }
                 }
             }
         }

@@ -36,7 +36,11 @@ impl<const M: usize, const C: usize> Innovation<M, C> {
         let mut pcc = SMatrix::<f64, C, C>::zeros();
         for (a, &ia) in cols.iter().enumerate() {
             for (b, &ib) in cols.iter().enumerate() {
-                pcc[(a, b)] = p[(ia, ib)];
+                // An index outside the state (a programming error) poisons `S`, which the
+                // gate and the update then refuse (no panic path, issue 18).
+                if let Some(v) = pcc.get_mut((a, b)) {
+                    *v = p.get((ia, ib)).copied().unwrap_or(f64::NAN);
+                }
             }
         }
         let s = h * pcc * h.transpose() + meas_cov;
@@ -56,9 +60,14 @@ impl<const M: usize, const C: usize> Innovation<M, C> {
     fn u(&self, p: &Cov) -> SMatrix<f64, DIM, M> {
         let mut u = SMatrix::<f64, DIM, M>::zeros();
         for (c, &ic) in self.cols.iter().enumerate() {
+            if ic >= DIM {
+                // Outside the state: a gain the update refuses (non-finite).
+                u.fill(f64::NAN);
+                return u;
+            }
             let pcol = p.column(ic);
             for m in 0..M {
-                let hmc = self.h[(m, c)];
+                let hmc = self.h.get((m, c)).copied().unwrap_or(f64::NAN);
                 if hmc != 0.0 {
                     u.column_mut(m).axpy(hmc, &pcol, 1.0);
                 }
@@ -118,6 +127,11 @@ impl Ekf {
         let live = live.get(..count).unwrap_or(&[]);
         for (b, &j) in live.iter().enumerate() {
             for &i in live.get(..=b).unwrap_or(&[]) {
+                // Live indices are below DIM by construction; the test lets the optimiser drop
+                // the matrices' own index checks (no panic path, issue 18).
+                if i >= DIM || j >= DIM {
+                    continue;
+                }
                 let mut acc = 0.0;
                 for m in 0..M {
                     acc += u[(i, m)] * kt[(m, j)] + kt[(m, i)] * w[(j, m)];

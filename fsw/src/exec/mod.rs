@@ -239,7 +239,8 @@ impl<const G: usize, const T: usize> Executive<G, T> {
         let mut task_index = 0usize;
         for (g, group) in self.groups.iter_mut().enumerate() {
             let due = group.enabled
-                && tick % u64::from(group.config.divisor) == u64::from(group.config.offset);
+                && tick.checked_rem(u64::from(group.config.divisor))
+                    == Some(u64::from(group.config.offset));
             let group_start = if due {
                 read(clock, &mut self.clock_faults)
             } else {

@@ -227,11 +227,16 @@ impl<const N: usize> Guidance<N> {
             });
         }
         // Eq. 48 and 49, limited.
-        let phi_dot =
-            control::heading_loop(phi_err_rad, slip.phi_rad, c.k1, c.k2, c.sample_period_s)
-                .clamp(-c.max_yaw_rate_rad_s, c.max_yaw_rate_rad_s);
-        let y_dot = control::crab_loop(slip.y_m, c.k3, c.sample_period_s)
-            .clamp(-c.max_crab_speed_m_s, c.max_crab_speed_m_s);
+        let phi_dot = crate::linalg::clamp(
+            control::heading_loop(phi_err_rad, slip.phi_rad, c.k1, c.k2, c.sample_period_s),
+            -c.max_yaw_rate_rad_s,
+            c.max_yaw_rate_rad_s,
+        );
+        let y_dot = crate::linalg::clamp(
+            control::crab_loop(slip.y_m, c.k3, c.sample_period_s),
+            -c.max_crab_speed_m_s,
+            c.max_crab_speed_m_s,
+        );
         // Forward speed: cruise, reduced while the heading error is large and near the goal.
         let heading_factor = libm::cos(phi_err_rad).max(0.0);
         let approach = (c.approach_gain_per_s * goal_distance_m).max(c.min_speed_m_s);

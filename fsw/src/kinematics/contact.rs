@@ -240,7 +240,7 @@ pub(crate) fn contact_step_frames(
     } else {
         core::f64::consts::FRAC_PI_2 - 1e-3
     };
-    let clamp = |d: f64| d.clamp(-max_angle, max_angle);
+    let clamp = |d: f64| crate::linalg::clamp(d, -max_angle, max_angle);
     // Weights relative to the rolling equations (scaled by sigma_e^2).
     let w_prev = {
         let k = config.residual_sigma_m / config.step_sigma_rad;
@@ -329,8 +329,10 @@ pub(crate) fn contact_step_frames(
             }
         }
         let step_body: Vec6 = if gyro_rad.is_some() {
-            let s3: Mat3 = s.fixed_view::<3, 3>(0, 0).into_owned();
-            let g3: Vec3 = g.fixed_view::<3, 1>(0, 0).into_owned();
+            // Built element-wise: nalgebra's view `into_owned` keeps an iterator-length
+            // assertion the optimiser does not remove (no panic path, issue 18).
+            let s3 = Mat3::from_fn(|r, c| s.get((r, c)).copied().unwrap_or(f64::NAN));
+            let g3 = Vec3::new(g.x, g.y, g.z);
             let chol = s3.cholesky().ok_or(KinematicsError::Singular)?;
             let d = chol.solve(&(-g3));
             Vec6::new(d.x, d.y, d.z, 0.0, 0.0, 0.0)

@@ -144,7 +144,7 @@ fn solve(
         }
         rhs[i] = -s.dot(&(v_cmd + w_cmd.cross(&p)));
     }
-    let u = m.lu().solve(&rhs).ok_or(KinematicsError::Singular)?;
+    let u = crate::linalg::solve6(&m, &rhs).ok_or(KinematicsError::Singular)?;
     if u.iter().any(|x| !x.is_finite()) {
         return Err(KinematicsError::NonFinite);
     }

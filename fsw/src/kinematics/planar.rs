@@ -24,11 +24,15 @@ pub fn planar_body_rates(
     let mut count: u8 = 0;
     let (mut cx, mut cy, mut vx, mut vy) = (0.0, 0.0, 0.0, 0.0);
     let mut velocities = [(0.0, 0.0); WHEEL_COUNT];
-    for (i, p) in points.iter().enumerate() {
-        if !wheel_valid[i] {
+    let wheels = points
+        .iter()
+        .zip(wheel_valid.iter())
+        .zip(drive_rad_s.iter().zip(steer_rad.iter()))
+        .zip(velocities.iter_mut());
+    for (((p, valid), (&d, &s)), velocity) in wheels {
+        if !*valid {
             continue;
         }
-        let (d, s) = (drive_rad_s[i], steer_rad[i]);
         if !(d.is_finite() && s.is_finite()) {
             return Err(KinematicsError::NonFinite);
         }
@@ -36,12 +40,12 @@ pub fn planar_body_rates(
             return Err(KinematicsError::JointOutOfRange);
         }
         let speed = geometry.wheel_radius_m * d;
-        velocities[i] = (speed * libm::cos(s), speed * libm::sin(s));
+        *velocity = (speed * libm::cos(s), speed * libm::sin(s));
         count = count.saturating_add(1);
         cx += p.x;
         cy += p.y;
-        vx += velocities[i].0;
-        vy += velocities[i].1;
+        vx += velocity.0;
+        vy += velocity.1;
     }
     if count < 2 {
         return Err(KinematicsError::Unobservable {
@@ -51,10 +55,10 @@ pub fn planar_body_rates(
     let n = f64::from(count);
     let (cx, cy, vx, vy) = (cx / n, cy / n, vx / n, vy / n);
     let (mut num, mut den) = (0.0, 0.0);
-    for (i, p) in points.iter().enumerate() {
-        if wheel_valid[i] {
+    for ((p, valid), velocity) in points.iter().zip(wheel_valid.iter()).zip(velocities.iter()) {
+        if *valid {
             let (qx, qy) = (p.x - cx, p.y - cy);
-            num += qx * velocities[i].1 - qy * velocities[i].0;
+            num += qx * velocity.1 - qy * velocity.0;
             den += qx * qx + qy * qy;
         }
     }

@@ -103,16 +103,13 @@ where
     for c in pairs {
         h += (c.q_p - mean_p) * (c.q_c - mean_c).transpose();
     }
-    let svd = h.svd(true, true);
-    let s = svd.singular_values;
-    let largest = s.max();
-    let smallest = s.min();
-    let middle = s.sum() - largest - smallest;
+    // `h = U S V'` (decreasing singular values, `det U = +1`: `crate::linalg::svd3`); the
+    // determinant constraint then only needs `det V`.
+    let (u, s, v) = crate::linalg::svd3(&h)?;
+    let (largest, middle) = (s.x, s.y);
     if !(largest > 1e-12 && middle > 1e-6 * largest) {
         return None;
     }
-    let u = svd.u?;
-    let v = svd.v_t?.transpose();
     let sign = (v * u.transpose()).determinant().signum();
     let rotation = v * Mat3::from_diagonal(&Vec3::new(1.0, 1.0, sign)) * u.transpose();
     let translation_m = mean_c - rotation * mean_p;
@@ -174,7 +171,7 @@ pub fn select_kth(values: &mut [f64], k: usize) -> Option<f64> {
             while values.get(j).is_some_and(|&v| v > pivot) && j > 0 {
                 j -= 1;
             }
-            if i >= j {
+            if i >= j || j >= values.len() {
                 break;
             }
             values.swap(i, j);

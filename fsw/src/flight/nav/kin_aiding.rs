@@ -322,10 +322,10 @@ impl Navigator {
         } else {
             0.0
         };
-        let v = implied.clamp(c.streak_velocity_sigma_m_s, 1.0);
+        let v = crate::linalg::clamp(implied, c.streak_velocity_sigma_m_s, 1.0);
         // RG2 period: 20 Hz.
         let streak_s = f64::from(c.reject_streak_cycles.max(1)) * 0.05;
-        let b = (v / streak_s).clamp(c.streak_accel_bias_sigma_m_s2, 0.5);
+        let b = crate::linalg::clamp(v / streak_s, c.streak_accel_bias_sigma_m_s2, 0.5);
         self.reject_streak = 0;
         self.counters.kin_streaks = self.counters.kin_streaks.saturating_add(1);
         let result = ekf.inflate_velocity(v, b);

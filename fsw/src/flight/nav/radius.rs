@@ -72,7 +72,7 @@ impl RadiusScale {
         self.ekf_m = 0.0;
         let next = self.scale + c.gain * (ratio - self.scale);
         if next.is_finite() {
-            self.scale = next.clamp(1.0 - c.max_deviation, 1.0 + c.max_deviation);
+            self.scale = crate::linalg::clamp(next, 1.0 - c.max_deviation, 1.0 + c.max_deviation);
             self.updates = self.updates.saturating_add(1);
         }
     }
