@@ -99,6 +99,10 @@ enum Command {
         /// kinematics (the cameras still capture).
         #[arg(long)]
         no_vo: bool,
+        /// The truth vehicle gets the published dimensions exactly (no per-seed dimension or
+        /// wheel-radius errors), as the SIL kinematic cases run it.
+        #[arg(long)]
+        exact_dimensions: bool,
         /// Slip model of the truth: `lumped` (default) or `terramechanics` (per wheel,
         /// docs/terramechanics.md).
         #[arg(long)]
@@ -228,6 +232,7 @@ struct RunRequest {
     no_render: bool,
     no_slip: bool,
     no_vo: bool,
+    exact_dimensions: bool,
     slip_model: Option<String>,
     quiet: bool,
 }
@@ -263,6 +268,7 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
             no_render: false,
             no_slip: false,
             no_vo: false,
+            exact_dimensions: false,
             slip_model: None,
             quiet: true,
         })?;
@@ -329,12 +335,17 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
         no_render,
         no_slip,
         no_vo,
+        exact_dimensions,
         slip_model,
         quiet,
     } = req;
     let mut scenario = Scenario::load(&path)?;
     if no_slip {
         scenario.slip = false;
+    }
+    if exact_dimensions {
+        scenario.sensors.dimension_error_m = 0.0;
+        scenario.sensors.wheel_radius_error_m = 0.0;
     }
     match slip_model.as_deref() {
         None => {}
@@ -582,6 +593,7 @@ fn main() -> anyhow::Result<()> {
             no_render,
             no_slip,
             no_vo,
+            exact_dimensions,
             slip_model,
         }) => run_scenario(RunRequest {
             path: scenario,
@@ -594,6 +606,7 @@ fn main() -> anyhow::Result<()> {
             no_render,
             no_slip,
             no_vo,
+            exact_dimensions,
             slip_model,
             quiet: false,
         })

@@ -50,6 +50,20 @@ pub struct CrossTrack {
     pub max: f64,
 }
 
+/// How far the true suspension moved (H04 Fig. 17's "rocker and bogies exercised to their
+/// full extent"), rad, with the truth vehicle's mechanical stops for comparison.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SuspensionSummary {
+    /// Largest `|beta|` of the rocker differential over the run.
+    pub rocker_max_abs_rad: f64,
+    /// Largest `|rho|` of the right and the left bogie over the run.
+    pub bogie_max_abs_rad: [f64; 2],
+    /// Largest peak-to-peak travel of the rocker, of the right and of the left bogie.
+    pub travel_rad: [f64; 3],
+    /// The truth vehicle's stops `[rocker, bogie]` (`vehicle::placement::JointLimits`).
+    pub stops_rad: [f64; 2],
+}
+
 /// Slip figures.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct SlipSummary {
@@ -110,6 +124,8 @@ pub struct Summary {
     pub goal_reached: bool,
     /// Final distance to the goal, m.
     pub goal_miss_m: f64,
+    /// True suspension excursions.
+    pub suspension: SuspensionSummary,
     /// Slip.
     pub slip: SlipSummary,
     /// VO.
@@ -228,6 +244,33 @@ fn distance_errors(run: &RunResult) -> DistanceErrors {
     }
 }
 
+/// The true suspension's excursions over the run.
+fn suspension(run: &RunResult) -> SuspensionSummary {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for r in &run.records {
+        for k in 0..3 {
+            lo[k] = lo[k].min(r.suspension_rad[k]);
+            hi[k] = hi[k].max(r.suspension_rad[k]);
+        }
+    }
+    let travel = std::array::from_fn(|k| if hi[k] >= lo[k] { hi[k] - lo[k] } else { 0.0 });
+    let max_abs = |k: usize| {
+        if hi[k] >= lo[k] {
+            hi[k].abs().max(lo[k].abs())
+        } else {
+            0.0
+        }
+    };
+    let stops = crate::vehicle::placement::JointLimits::rocky8();
+    SuspensionSummary {
+        rocker_max_abs_rad: max_abs(0),
+        bogie_max_abs_rad: [max_abs(1), max_abs(2)],
+        travel_rad: travel,
+        stops_rad: [stops.rocker_rad, stops.bogie_rad],
+    }
+}
+
 /// Build the summary of `run`.
 pub fn summarise(run: &RunResult) -> Summary {
     let n = run.records.len().max(1) as f64;
@@ -277,6 +320,7 @@ pub fn summarise(run: &RunResult) -> Summary {
         cross_track_m: CrossTrack { rms, max },
         goal_reached: run.goal_reached,
         goal_miss_m: run.goal_miss_m,
+        suspension: suspension(run),
         slip: SlipSummary {
             gate_reject_fraction: (run.nav.kin_tested > 0)
                 .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
