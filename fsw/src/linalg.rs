@@ -23,23 +23,24 @@ pub fn clamp(x: f64, lo: f64, hi: f64) -> f64 {
 /// Solve `m u = rhs` for a 6x6 system by Gaussian elimination with partial pivoting (the
 /// inverse-kinematics solve of H04 eq. 20-25). `None` when a pivot is zero or the system is
 /// not finite.
+// Index loops read like the textbook elimination and compile without bounds checks.
+#[allow(clippy::needless_range_loop)]
 pub fn solve6(m: &Mat6, rhs: &Vec6) -> Option<Vec6> {
-    // Row-major augmented copy: a[r] = [m(r, 0..6), rhs(r)].
+    // Row-major augmented copy: a[r] = [m(r, 0..6), rhs(r)]. Every index below is a loop
+    // variable over a constant range, which the optimiser proves in bounds (the image's
+    // panic-site count checks that it does).
     let mut a = [[0.0f64; 7]; 6];
     for (r, row) in a.iter_mut().enumerate() {
-        for (c, v) in row.iter_mut().take(6).enumerate() {
-            *v = m.get((r, c)).copied().unwrap_or(f64::NAN);
-        }
-        if let Some(v) = row.get_mut(6) {
-            *v = rhs.get(r).copied().unwrap_or(f64::NAN);
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = if c < 6 { m[(r, c)] } else { rhs[r] };
         }
     }
     for k in 0..6 {
         // Pivot: the largest magnitude in column k at or below row k.
         let mut best = k;
-        let mut best_abs = -1.0;
-        for (r, row) in a.iter().enumerate().skip(k) {
-            let v = row.get(k).copied().unwrap_or(0.0).abs();
+        let mut best_abs = a[k][k].abs();
+        for r in (k + 1)..6 {
+            let v = a[r][k].abs();
             if v > best_abs {
                 best_abs = v;
                 best = r;
@@ -49,34 +50,26 @@ pub fn solve6(m: &Mat6, rhs: &Vec6) -> Option<Vec6> {
             return None;
         }
         if best != k {
-            let (Some(rk), Some(rb)) = (a.get(k).copied(), a.get(best).copied()) else {
-                return None;
-            };
-            if let Some(x) = a.get_mut(k) {
-                *x = rb;
-            }
-            if let Some(x) = a.get_mut(best) {
-                *x = rk;
-            }
+            a.swap(k, best.min(5));
         }
-        let pivot_row = *a.get(k)?;
-        let pivot = *pivot_row.get(k)?;
+        let pivot_row = a[k];
+        let inv = 1.0 / pivot_row[k];
         for row in a.iter_mut().skip(k + 1) {
-            let f = row.get(k).copied().unwrap_or(0.0) / pivot;
-            for (v, p) in row.iter_mut().zip(pivot_row.iter()).skip(k) {
-                *v -= f * p;
+            let f = row[k] * inv;
+            for c in k..7 {
+                row[c] -= f * pivot_row[c];
             }
         }
     }
-    let mut u = Vec6::zeros();
+    let mut u = [0.0f64; 6];
     for k in (0..6).rev() {
-        let row = a.get(k)?;
-        let mut acc = *row.get(6)?;
-        for (c, v) in row.iter().enumerate().take(6).skip(k + 1) {
-            acc -= v * u.get(c).copied().unwrap_or(0.0);
+        let mut acc = a[k][6];
+        for c in (k + 1)..6 {
+            acc -= a[k][c] * u[c];
         }
-        *u.get_mut(k)? = acc / *row.get(k)?;
+        u[k] = acc / a[k][k];
     }
+    let u = Vec6::from_column_slice(&u);
     u.iter().all(|x| x.is_finite()).then_some(u)
 }
 

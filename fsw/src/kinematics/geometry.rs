@@ -269,7 +269,7 @@ fn sin_cos(angle: f64) -> (f64, f64) {
     } else if angle == PI {
         (0.0, -1.0)
     } else {
-        (libm::sin(angle), libm::cos(angle))
+        libm::sincos(angle)
     }
 }
 
