@@ -99,8 +99,8 @@ enum Command {
         /// kinematics (the cameras still capture).
         #[arg(long)]
         no_vo: bool,
-        /// Slip model of the truth: `lumped` (default) or `terramechanics` (per wheel,
-        /// docs/terramechanics.md).
+        /// Slip model of the truth (overrides the scenario's): `terramechanics` (per wheel,
+        /// docs/terramechanics.md; the default) or `lumped`.
         #[arg(long)]
         slip_model: Option<String>,
     },
