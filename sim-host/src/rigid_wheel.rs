@@ -997,5 +997,24 @@ mod figures {
             }
             println!();
         }
+        // Sensitivity of loose_sand to its exit-angle ratio (0.9 in one transcription, 1 in
+        // another; 0 is the Wong-Reece exit at the bottom of the wheel).
+        for lambda in [0.0, 0.9, 1.0] {
+            let soil = Soil {
+                exit_sinkage_ratio: lambda,
+                ..Soil::ishigami_regolith_simulant()
+            };
+            let f = |s: f64| wheel_forces(&soil, &wheel, w6, s, 0.0);
+            let free = slip_for_drawbar_pull(&soil, &wheel, w6, 0.0, 0.0);
+            println!(
+                "loose_sand lambda {lambda}: W/6 z {:.1} mm, DP(0) {:+.3} W, free-rolling s {:.3}, DP(0.2) {:+.3} W, DP(0.5) {:+.3} W, climbs {:.1} deg",
+                f(0.0).sinkage_m * 1e3,
+                f(0.0).drawbar_pull_n / w6,
+                free.slip_ratio,
+                f(0.2).drawbar_pull_n / w6,
+                f(0.5).drawbar_pull_n / w6,
+                climbable_slope_deg(&soil, &wheel, w6)
+            );
+        }
     }
 }
