@@ -997,6 +997,11 @@ mod figures {
             }
             println!();
         }
+        let start = std::time::Instant::now();
+        for _ in 0..6 {
+            let _ = WheelTable::new(&Soil::ishigami_regolith_simulant(), &wheel);
+        }
+        println!("six tables built in {:.3} s", start.elapsed().as_secs_f64());
         // Sensitivity of loose_sand to its exit-angle ratio (0.9 in one transcription, 1 in
         // another; 0 is the Wong-Reece exit at the bottom of the wheel).
         for lambda in [0.0, 0.9, 1.0] {

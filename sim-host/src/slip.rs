@@ -411,4 +411,28 @@ mod tests {
             .iter()
             .all(|x| x.ground_speed_m_s == 0.1 && x.lateral_m_s == 0.0));
     }
+
+    /// Cost of one six-wheel step on a 10 deg cross slope (printed with `--nocapture`; the
+    /// bound only catches a gross regression: 6 wheels at 200 Hz must stay far below real time).
+    #[test]
+    fn six_wheel_step_is_cheap() {
+        let g = rocky8();
+        let th = 10f64.to_radians();
+        let grav = Vector3::new(0.0, th.sin(), th.cos());
+        let m = model(Soil::ishigami_regolith_simulant());
+        let ground = level_ground(&g, 0.1, grav);
+        let n = 20_000;
+        let start = std::time::Instant::now();
+        let mut acc = 0.0;
+        for _ in 0..n {
+            let (_, s) = m.wheel_slips(&g, 0.0, &ground, &grav);
+            acc += s.slip_angle_rad;
+        }
+        let per = start.elapsed().as_secs_f64() / n as f64;
+        println!(
+            "wheel_slips: {:.1} us per six-wheel step ({acc:.3})",
+            per * 1e6
+        );
+        assert!(per < 200e-6, "{per}");
+    }
 }
