@@ -6,7 +6,8 @@
 //!
 //! - [`terrain`]: analytic height models (yard with rocks, slopes, rough terrain, dunes, step).
 //! - [`vehicle`]: Rocky 8 geometry, placement on the terrain, motors.
-//! - [`slip`]: terramechanics-inspired slip model.
+//! - [`slip`]: per-wheel slip from the rocker-bogie loads and the rigid-wheel terramechanics of
+//!   [`rigid_wheel`] (the default); [`slip_lumped`]: the lumped slip model (an option).
 //! - [`sensors`]: IMU, encoders, sun sensor, fault injection.
 //! - [`camera`]: the stereo renderer interface; [`render`]: the rasterising hazcam renderer and
 //!   the procedural albedo texture.
@@ -31,6 +32,7 @@ pub mod record;
 pub mod render;
 pub mod replay;
 pub mod report;
+pub mod rigid_wheel;
 pub mod run;
 pub mod scenario;
 pub mod sensors;

@@ -103,8 +103,8 @@ enum Command {
         /// wheel-radius errors), as the SIL kinematic cases run it.
         #[arg(long)]
         exact_dimensions: bool,
-        /// Slip model of the truth: `lumped` (default) or `terramechanics` (per wheel,
-        /// docs/terramechanics.md).
+        /// Slip model of the truth (overrides the scenario's): `terramechanics` (per wheel,
+        /// docs/terramechanics.md; the default) or `lumped`.
         #[arg(long)]
         slip_model: Option<String>,
     },

@@ -14,9 +14,11 @@ use serde::Deserialize;
 use std::path::Path;
 
 /// Soil: a preset name (`"loose_sand"`, `"firm_soil"`, and for the terramechanics model also
-/// `"mars_simulant"`) or explicit parameters of either model. For the terramechanics model
-/// `loose_sand` is Wong's dry sand, `firm_soil` Wong's sandy loam and `mars_simulant` the DLR
-/// Mars soil simulant (`docs/terramechanics.md`).
+/// `"mars_simulant"` and `"wong_dry_sand"`) or explicit parameters of either model. For the
+/// terramechanics model `loose_sand` is the lunar regolith simulant of Ishigami et al. (2007),
+/// measured with a small rover wheel; `firm_soil` Wong's sandy loam; `mars_simulant` the DLR
+/// Mars soil simulant; `wong_dry_sand` Wong's dry sand (the `loose_sand` of earlier versions)
+/// (`docs/terramechanics.md`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(untagged)]
 pub enum SoilSpec {
@@ -33,9 +35,10 @@ pub enum SoilSpec {
 #[serde(rename_all = "snake_case")]
 pub enum SlipModelKind {
     /// One slip ratio and angle for the vehicle from the slopes ([`crate::slip_lumped`]).
-    #[default]
     Lumped,
-    /// Per-wheel slip from loads and Bekker-Wong terramechanics ([`crate::slip`]).
+    /// Per-wheel slip from loads and rigid-wheel (Wong-Reece) terramechanics ([`crate::slip`]);
+    /// the default.
+    #[default]
     Terramechanics,
 }
 
@@ -61,11 +64,13 @@ impl SoilSpec {
     pub fn bekker(&self) -> anyhow::Result<Soil> {
         match self {
             SoilSpec::Preset(name) => match name.as_str() {
-                "loose_sand" => Ok(Soil::dry_sand()),
+                "loose_sand" => Ok(Soil::ishigami_regolith_simulant()),
                 "firm_soil" => Ok(Soil::sandy_loam()),
                 "mars_simulant" => Ok(Soil::mars_dlr_simulant()),
+                "wong_dry_sand" => Ok(Soil::dry_sand()),
                 other => anyhow::bail!(
-                    "unknown soil preset {other:?} (loose_sand, firm_soil, mars_simulant)"
+                    "unknown soil preset {other:?} (loose_sand, firm_soil, mars_simulant, \
+                     wong_dry_sand)"
                 ),
             },
             SoilSpec::Bekker(p) => Ok(p.soil()),
@@ -215,7 +220,7 @@ pub struct Scenario {
     /// Slip model on/off.
     #[serde(default = "default_true")]
     pub slip: bool,
-    /// Which slip model the truth uses (default: lumped).
+    /// Which slip model the truth uses (default: terramechanics).
     #[serde(default)]
     pub slip_model: SlipModelKind,
     /// Terrain.

@@ -70,7 +70,8 @@ pub struct Variant {
     /// The truth vehicle has the published dimensions exactly (no per-seed dimension or
     /// wheel-radius errors): what is left is the difference of the kinematic formulations.
     pub exact_dimensions: bool,
-    /// The per-wheel terramechanics slip model instead of the lumped one.
+    /// The per-wheel terramechanics slip model, whatever the scenario says (it is also the
+    /// default of scenarios that do not name one).
     pub terramechanics: bool,
     /// Visual odometry off in the flight software (the images are then not rendered: nothing
     /// uses them).
@@ -652,7 +653,8 @@ pub const CASES: [Case; 23] = [
         scenario: "slope-10-cross",
         no_slip_comp: false,
         variant: TERRAMECHANICS,
-        title: "10 deg sand cross slope with per-wheel terramechanics slip (Wong's dry sand)",
+        title: "10 deg sand cross slope with per-wheel terramechanics slip (loose_sand: Ishigami \
+                et al. 2007 regolith simulant)",
         checks: &[
             goal(
                 "goal reached",
@@ -675,7 +677,7 @@ pub const CASES: [Case; 23] = [
         scenario: "marsyard-25m",
         no_slip_comp: false,
         variant: TERRAMECHANICS,
-        title: "Mars Yard with per-wheel terramechanics slip (Wong's sandy loam)",
+        title: "Mars Yard with per-wheel terramechanics slip (firm_soil: Wong's sandy loam)",
         checks: &[
             goal(
                 "goal reached",
@@ -858,8 +860,9 @@ fixed:
   the fallback did not fix it. The fix belongs in the flight software (VO relative poses after
   an outage should re-anchor position rather than heading when the heading prior comes only
   from the plan).
-- SIL-SLIP-1/2 are goals: the per-wheel terramechanics model with Wong's soil tables (not the
-  default) bogs down on the sand slope; see `docs/simulator.md`, section Slip.
+- SIL-SLIP-1/2 are goals. The per-wheel terramechanics model (rigid-wheel Wong-Reece law,
+  `docs/terramechanics.md`) is now the simulator's default slip model, so every case without
+  `no slip` runs it; SIL-SLIP-1/2 name it explicitly. See `docs/simulator.md`, section Slip.
 ";
 
 /// The results as a Markdown page.

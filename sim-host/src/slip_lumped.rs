@@ -1,10 +1,10 @@
-//! The lumped slip model (the default, `slip_model = "lumped"`): one slip ratio and one slip
+//! The lumped slip model (an option, `slip_model = "lumped"`): one slip ratio and one slip
 //! angle for the whole vehicle from the slope along and across it, applied to every wheel on
 //! the ground by the rolling solve. Its lateral constant `k_lat` was chosen so that 10 deg of
 //! sand gives the drift of H05 Fig. 9, and its contact patch is a fixed assumption; the
-//! per-wheel terramechanics model ([`crate::slip`], `slip_model = "terramechanics"`) derives
-//! both from published soil values, but with Wong's tables it predicts that a Rocky 8 size
-//! wheel bogs down on sand (see `docs/simulator.md`), so it is not yet the default.
+//! default per-wheel terramechanics model ([`crate::slip`], `slip_model = "terramechanics"`,
+//! the rigid-wheel law of [`crate::rigid_wheel`]) derives both from published soil values
+//! (see `docs/simulator.md`). This model is kept for comparison with earlier results.
 //!
 //! What follows is the model: how much the rover's ground velocity falls short of
 //! (longitudinal) and departs sideways from (lateral, downhill) the velocity its wheels
