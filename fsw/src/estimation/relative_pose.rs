@@ -63,6 +63,53 @@ impl Ekf {
         Ok(d)
     }
 
+    /// Eq. 46 on all observed components of `m` at their own covariance, then, when the gate
+    /// accepts, eq. 28-45 with `fuse_variance[k]` added to the measurement variance of
+    /// component `k` (rad^2 or m^2; an infinite value drops the component: its row of `H` and
+    /// its residual zeroed, an identity in `S`, exactly as if `m` had not observed it). The
+    /// kinematic aiding gates the whole interval (the slip detector's statistics stay those of
+    /// eq. 46) and fuses the lateral translation with a crab allowance: a lateral slip too small
+    /// for one interval's test would otherwise be learnt as a heading error.
+    pub fn update_relative_pose_allowance(
+        &mut self,
+        m: &RelativePose,
+        fuse_variance: [f64; 6],
+    ) -> Result<GateDecision, EstError> {
+        if self.fault {
+            return Err(EstError::Faulted);
+        }
+        if fuse_variance.iter().any(|v| v.is_nan() || *v < 0.0) {
+            return Err(EstError::InvalidMeasurement);
+        }
+        let (mut inn, dof) = self.relative_pose_innovation(m)?;
+        let mut d = decision(&inn, dof)?;
+        if d.accepted {
+            for (k, (observed, extra)) in m.observed.iter().zip(fuse_variance.iter()).enumerate() {
+                if !*observed || *extra == 0.0 {
+                    continue;
+                }
+                if extra.is_finite() {
+                    if let Some(s) = inn.s.get_mut((k, k)) {
+                        *s += *extra;
+                    }
+                } else {
+                    inn.h.row_mut(k).fill(0.0);
+                    if let Some(r) = inn.r.get_mut(k) {
+                        *r = 0.0;
+                    }
+                    inn.s.row_mut(k).fill(0.0);
+                    inn.s.column_mut(k).fill(0.0);
+                    if let Some(s) = inn.s.get_mut((k, k)) {
+                        *s = 1.0;
+                    }
+                }
+            }
+            self.fuse(&inn)?;
+            d.applied = true;
+        }
+        Ok(d)
+    }
+
     fn endpoint(&self, t_us: u64, allow_current: bool) -> Result<Endpoint, EstError> {
         if allow_current && t_us == self.x.t_us {
             return Ok(Endpoint {

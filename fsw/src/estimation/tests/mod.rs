@@ -680,3 +680,85 @@ fn est_7_chi_square_table() {
 }
 
 use nalgebra::Vector3;
+
+/// EST-8: `update_relative_pose_allowance` gates on every observed component at the
+/// measurement's own covariance and fuses with the allowance: with no allowance it is
+/// bit-identical to the gated update; with an infinite lateral allowance it gives the same
+/// gate decision as the full measurement and the same state as fusing the measurement without
+/// that component; a finite allowance equals fusing with that variance added; a rejected
+/// measurement changes nothing.
+#[test]
+fn est_8_subset_update_gates_whole_and_fuses_part() {
+    let (ekf, samples, truth_poses, mut rng) = late_vo_drive(8);
+    let mut base = ekf.clone();
+    let mut h0 = None;
+    for (k, s) in samples.iter().enumerate().take(201) {
+        base.propagate(s).unwrap();
+        if k == 100 {
+            h0 = Some(base.clone_at(s.t_us).unwrap());
+        }
+    }
+    assert!(h0.is_some());
+    // A measurement with a 3 mm lateral offset, within the gate.
+    let m = relative_pose(
+        &truth_poses[100],
+        &truth_poses[200],
+        &[2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3],
+        [true, true, true, true, true, false],
+        Vector3::new(0.0, 0.003, 0.0),
+        &mut rng,
+    );
+    let mut full = base.clone();
+    let mut all = base.clone();
+    let d_full = full.update_relative_pose(&m, true).unwrap();
+    let d_all = all.update_relative_pose_allowance(&m, [0.0; 6]).unwrap();
+    assert!(d_full.accepted && d_full.applied && d_all.applied);
+    assert_eq!(full.state(), all.state());
+    assert_eq!(full.covariance(), all.covariance());
+
+    let keep = [0.0, 0.0, 0.0, 0.0, f64::INFINITY, 0.0];
+    let mut sub = base.clone();
+    let d_sub = sub.update_relative_pose_allowance(&m, keep).unwrap();
+    assert_eq!(d_sub.d2, d_full.d2);
+    let mut reduced = m;
+    reduced.observed[4] = false;
+    let mut reference = base.clone();
+    reference.update_relative_pose(&reduced, false).unwrap();
+    let d = core_diff(sub.state(), reference.state());
+    assert!(d.norm() < 1e-12, "{:?}", d.as_slice());
+    // The lateral offset was not fused: the full update moved the state further sideways.
+    let lateral = |e: &Ekf| {
+        let q = e.state().q_nr;
+        q.inverse_transform_vector(&e.state().p_n).y
+    };
+    assert!((lateral(&full) - lateral(&base)).abs() > (lateral(&sub) - lateral(&base)).abs());
+    // A finite allowance: the same as the measurement with that variance added, fused.
+    let mut widened = m;
+    widened.covariance[(4, 4)] += 1e-5;
+    let mut reference = base.clone();
+    reference.update_relative_pose(&widened, false).unwrap();
+    let mut allowed = base.clone();
+    let d_allowed = allowed
+        .update_relative_pose_allowance(&m, [0.0, 0.0, 0.0, 0.0, 1e-5, 0.0])
+        .unwrap();
+    assert_eq!(d_allowed.d2, d_full.d2);
+    let d = core_diff(allowed.state(), reference.state());
+    assert!(d.norm() < 1e-12, "{:?}", d.as_slice());
+    assert!(allowed
+        .update_relative_pose_allowance(&m, [0.0, 0.0, 0.0, 0.0, f64::NAN, 0.0])
+        .is_err());
+
+    // Far outside the gate: nothing is applied.
+    let far = relative_pose(
+        &truth_poses[100],
+        &truth_poses[200],
+        &[2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3],
+        [true, true, true, true, true, false],
+        Vector3::new(0.0, 0.5, 0.0),
+        &mut rng,
+    );
+    let mut rejected = base.clone();
+    let d = rejected.update_relative_pose_allowance(&far, keep).unwrap();
+    assert!(!d.accepted && !d.applied);
+    assert_eq!(rejected.state(), base.state());
+}

@@ -169,6 +169,11 @@ pub struct NavConfig {
     /// Growth of the horizontal position sigma per metre of accepted travel fused without VO
     /// (a systematic slip the gate cannot see), fraction.
     pub vo_loss_drift_fraction: f64,
+    /// Crab allowance of a kinematic interval fused while VO is alive: the lateral translation
+    /// is fused with `(kin_crab_allowance * step)^2` added to its variance (m^2; `step` the
+    /// interval's translation, m), after the gate tested the interval at its own covariance
+    /// (`kin_aiding::KinAiding`). `f64::INFINITY` does not fuse the lateral part at all.
+    pub kin_crab_allowance: f64,
     /// RG2 cycles the rover waits at the start for VO's first keyframe (VO running) before it
     /// drives without VO.
     pub vo_start_timeout_cycles: u32,
@@ -267,6 +272,7 @@ impl NavConfig {
             // Slip below the gate's detection on firm ground (about 8 % of a step,
             // docs/slip-detection.md).
             vo_loss_drift_fraction: 0.05,
+            kin_crab_allowance: kin_aiding::KIN_CRAB_ALLOWANCE,
             // 4 s of rejections with no VO fused: longer than the rover goes without a VO
             // update while slipping with VO alive (a capture every 0.1 m, 1-2 s).
             reject_streak_cycles: 80,
