@@ -1,4 +1,4 @@
-//! SIM-19: the truth vehicle climbs a step with its right side (the quasi-static force model of
+//! SIM-28: the truth vehicle climbs a step with its right side (the quasi-static force model of
 //! `sim_host::vehicle::forces`), driven directly (no flight software): `scenarios/step-climb.toml`
 //! with slip off, the wheels commanded for a constant 0.08 m/s forward and the heading held on the
 //! TRUE yaw by steering (the simulator's planar inverse kinematics with a yaw rate of minus the yaw
@@ -122,7 +122,7 @@ fn right_wheels_on_top(w: &World, height_m: f64) -> bool {
     })
 }
 
-/// SIM-19: a step of one wheel radius (0.10 m) under the right wheels: every right wheel ends
+/// SIM-28: a step of one wheel radius (0.10 m) under the right wheels: every right wheel ends
 /// on top; the body advances more than 90 % of the mean rim travel of the six wheels over the
 /// run (on flat ground the two are equal; the climb itself costs each right wheel 0.57 r of rim
 /// travel without advance, SIM-14, about 2 % of this run's mean rim travel, and the rest is the
@@ -136,7 +136,7 @@ fn right_wheels_on_top(w: &World, height_m: f64) -> bool {
 /// 10 m/s^2); the kinematic model before the force model showed 116 m/s^2 and 10192 such
 /// frames in this run without climbing.
 #[test]
-fn sim_19_right_side_climbs_a_step_of_one_radius() {
+fn sim_28_right_side_climbs_a_step_of_one_radius() {
     let c = climb(0.10, 75.0);
     println!("0.10 m step: {c:?}");
     assert!(c.on_top, "{c:?}");
@@ -150,13 +150,13 @@ fn sim_19_right_side_climbs_a_step_of_one_radius() {
     assert!(c.accel_events <= 20, "{c:?}");
 }
 
-/// SIM-19: a step of 1.5 wheel radii (0.15 m), above the axles: the wheel meets the face below
+/// SIM-28: a step of 1.5 wheel radii (0.15 m), above the axles: the wheel meets the face below
 /// its axle height and must climb it on friction before it rolls over the corner. With the
 /// seed's firm soil (`mu` = tan of the drawn friction angle, 0.58 for seed 1) the right side
 /// climbs it too. Same checks as for 0.10 m except the contact events: the face met below the
 /// axle gives up to 50 m/s^2 in single frames (at most 20 frames beyond 2 m/s^2).
 #[test]
-fn sim_19_right_side_climbs_a_step_of_one_and_a_half_radii() {
+fn sim_28_right_side_climbs_a_step_of_one_and_a_half_radii() {
     let c = climb(0.15, 90.0);
     println!("0.15 m step: {c:?}");
     assert!(c.on_top, "{c:?}");

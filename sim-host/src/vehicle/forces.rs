@@ -345,11 +345,11 @@ mod tests {
             .collect()
     }
 
-    /// SIM-20: on level ground with every wheel able to roll (right wheels 1 % larger, so the
+    /// SIM-27: on level ground with every wheel able to roll (right wheels 1 % larger, so the
     /// rolling rows conflict a little), the force model is the rolling solve's least squares
     /// (the creep regime, the weight does no work), and its loads carry the weight.
     #[test]
-    fn sim_20_level_ground_is_the_rolling_solve() {
+    fn sim_27_level_ground_is_the_rolling_solve() {
         let mut g = rocky8();
         for i in [0, 2, 4] {
             g.wheel_radius_m[i] = 0.101;
@@ -395,13 +395,13 @@ mod tests {
         assert!(q.sliding.iter().all(|s| !s));
     }
 
-    /// SIM-20: the right front wheel pressed against a step face (a second contact with a
+    /// SIM-27: the right front wheel pressed against a step face (a second contact with a
     /// horizontal normal) while all wheels turn at 0.08 m/s: every contact's friction stays in
     /// its Coulomb cone (within 2 % and 1 mN, the relaxation of the bounds), no normal force pulls,
     /// and the wheel is lifted off the ground with a high friction
     /// coefficient (its ground contact carries nothing) but not with a low one.
     #[test]
-    fn sim_20_wheel_at_a_face_is_lifted_by_friction() {
+    fn sim_27_wheel_at_a_face_is_lifted_by_friction() {
         let g = rocky8();
         let w = g.wheels(0.0, [0.0; 2], &[0.0; WHEELS]).unwrap();
         let mut contacts = on_ground(&w);
