@@ -3,13 +3,17 @@
 //! [`World::step`] advances everything by one minor frame (5 ms) and refreshes the readings the
 //! HAL devices hand to the flight software.
 //!
-//! Motion model per step: motors follow the command; each wheel's slip comes from its contact
-//! and load ([`crate::slip`]); the rolling solve ([`crate::vehicle::rolling`]) gives the body
-//! twist and the suspension rates from all wheels on the ground (each axle moves along its
-//! contact tangent at its rim speed less its slip); the body pose and the suspension are
+//! Motion model per step: motors follow the command; each wheel's soil slip comes from its
+//! contact and load ([`crate::slip`], [`crate::slip_lumped`]); the quasi-static force model
+//! ([`crate::vehicle::forces`]) gives the body twist and the suspension rates from every contact
+//! of every wheel (on terrain with vertical faces a wheel may touch the ground and a face): a
+//! contact rolls while its friction stays inside Coulomb's cone and slides at the cone
+//! otherwise, and a contact that would have to pull lets go (a wheel pushed against a face is
+//! lifted off the ground by the friction at the face); the body pose and the suspension are
 //! integrated over the step (`R_WR <- R_WR exp(w dt)`, `p <- p + R_WR v dt`); then the
 //! placement solver projects the vehicle back onto the terrain (height, roll, pitch, rocker and
-//! bogies at the integrated north, east and yaw: the holonomic constraint).
+//! bogies at the integrated north, east and yaw: the holonomic constraint), a lifted wheel on its
+//! face contact.
 
 use crate::scenario::SlipModelKind;
 use crate::scenario::{Scenario, Site};
@@ -18,17 +22,21 @@ use crate::sensors::encoders::EncoderParams;
 use crate::sensors::faults::{FaultDevice, FaultKind, Faults};
 use crate::sensors::imu::ImuModel;
 use crate::sensors::sun::SunParams;
+use crate::slip::centre_of_mass;
 use crate::slip::{SlipModel, SlipState, WheelGround, WheelSlip};
 use crate::slip_lumped::LumpedSlip;
 use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
-use crate::vehicle::contact::{edge_contact_ahead, WheelContact, EDGE_PROBE_M};
+use crate::terramechanics::{patch, Wheel, ROCKY8_MASS_KG};
+use crate::vehicle::contact::{face_contact, ground_contact_below, WheelContact, EDGE_PROBE_M};
+use crate::vehicle::forces::{solve_quasi_static, ForceContact, Friction, QuasiStatic, Weight};
 use crate::vehicle::geometry::{rocky8, TruthGeometry, VehicleGeometry, WheelPose, WHEELS};
 use crate::vehicle::motors::MotorParams;
 use crate::vehicle::placement::{
     place, place_cached, BodyPose, JointLimits, Placement, PlacementJacobian, Suspension,
+    LIFTED_ANGLE_RAD,
 };
-use crate::vehicle::rolling::{solve_rolling, RollingContact, CONTACT_TOLERANCE_M};
+use crate::vehicle::rolling::{RollingContact, CONTACT_TOLERANCE_M};
 use nalgebra::{Rotation3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -110,7 +118,8 @@ pub struct Truth {
     pub contact_angle_rad: [f64; WHEELS],
     /// Longitudinal slip ratio of each wheel over the last step.
     pub wheel_slip_ratio: [f64; WHEELS],
-    /// Normal load of each wheel over the last step, N.
+    /// Normal load of each wheel over the last step from the quasi-static force model (the sum
+    /// over its contacts, a step face included), N.
     pub wheel_load_n: [f64; WHEELS],
     /// Suspension rates `[beta, rho1, rho2]` over the last step, rad/s.
     pub suspension_rate_rad_s: [f64; 3],
@@ -143,6 +152,10 @@ pub struct World {
     steer_motor: MotorParams,
     drive_motor: MotorParams,
     slip: Slip,
+    /// Friction of the wheel contacts (force model), from the soil.
+    pub friction: Friction,
+    /// The contacts and the force model's solution of the last step (diagnostics).
+    pub forces: Option<(Vec<ForceContact>, QuasiStatic)>,
     imu: ImuModel,
     /// Encoder model.
     pub encoders: EncoderParams,
@@ -187,6 +200,43 @@ pub struct World {
 
 /// Nominal wheel radius of the averaged wheel odometry, m (the published Rocky 8 figure).
 const NOMINAL_WHEEL_RADIUS_M: f64 = 0.10;
+
+/// Two contacts of one wheel are distinct when their normals differ by more than about 10 deg
+/// (cosine below this).
+const DISTINCT_COS: f64 = 0.985;
+/// A wheel whose contact is more than this off the vertical below its axle (on an edge or a
+/// face) is also searched for the ground below, up to this much short of that contact, rad.
+const BELOW_ANGLE_RAD: f64 = 0.35;
+
+/// Friction of the wheel contacts for the force model, from the soil of the slip model:
+/// Coulomb `mu = tan(phi)` of the soil's friction angle (Wong, *Theory of Ground Vehicles*,
+/// Table 2.3, as the soil presets give it) and the creep slip `2 K / L` of the Janosi-Hanamoto
+/// law (`K / L` of the lumped soil; for the terramechanics soil `K` over the contact length of
+/// a Rocky 8 wheel under a sixth of the weight). After the per-seed draw.
+fn friction_of(slip: &Slip) -> Friction {
+    match slip {
+        Slip::Lumped(m) => {
+            let soil = m.soil();
+            Friction {
+                mu: soil.friction_angle_deg.to_radians().tan(),
+                creep_slip: 2.0 * soil.shear_modulus_ratio,
+            }
+        }
+        Slip::Terramechanics(m) => {
+            let soil = m.soil();
+            let load = ROCKY8_MASS_KG * MARS_GRAVITY_M_S2 / WHEELS as f64;
+            let length = patch(soil, &Wheel::rocky8(), load).contact_length_m;
+            Friction {
+                mu: soil.phi_rad.tan(),
+                creep_slip: if length > 0.0 {
+                    (2.0 * soil.shear_k_m / length).min(1.0)
+                } else {
+                    1.0
+                },
+            }
+        }
+    }
+}
 
 impl World {
     /// Build the world of `scenario` for `seed`.
@@ -267,6 +317,8 @@ impl World {
             flight_command: None,
             steer_motor: MotorParams::steering(),
             drive_motor: MotorParams::drive(),
+            friction: friction_of(&slip),
+            forces: None,
             slip,
             imu,
             encoders: scenario.sensors.encoders,
@@ -352,28 +404,6 @@ impl World {
         let pose0 = self.truth.pose;
         let rot = pose0.rot_w_from_r();
         let rot_inv = rot.inverse();
-        // A wheel on the ground whose rim is within the edge probe of a step face ahead rolls
-        // on the face (it climbs; the ground only holds it from below): the placement alone
-        // would push it back off the face every step and leave it pressed there.
-        let p0 = Vector3::from(pose0.pos_m);
-        for i in 0..WHEELS {
-            let rate = self.truth.wheel_rate_rad_s[i];
-            if rate == 0.0 {
-                continue;
-            }
-            let c = p0 + rot * wheels[i].axle_m;
-            let spin = rot * wheels[i].spin_axis;
-            let r_wheel = self.geometry.wheel_radius_m(i);
-            if let Some(k) = edge_contact_ahead(&self.terrain, &c, &spin, r_wheel, rate.signum()) {
-                if k.clearance_m < EDGE_PROBE_M
-                    && k.clearance_m < self.contacts[i].clearance_m + EDGE_PROBE_M
-                {
-                    self.contacts[i] = k;
-                    self.truth.clearance_m[i] =
-                        self.truth.clearance_m[i].min(k.clearance_m.max(0.0));
-                }
-            }
-        }
         let contacts: [RollingContact; WHEELS] = std::array::from_fn(|i| {
             RollingContact::new(
                 self.truth.clearance_m[i] < CONTACT_TOLERANCE_M,
@@ -381,6 +411,66 @@ impl World {
                 wheels[i].spin_axis,
             )
         });
+        // Every contact of every wheel for the force model: the placement's contact, and on
+        // terrain with vertical faces also a step face within the edge probe (ahead or behind)
+        // and the ground below a wheel whose contact is on a face or edge (a wheel standing on
+        // the ground and pressed against a face touches both).
+        let p0 = Vector3::from(pose0.pos_m);
+        let mut all_contacts: Vec<ForceContact> = Vec::with_capacity(3 * WHEELS);
+        // The same contacts in `W` (for the placement).
+        let mut world_contacts: Vec<WheelContact> = Vec::with_capacity(3 * WHEELS);
+        let mut primary_index = [0; WHEELS];
+        for i in 0..WHEELS {
+            primary_index[i] = all_contacts.len();
+            all_contacts.push(ForceContact {
+                wheel: i,
+                contact: contacts[i],
+            });
+            world_contacts.push(self.contacts[i]);
+            if !self.terrain.has_edges() {
+                continue;
+            }
+            let c = p0 + rot * wheels[i].axle_m;
+            let spin = rot * wheels[i].spin_axis;
+            let r_wheel = self.geometry.wheel_radius_m(i);
+            let primary = self.contacts[i];
+            let mut extra = |k: &WheelContact| {
+                let distinct = all_contacts
+                    .iter()
+                    .filter(|f| f.wheel == i)
+                    .all(|f| f.contact.normal.dot(&(rot_inv * k.normal_w)) < DISTINCT_COS);
+                if distinct {
+                    world_contacts.push(*k);
+                    all_contacts.push(ForceContact {
+                        wheel: i,
+                        contact: RollingContact::new(
+                            true,
+                            rot_inv * k.normal_w,
+                            wheels[i].spin_axis,
+                        ),
+                    });
+                }
+            };
+            for direction in [1.0, -1.0] {
+                if let Some(k) = face_contact(&self.terrain, &c, &spin, r_wheel, direction) {
+                    if k.clearance_m < EDGE_PROBE_M {
+                        extra(&k);
+                    }
+                }
+            }
+            if primary.angle_rad.abs() > BELOW_ANGLE_RAD {
+                let below = ground_contact_below(
+                    &self.terrain,
+                    &c,
+                    &spin,
+                    r_wheel,
+                    primary.angle_rad.abs() - BELOW_ANGLE_RAD,
+                );
+                if below.clearance_m < CONTACT_TOLERANCE_M {
+                    extra(&below);
+                }
+            }
+        }
         // Per-wheel slip from the loads and the soil. A wheel's rim speed is its own radius
         // times its rate.
         let r = self.geometry.wheel_radius_m;
@@ -441,16 +531,43 @@ impl World {
         });
         let lateral = wheel_slip.map(|w| w.lateral_m_s);
         let s0 = self.truth.suspension;
-        let twist = solve_rolling(
+        let quasi = solve_quasi_static(
             &self.geometry,
             &wheels,
             s0.rocker_rad,
             s0.bogie_rad,
-            &contacts,
+            &all_contacts,
             &ground_speed,
             &slip_factor,
             &lateral,
+            &self.friction,
+            &Weight {
+                weight_n: ROCKY8_MASS_KG * MARS_GRAVITY_M_S2,
+                centre_of_mass_m: centre_of_mass(),
+                gravity_r,
+            },
         );
+        let twist = quasi.twist;
+        // A wheel the force balance carries on a step face or edge only (no contact near the
+        // bottom of its rim carries load: it has been lifted off the ground below) climbs that
+        // face: the placement follows the face contact (measured along the rim's normals)
+        // instead of setting the wheel back on the ground.
+        let mut lifted = [false; WHEELS];
+        for i in 0..WHEELS {
+            let carrying = || {
+                (0..all_contacts.len()).filter(|&c| all_contacts[c].wheel == i && quasi.active[c])
+            };
+            let on_ground =
+                carrying().any(|c| world_contacts[c].angle_rad.abs() <= LIFTED_ANGLE_RAD);
+            let on_face = carrying()
+                .filter(|&c| world_contacts[c].angle_rad.abs() > LIFTED_ANGLE_RAD)
+                .max_by(|&a, &b| quasi.normal_n[a].total_cmp(&quasi.normal_n[b]));
+            if let (false, Some(c)) = (on_ground, on_face) {
+                self.contacts[i] = world_contacts[c];
+                self.truth.clearance_m[i] = world_contacts[c].clearance_m.max(0.0);
+                lifted[i] = true;
+            }
+        }
         // Integrate the body pose and the suspension over the step.
         let rot_int = rot * Rotation3::from_scaled_axis(twist.w * dt);
         let v_w = rot * twist.v;
@@ -480,6 +597,7 @@ impl World {
             &mut self.jacobian,
             Some(&self.contacts),
             true,
+            &lifted,
         );
         self.placement_iterations += u64::from(placed.iterations);
         self.contacts = placed.contacts;
@@ -494,7 +612,8 @@ impl World {
         t.clearance_m = placed.clearance_m;
         t.contact_angle_rad = placed.contacts.map(|c| c.angle_rad);
         t.wheel_slip_ratio = wheel_slip.map(|w| w.slip_ratio);
-        t.wheel_load_n = wheel_slip.map(|w| w.load_n);
+        t.wheel_load_n = quasi.wheel_load_n;
+        self.forces = Some((all_contacts, quasi));
         t.suspension_rate_rad_s = [
             (placed.suspension.rocker_rad - s0.rocker_rad) / dt,
             (placed.suspension.bogie_rad[0] - s0.bogie_rad[0]) / dt,

@@ -188,8 +188,11 @@ fn sim_24_motor_stall_in_the_truth() {
     // Inside: wheel 2 does not turn, wheel 3 does; the vehicle is slower and yaws.
     assert!((one[1].1[2] - one[0].1[2]).abs() < 1e-3);
     assert!(one[1].1[3] - one[0].1[3] > 0.5);
+    // The stalled wheel is dragged at its Coulomb bound (the force model, SIM-27): the other
+    // five wheels creep to overcome it, about 4 % slower on this firm soil (the equal-weight
+    // least squares before the force model gave about 17 %).
     let (d_clean, d_one) = (clean[1].0 - clean[0].0, one[1].0 - one[0].0);
-    assert!(d_one < 0.95 * d_clean, "{d_one} vs {d_clean}");
+    assert!(d_one < 0.97 * d_clean, "{d_one} vs {d_clean}");
     let yaw_clean = clean[1].2 - clean[0].2;
     let yaw_one = one[1].2 - one[0].2;
     assert!(

@@ -249,6 +249,155 @@ pub fn edge_contact_ahead(
     })
 }
 
+/// Bisection steps of [`face_contact`] along a ray (r over 2^27, below 0.001 um).
+const RAY_ITERATIONS: usize = 27;
+/// How far [`face_contact`]'s scan looks along the rim's normals, in wheel radii.
+const FACE_SCAN_REACH: f64 = 1.5;
+/// Golden-section steps of [`face_contact`] over the contact angle.
+const FACE_GOLDEN_ITERATIONS: usize = 14;
+
+/// The contact of the rim with a step face or edge ahead (`direction` +1: positive contact
+/// angles, -1: negative), measured along the rim's normals: for each contact angle `phi` the
+/// distance `b(phi)` from the axle along the radius to where the ray enters the terrain, and
+/// the contact is the angle of smallest `b` (a coarse scan every 15 deg and a golden section).
+/// So a wheel pressed against a vertical face below its axle touches it at 90 deg with a
+/// horizontal normal, and a wheel on the corner touches the corner. Only terrain higher than
+/// the ground under the axle by more than [`EDGE_M`] counts (the face of a step, not the
+/// ground the wheel stands on), and only within [`EDGE_PROBE_M`] outside the rim. The
+/// clearance is `min b - r` (negative: overlap). `None` on terrain without edges or when no
+/// face is within reach.
+pub fn face_contact(
+    terrain: &dyn TerrainSurface,
+    c_w: &Vector3<f64>,
+    spin_w: &Vector3<f64>,
+    r: f64,
+    direction: f64,
+) -> Option<WheelContact> {
+    if !terrain.has_edges() || direction == 0.0 {
+        return None;
+    }
+    let (d, f) = plane_basis(spin_w);
+    // The scan looks further than the probe (a corner within the probe can lie between two
+    // samples whose rays meet the face only further out); the result must be within the probe.
+    let reach = FACE_SCAN_REACH * r;
+    let base = terrain.height_m(c_w.x, c_w.y);
+    let inside = |q: &Vector3<f64>| penetration(terrain, q) > 0.0;
+    let entry = |phi: f64| -> f64 {
+        let (s, co) = phi.sin_cos();
+        let radial = d * co + f * s;
+        let (mut a, mut b) = (0.5 * r, reach);
+        if inside(&(c_w + radial * a)) || !inside(&(c_w + radial * b)) {
+            return f64::INFINITY;
+        }
+        for _ in 0..RAY_ITERATIONS {
+            let m = 0.5 * (a + b);
+            if inside(&(c_w + radial * m)) {
+                b = m;
+            } else {
+                a = m;
+            }
+        }
+        let q = c_w + radial * b;
+        if terrain.height_m(q.x, q.y) > base + EDGE_M {
+            b
+        } else {
+            f64::INFINITY
+        }
+    };
+    let sign = direction.signum();
+    let step = FRAC_PI_2 / 6.0;
+    let (mut best_phi, mut best) = (0.0, f64::INFINITY);
+    for k in 0..7 {
+        let phi = sign * k as f64 * step;
+        let b = entry(phi);
+        if b < best {
+            (best_phi, best) = (phi, b);
+        }
+    }
+    if !best.is_finite() {
+        return None;
+    }
+    // Golden section for the smallest b around the best sample, within the quarter.
+    let (lo, hi) = if sign > 0.0 {
+        (0.0, FRAC_PI_2)
+    } else {
+        (-FRAC_PI_2, 0.0)
+    };
+    let (mut a, mut b) = ((best_phi - step).max(lo), (best_phi + step).min(hi));
+    let ratio = 0.5 * (5f64.sqrt() - 1.0);
+    let mut x1 = b - ratio * (b - a);
+    let mut x2 = a + ratio * (b - a);
+    let (mut e1, mut e2) = (entry(x1), entry(x2));
+    for _ in 0..FACE_GOLDEN_ITERATIONS {
+        if e1 <= e2 {
+            b = x2;
+            (x2, e2) = (x1, e1);
+            x1 = b - ratio * (b - a);
+            e1 = entry(x1);
+        } else {
+            a = x1;
+            (x1, e1) = (x2, e2);
+            x2 = a + ratio * (b - a);
+            e2 = entry(x2);
+        }
+    }
+    for (phi, e) in [(x1, e1), (x2, e2)] {
+        if e < best {
+            (best_phi, best) = (phi, e);
+        }
+    }
+    if best > r + EDGE_PROBE_M {
+        return None;
+    }
+    let (s, co) = best_phi.sin_cos();
+    let radial = d * co + f * s;
+    Some(WheelContact {
+        point_w: c_w + radial * best,
+        angle_rad: best_phi,
+        normal_w: -radial,
+        tangent_w: f * co - d * s,
+        clearance_m: best - r,
+    })
+}
+
+/// Samples of [`ground_contact_below`]'s scan.
+const BELOW_SAMPLES: usize = 10;
+
+/// The rim's contact with the ground over contact angles `[-pi/2, phi_max]` only: the lower
+/// ground under a wheel whose contact of largest penetration ([`wheel_contact`]) is a step face
+/// or edge at a larger angle (a wheel standing on the ground and pressed against a face touches
+/// both). A scan of [`BELOW_SAMPLES`] angles and a golden section around the best; the contact
+/// is measured like [`wheel_contact`]'s (vertical clearance under the rim point).
+pub fn ground_contact_below(
+    terrain: &dyn TerrainSurface,
+    c_w: &Vector3<f64>,
+    spin_w: &Vector3<f64>,
+    r: f64,
+    phi_max: f64,
+) -> WheelContact {
+    let (d, f) = plane_basis(spin_w);
+    let hi = phi_max.clamp(-FRAC_PI_2, FRAC_PI_2);
+    let step = (hi + FRAC_PI_2) / (BELOW_SAMPLES - 1) as f64;
+    let g = |phi: f64| penetration(terrain, &rim_point(c_w, &d, &f, r, phi));
+    let (mut best_phi, mut best) = (-FRAC_PI_2, f64::NEG_INFINITY);
+    for k in 0..BELOW_SAMPLES {
+        let phi = -FRAC_PI_2 + k as f64 * step;
+        let v = g(phi);
+        if v > best {
+            (best_phi, best) = (phi, v);
+        }
+    }
+    let (phi, v) = golden(
+        &g,
+        (best_phi - step).max(-FRAC_PI_2),
+        (best_phi + step).min(hi),
+    );
+    if v > best {
+        (best_phi, best) = (phi, v);
+    }
+    contact_at(c_w, &d, &f, r, best_phi, best)
+}
+
 /// Contact of a wheel of radius `r` centred at `c_w` with spin axis `spin_w` (unit, `W`).
 /// `hint` is the contact angle of the previous step, rad: its neighbourhood is searched too,
 /// so a contact on an edge is followed from step to step.

@@ -2,6 +2,7 @@
 //! motion, motors.
 
 pub mod contact;
+pub mod forces;
 pub mod geometry;
 pub mod motors;
 pub mod placement;

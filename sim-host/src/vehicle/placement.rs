@@ -10,7 +10,9 @@
 //! in the least-squares sense, and the body is raised until no wheel penetrates the ground (the
 //! wheels that then float are off the ground, as on a real vehicle at its joint limits).
 
-use super::contact::{edge_contact_ahead, wheel_contact, WheelContact};
+use super::contact::{
+    edge_contact_ahead, face_contact, ground_contact_below, wheel_contact, WheelContact,
+};
 use super::geometry::{VehicleGeometry, WHEELS};
 use crate::surface::TerrainSurface;
 use nalgebra::{Rotation3, SMatrix, SVector, Vector3};
@@ -102,6 +104,7 @@ fn residuals(
     steer_rad: &[f64; WHEELS],
     contacts: &mut [WheelContact; WHEELS],
     fixed: bool,
+    lifted: &[bool; WHEELS],
 ) -> Residuals {
     let pose = BodyPose {
         pos_m: [pose.pos_m[0] + u[6], pose.pos_m[1] + u[7], u[0]],
@@ -123,6 +126,18 @@ fn residuals(
         let k = &mut contacts[i];
         if fixed {
             e[i] = (c - k.point_w).dot(&k.normal_w) - r;
+        } else if lifted[i] && k.angle_rad.abs() > LIFTED_ANGLE_RAD {
+            // Held by a step face, off the ground: it follows the face (measured along the
+            // rim's normals) unless it touches the ground below or leaves the face.
+            let direction = k.angle_rad.signum();
+            let below =
+                ground_contact_below(terrain, &c, &s, r, k.angle_rad.abs() - LIFTED_ANGLE_RAD);
+            let face = face_contact(terrain, &c, &s, r, direction);
+            *k = match face {
+                Some(f) if below.clearance_m >= f.clearance_m.min(0.0) => f,
+                _ => wheel_contact(terrain, &c, &s, r, Some(k.angle_rad)),
+            };
+            e[i] = k.clearance_m;
         } else {
             let hint = k.angle_rad.is_finite().then_some(k.angle_rad);
             let mut best = wheel_contact(terrain, &c, &s, r, hint);
@@ -153,9 +168,23 @@ pub fn place(
     limits: &JointLimits,
 ) -> Placement {
     place_cached(
-        geometry, terrain, pose, guess, steer_rad, limits, &mut None, None, false,
+        geometry,
+        terrain,
+        pose,
+        guess,
+        steer_rad,
+        limits,
+        &mut None,
+        None,
+        false,
+        &[false; WHEELS],
     )
 }
+
+/// A wheel lifted off the ground by the force model follows its step-face contact while that
+/// contact is more than this off the vertical below the axle, rad; the ground is searched up
+/// to this much short of it.
+pub const LIFTED_ANGLE_RAD: f64 = 0.35;
 
 /// A step edge is taken as a wheel's contact when its clearance is below the ground contact's
 /// plus this, m: at equal distance the edge is the one the wheel must climb.
@@ -193,6 +222,12 @@ fn no_contact() -> WheelContact {
 /// rolled into a step face is then pushed back off the face by the overlap instead of being
 /// lifted by the much larger vertical penetration the face shows near a 90 deg contact angle.
 /// Without it (the initial placement), north, east and yaw are held.
+///
+/// `lifted[i]`: the force model ([`super::forces`]) carries wheel `i` on a step face or edge
+/// only (it has been lifted off the ground below). Such a wheel's contact is its face contact
+/// measured along the rim's normals ([`face_contact`]), not the vertical clearance, unless the
+/// ground below touches first or the face is no longer within reach; so the placement does not
+/// set a climbing wheel back on the ground.
 #[allow(clippy::too_many_arguments)]
 pub fn place_cached(
     geometry: &dyn VehicleGeometry,
@@ -204,6 +239,7 @@ pub fn place_cached(
     cache: &mut Option<PlacementJacobian>,
     previous_contacts: Option<&[WheelContact; WHEELS]>,
     move_planar: bool,
+    lifted: &[bool; WHEELS],
 ) -> Placement {
     let mut u = Unknowns::from_column_slice(&[
         pose.pos_m[2],
@@ -243,7 +279,9 @@ pub fn place_cached(
     let h = 1e-7;
     let mut previous = f64::INFINITY;
     let eval = |u: &Unknowns, contacts: &mut [WheelContact; WHEELS], fixed| {
-        residuals(geometry, terrain, pose, u, steer_rad, contacts, fixed)
+        residuals(
+            geometry, terrain, pose, u, steer_rad, contacts, fixed, lifted,
+        )
     };
     // Newton on the distances to the contacts' tangent planes, with a
     // full rim search at the start and to confirm convergence: a contact that moves to another

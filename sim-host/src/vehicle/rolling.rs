@@ -81,6 +81,55 @@ pub struct Twist {
     pub contacts: usize,
 }
 
+/// One row of the generalised velocity `[v; w; q_dot]` (9): the velocity of a contact's material
+/// point along a direction is `row . [v; w; q_dot]` (plus the wheel's own spin on the rolling row).
+pub type Row = SVector<f64, 9>;
+
+/// The three rows of wheel `i`'s contact `c`: `[normal, rolling tangent, spin axis]`. Each gives
+/// the velocity of the wheel's material contact point along that direction per unit of
+/// `[v; w; q_dot]`, before the wheel's own spin: the axle velocity `v + w x a + J q_dot` along
+/// the direction, plus the carrying link's rotation (`k r l . w_link` on the rolling row, `k` the
+/// ground-to-rim speed ratio `slip_factor`, and `-r t . w_link` on the lateral row). By virtual
+/// work the same rows map a contact force along the direction to generalised forces.
+pub fn contact_rows(
+    geometry: &TruthGeometry,
+    wheels: &[WheelPose; WHEELS],
+    rocker_rad: f64,
+    bogie_rad: [f64; 2],
+    i: usize,
+    c: &RollingContact,
+    slip_factor: f64,
+) -> [Row; 3] {
+    let r = geometry.wheel_radius_m[i];
+    let a = wheels[i].axle_m;
+    let jac: Matrix3<f64> = geometry.axle_jacobian(i, rocker_rad, bogie_rad);
+    // Link rotation about the spin axis per unit of [w; q_dot], times k r.
+    let kr = slip_factor * r;
+    let side_sign = if side(i) == 0 { 1.0 } else { -1.0 };
+    // Link rotation per unit of [w; q_dot] projected on `axis`, times `scale`.
+    let link = |axis: &Vector3<f64>, scale: f64| {
+        let ya = axis.y * scale;
+        let mut q = [side_sign * ya, 0.0, 0.0];
+        if on_bogie(i) {
+            q[1 + side(i)] = ya;
+        }
+        (axis * scale, Vector3::from(q))
+    };
+    let none = (Vector3::zeros(), Vector3::zeros());
+    [
+        (c.normal, none),
+        (c.tangent, link(&c.spin, kr)),
+        (c.spin, link(&c.tangent, -r)),
+    ]
+    .map(|(e, (link_w, link_q))| {
+        // e . (v + w x a + J q_dot) = e.v + (a x e).w + (J^T e).q_dot, plus the link's
+        // rotation: k r l . w_link on the rolling row, -r t . w_link on the lateral row.
+        let axe = a.cross(&e) + link_w;
+        let jte = jac.transpose() * e + link_q;
+        Row::from_column_slice(&[e.x, e.y, e.z, axe.x, axe.y, axe.z, jte.x, jte.y, jte.z])
+    })
+}
+
 /// Solve the rolling constraints of all wheels on the ground for the body twist and the
 /// suspension rates. `wheels` are the wheel poses in `R` at `rocker_rad`, `bogie_rad`;
 /// `ground_speed[i]` is the wheel's rim speed `r_i theta_dot_i` after its slip (m/s along the
@@ -107,34 +156,20 @@ pub fn solve_rolling(
             continue;
         }
         touching += 1;
-        let r = geometry.wheel_radius_m[i];
-        let a = wheels[i].axle_m;
-        let jac: Matrix3<f64> = geometry.axle_jacobian(i, rocker_rad, bogie_rad);
-        // Link rotation about the spin axis per unit of [w; q_dot], times k r.
-        let kr = slip_factor[i] * r;
-        let side_sign = if side(i) == 0 { 1.0 } else { -1.0 };
-        // Link rotation per unit of [w; q_dot] projected on `axis`, times `scale`.
-        let link = |axis: &Vector3<f64>, scale: f64| {
-            let ya = axis.y * scale;
-            let mut q = [side_sign * ya, 0.0, 0.0];
-            if on_bogie(i) {
-                q[1 + side(i)] = ya;
-            }
-            (axis * scale, Vector3::from(q))
-        };
-        let none = (Vector3::zeros(), Vector3::zeros());
-        for (e, target, weight, (link_w, link_q)) in [
-            (c.normal, 0.0, NORMAL_WEIGHT, none),
-            (c.tangent, ground_speed[i], 1.0, link(&c.spin, kr)),
-            (c.spin, lateral[i], LATERAL_WEIGHT, link(&c.tangent, -r)),
+        let rows = contact_rows(
+            geometry,
+            wheels,
+            rocker_rad,
+            bogie_rad,
+            i,
+            c,
+            slip_factor[i],
+        );
+        for (row, target, weight) in [
+            (rows[0], 0.0, NORMAL_WEIGHT),
+            (rows[1], ground_speed[i], 1.0),
+            (rows[2], lateral[i], LATERAL_WEIGHT),
         ] {
-            // e . (v + w x a + J q_dot) = e.v + (a x e).w + (J^T e).q_dot, plus the link's
-            // rotation: k r l . w_link on the rolling row, -r t . w_link on the lateral row.
-            let axe = a.cross(&e) + link_w;
-            let jte = jac.transpose() * e + link_q;
-            let row = SVector::<f64, 9>::from_column_slice(&[
-                e.x, e.y, e.z, axe.x, axe.y, axe.z, jte.x, jte.y, jte.z,
-            ]);
             let w2 = weight * weight;
             ata += row * row.transpose() * w2;
             atb += row * (target * w2);
