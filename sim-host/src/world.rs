@@ -27,7 +27,7 @@ use crate::slip::{SlipModel, SlipState, WheelGround, WheelSlip};
 use crate::slip_lumped::LumpedSlip;
 use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
-use crate::terramechanics::{patch, Wheel, ROCKY8_MASS_KG};
+use crate::terramechanics::{Wheel, ROCKY8_MASS_KG};
 use crate::vehicle::contact::{face_contact, ground_contact_below, WheelContact, EDGE_PROBE_M};
 use crate::vehicle::forces::{solve_quasi_static, ForceContact, Friction, QuasiStatic, Weight};
 use crate::vehicle::geometry::{rocky8, TruthGeometry, VehicleGeometry, WheelPose, WHEELS};
@@ -190,6 +190,10 @@ pub struct World {
     pub steps: u64,
     /// Newton iterations of the placement solver, summed over all steps (diagnostics).
     pub placement_iterations: u64,
+    /// Steps whose quasi-static twist was implausible (faster than the wheels can drive the
+    /// rover) and that fell back to the kinematic least squares (diagnostics; 0 on every
+    /// scenario but a dense rock field).
+    pub force_fallbacks: u64,
     /// Averaged wheel odometry, m: the mean increment of the six drive encoders (as read)
     /// times the nominal wheel radius (0.10 m, published: what the flight software knows, not
     /// the wheels' true radii) times the cosine of the true pitch;
@@ -225,7 +229,15 @@ fn friction_of(slip: &Slip) -> Friction {
         Slip::Terramechanics(m) => {
             let soil = m.soil();
             let load = ROCKY8_MASS_KG * MARS_GRAVITY_M_S2 / WHEELS as f64;
-            let length = patch(soil, &Wheel::rocky8(), load).contact_length_m;
+            // Contact length of the rigid wheel at free rolling: the chord from the entry
+            // angle to the exit angle (exit sinkage `lambda` times the entry sinkage).
+            let wheel = Wheel::rocky8();
+            let entry =
+                crate::rigid_wheel::wheel_forces(soil, &wheel, load, 0.0, 0.0).entry_angle_rad;
+            let exit = (1.0 - soil.exit_sinkage_ratio * (1.0 - entry.cos()))
+                .clamp(-1.0, 1.0)
+                .acos();
+            let length = wheel.radius_m * (entry.sin() + exit.sin());
             Friction {
                 mu: soil.phi_rad.tan(),
                 creep_slip: if length > 0.0 {
@@ -338,6 +350,7 @@ impl World {
             sun_reading: SunReading::default(),
             steps: 0,
             placement_iterations: 0,
+            force_fallbacks: 0,
             wheel_average_m: 0.0,
         };
         world.update_wheels();
@@ -547,7 +560,39 @@ impl World {
                 gravity_r,
             },
         );
-        let twist = quasi.twist;
+        // A quasi-static rover cannot move faster than its wheels drive it. When the placement
+        // of the last step did not converge the force balance can become singular and return an
+        // absurd twist (km/s, seen once on a dense rock field); such a step falls back to the
+        // kinematic least squares of all contacts (`solve_rolling`) and is counted.
+        let max_rim = ground
+            .iter()
+            .map(|g| g.rim_speed_m_s.abs())
+            .fold(0.0, f64::max);
+        let plausible = |t: &crate::vehicle::rolling::Twist| {
+            let finite = t.v.iter().chain(t.w.iter()).all(|x| x.is_finite())
+                && t.suspension_rad_s.iter().all(|x| x.is_finite());
+            finite
+                && t.v.norm() <= 3.0 * max_rim + 0.05
+                && t.w.norm() <= 15.0 * max_rim + 0.25
+                && t.suspension_rad_s
+                    .iter()
+                    .all(|x| x.abs() <= 15.0 * max_rim + 0.25)
+        };
+        let twist = if plausible(&quasi.twist) {
+            quasi.twist
+        } else {
+            self.force_fallbacks += 1;
+            crate::vehicle::rolling::solve_rolling(
+                &self.geometry,
+                &wheels,
+                s0.rocker_rad,
+                s0.bogie_rad,
+                &contacts,
+                &ground_speed,
+                &slip_factor,
+                &lateral,
+            )
+        };
         // A wheel the force balance carries on a step face or edge only (no contact near the
         // bottom of its rim carries load: it has been lifted off the ground below) climbs that
         // face: the placement follows the face contact (measured along the rim's normals)
