@@ -347,6 +347,9 @@ pub fn scenario(job: &Job, scenarios_dir: &Path) -> anyhow::Result<Scenario> {
     if job.series == Series::NoSlip {
         scenario.slip = false;
     }
+    // The study's slip-to-slope relation is the lumped model's (its text and figures say so);
+    // the rigid-wheel terramechanics that `slope-10-cross` runs by default is not swept here.
+    scenario.slip_model = crate::scenario::SlipModelKind::Lumped;
     scenario.name = format!(
         "{}-{}-{}deg",
         scenario.name,

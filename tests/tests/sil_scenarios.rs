@@ -94,12 +94,12 @@ fn sil_kin_5_step_climb() {
 }
 
 #[test]
-fn sil_slip_1_terramechanics_slope() {
+fn sil_slip_1_lumped_slope_reference() {
     check("SIL-SLIP-1");
 }
 
 #[test]
-fn sil_slip_2_terramechanics_marsyard() {
+fn sil_slip_2_lumped_marsyard_reference() {
     check("SIL-SLIP-2");
 }
 
