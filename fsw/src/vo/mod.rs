@@ -110,8 +110,13 @@ pub struct VoConfig {
     pub min_range_m: f64,
     /// Range limits of a triangulated point from the left camera, m.
     pub max_range_m: f64,
-    /// Standard deviation of a matched image coordinate, pixels (Sigma_l, Sigma_r of eq. 8).
+    /// Standard deviation of a matched image coordinate, pixels (Sigma_l, Sigma_r of eq. 8);
+    /// values below `stereo::MATCH_SIGMA_FLOOR_PX` (0.3 px) are raised to it.
     pub sigma_px: f64,
+    /// Calibration term of the point covariances: standard deviation of the disparity error
+    /// left by the calibration (rectification and distortion residuals), pixels
+    /// (`stereo::triangulate_model`).
+    pub sigma_calibration_px: f64,
     /// Tracking: half side of the correlation search window around the predicted position, px.
     pub search_radius_px: u16,
     /// Tracking: largest motion of the affine refinement from the correlation peak, pixels.
@@ -161,6 +166,7 @@ impl Default for VoConfig {
             min_range_m: 0.2,
             max_range_m: 30.0,
             sigma_px: 0.3,
+            sigma_calibration_px: 0.2,
             search_radius_px: 24,
             max_refine_shift_px: 3.0,
             lmeds_hypotheses: 64,
@@ -187,6 +193,7 @@ impl VoConfig {
             self.min_range_m,
             self.max_range_m,
             self.sigma_px,
+            self.sigma_calibration_px,
             self.max_refine_shift_px,
             self.inlier_gate_chi2,
             self.min_image_std,
@@ -218,6 +225,7 @@ impl VoConfig {
             && self.min_range_m > 0.0
             && self.max_range_m > self.min_range_m
             && self.sigma_px > 0.0
+            && self.sigma_calibration_px >= 0.0
             && self.search_radius_px >= 1
             && usize::from(self.search_radius_px) <= MAX_SEARCH_RADIUS_PX
             && self.max_refine_shift_px > 0.0
@@ -287,6 +295,46 @@ pub enum VoError {
     NonFinite,
 }
 
+/// Stereo matches rejected in one update, per reason ([`stereo::StereoReject`]), over the
+/// tracked features' and the new keyframe's matches. Counts saturate at `u16::MAX`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StereoRejectCounts {
+    /// Template or search outside the image.
+    pub out_of_image: u16,
+    /// Best correlation below `min_correlation`.
+    pub weak_correlation: u16,
+    /// A rival peak within `uniqueness_margin`.
+    pub ambiguous: u16,
+    /// Sub-pixel refinement failed or moved too far.
+    pub refinement_failed: u16,
+    /// Peak at an end of the disparity search range.
+    pub range_end: u16,
+    /// Left-right consistency check failed (more than 1 px).
+    pub left_right: u16,
+    /// Template across a depth discontinuity (its halves disagree).
+    pub discontinuity: u16,
+    /// Degenerate rays, large gap, out of range or non-finite triangulation.
+    pub triangulation: u16,
+}
+
+impl StereoRejectCounts {
+    /// Counts one rejection.
+    pub fn count(&mut self, reason: stereo::StereoReject) {
+        use stereo::StereoReject as R;
+        let slot = match reason {
+            R::OutOfImage => &mut self.out_of_image,
+            R::WeakCorrelation => &mut self.weak_correlation,
+            R::Ambiguous => &mut self.ambiguous,
+            R::RefinementFailed => &mut self.refinement_failed,
+            R::RangeEnd => &mut self.range_end,
+            R::LeftRightMismatch => &mut self.left_right,
+            R::Discontinuity => &mut self.discontinuity,
+            R::Degenerate | R::LargeGap | R::OutOfRange | R::NonFinite => &mut self.triangulation,
+        };
+        *slot = slot.saturating_add(1);
+    }
+}
+
 /// Quality figures of one update (for telemetry and for the estimator's trust).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct VoQuality {
@@ -302,6 +350,12 @@ pub struct VoQuality {
     pub residual_rms_m: f64,
     /// Sum of squared Mahalanobis residuals of the inliers per degree of freedom.
     pub chi2_per_dof: f64,
+    /// Factor applied to the motion covariance (>= 1; `motion::finish_estimate`).
+    pub covariance_scale: f64,
+    /// Maximum-likelihood rounds dropped to keep the previous round's solution (0 or 1).
+    pub rounds_reverted: u8,
+    /// Stereo matches rejected, per reason (tracked and new features).
+    pub stereo_rejects: StereoRejectCounts,
     /// Work items this update used (a deterministic function of the input).
     pub work_items: u32,
 }

@@ -107,6 +107,38 @@ pub enum StereoReject {
     OutOfRange,
     /// A non-finite number.
     NonFinite,
+    /// The correlation peak is at an end of the searched disparity range (or of the part of it
+    /// where the template fits in the image): no sub-pixel peak, the true one may lie outside.
+    RangeEnd,
+    /// Left-right consistency: matching the right template back along the left row does not
+    /// land within 1 px of the left feature.
+    LeftRightMismatch,
+    /// The template straddles a depth discontinuity: its halves prefer different disparities.
+    Discontinuity,
+}
+
+/// Floor of the matching noise of one image coordinate, pixels: the per-point covariances of the
+/// flight noise model ([`triangulate_model`]) never assume less. 0.3 px: the normalised
+/// cross-correlation peak refined by eq. 10 on 11x11 templates; measured on real images
+/// (Middlebury 2014 motorcycle, `docs/vo.md`) the disparity error of the good matches has a
+/// robust sigma of about 0.17-0.2 px, i.e. 0.12-0.14 px per coordinate, so 0.3 px leaves room for
+/// tracking over time (perspective change, interpolation) that the stereo check does not see.
+pub const MATCH_SIGMA_FLOOR_PX: f64 = 0.3;
+
+/// Eq. 1-8 (H04) with the flight noise model of `config`: [`triangulate_model`] with the
+/// matching noise `max(config.sigma_px, MATCH_SIGMA_FLOOR_PX)` on all four coordinates and the
+/// calibration term `config.sigma_calibration_px` on the disparity.
+pub fn triangulate_config(
+    cam: &PinholeStereo,
+    pixels: [f64; 4],
+    config: &VoConfig,
+) -> Result<StereoPoint, StereoReject> {
+    triangulate_model(
+        cam,
+        pixels,
+        config.sigma_px.max(MATCH_SIGMA_FLOOR_PX),
+        config.sigma_calibration_px,
+    )
 }
 
 /// Eq. 1-8 (H04): triangulates the left pixel `(xl, yl)` and right pixel `(xr, yr)` as the
@@ -117,6 +149,22 @@ pub fn triangulate(
     cam: &PinholeStereo,
     pixels: [f64; 4],
     sigma_px: f64,
+) -> Result<StereoPoint, StereoReject> {
+    triangulate_model(cam, pixels, sigma_px, 0.0)
+}
+
+/// [`triangulate`] with a calibration term: eq. 8 with `Sigma_l = sigma_px^2 I` and
+/// `Sigma_r = diag(sigma_px^2 + sigma_calibration_px^2, sigma_px^2)`, i.e. an extra
+/// disparity error of `sigma_calibration_px` (pixels) from the calibration (rectification and
+/// lens-distortion residuals along the row, the error of the principal points' difference),
+/// propagated through the same Jacobian `P'` (eq. 5-7). Treated as independent per point: an
+/// approximation of an error that is smooth over the image, conservative for the weights of
+/// eq. 11.
+pub fn triangulate_model(
+    cam: &PinholeStereo,
+    pixels: [f64; 4],
+    sigma_px: f64,
+    sigma_calibration_px: f64,
 ) -> Result<StereoPoint, StereoReject> {
     let [xl, yl, xr, yr] = pixels;
     let b = Vec3::new(cam.baseline_m, 0.0, 0.0); // B = C2 - C1
@@ -154,9 +202,13 @@ pub fn triangulate(
         jacobian.set_column(k, &p_d);
     }
     let variance = sigma_px * sigma_px;
-    // eq. 8 with Sigma_l = Sigma_r = sigma^2 I.
-    let covariance =
-        jacobian * jacobian.transpose() * variance + Mat3::identity() * (0.25 * gap * gap);
+    // eq. 8 with Sigma_l = sigma^2 I, Sigma_r = sigma^2 I + diag(sigma_cal^2, 0).
+    let xr_column = jacobian.column(2);
+    let calibration =
+        xr_column * xr_column.transpose() * (sigma_calibration_px * sigma_calibration_px);
+    let covariance = jacobian * jacobian.transpose() * variance
+        + calibration
+        + Mat3::identity() * (0.25 * gap * gap);
     let finite = position.iter().all(|v| v.is_finite())
         && covariance.iter().all(|v| v.is_finite())
         && gap.is_finite();
@@ -168,6 +220,18 @@ pub fn triangulate(
         covariance,
         gap_m: gap,
     })
+}
+
+/// The triangulated point of a stereo match with the flight noise model of `config`
+/// ([`triangulate_config`]) after the gap and range checks of [`accept_point`].
+pub fn point_from_pixels(
+    cam: &PinholeStereo,
+    pixels: [f64; 4],
+    config: &VoConfig,
+) -> Result<StereoPoint, StereoReject> {
+    let point = triangulate_config(cam, pixels, config)?;
+    accept_point(cam, &point, config)?;
+    Ok(point)
 }
 
 /// Checks a triangulated point against the gap and range limits of `config` (H04: "features
@@ -329,8 +393,7 @@ pub fn match_and_triangulate(
         Some(d) => match_along_row_near(left, right, xl, yl, d, config)?,
         None => match_along_row(left, right, xl, yl, config)?,
     };
-    let point = triangulate(cam, [xl, yl, xr, yr], config.sigma_px)?;
-    accept_point(cam, &point, config)?;
+    let point = point_from_pixels(cam, [xl, yl, xr, yr], config)?;
     Ok((point, (xr, yr)))
 }
 
