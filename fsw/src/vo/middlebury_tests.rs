@@ -125,6 +125,12 @@ fn report_pair(name: &str, stats: &PairStats, config: &VoConfig) -> (usize, usiz
         }
         if m.truth.is_finite() {
             errors.push((d - m.truth).abs());
+            if (d - m.truth).abs() > 2.0 {
+                println!(
+                    "  {name}: gross error at ({}, {}): disparity {d:.2}, truth {:.2}",
+                    m.xl, m.yl, m.truth
+                );
+            }
         }
     }
     errors.sort_by(|a, b| a.total_cmp(b));
@@ -150,6 +156,14 @@ fn report_pair(name: &str, stats: &PairStats, config: &VoConfig) -> (usize, usiz
         gross as f64 / n as f64 * 100.0,
         stats.rejects
     );
+    println!(
+        "  {name}: gross errors {:.2} % of the {} matched features, {:.2} % of the {} with ground \
+         truth",
+        gross as f64 / stats.matched.len().max(1) as f64 * 100.0,
+        stats.matched.len(),
+        gross as f64 / n as f64 * 100.0,
+        errors.len()
+    );
     (gross, range_end, errors.len())
 }
 
@@ -164,10 +178,32 @@ fn dataset_dirs() -> Vec<(String, std::path::PathBuf)> {
     out
 }
 
+/// The default configuration, or with the stereo rules' settings from `VO_STEREO_RULES`
+/// ("left_right_tolerance_px,half_window_px,half_min_std,half_min_correlation[,uniqueness_margin]")
+/// to explore them.
+fn tuned_config() -> VoConfig {
+    let mut config = VoConfig::default();
+    if let Ok(rules) = std::env::var("VO_STEREO_RULES") {
+        let v: Vec<f64> = rules
+            .split(',')
+            .map(|x| x.trim().parse().unwrap())
+            .collect();
+        config.left_right_tolerance_px = v[0];
+        config.half_window_px = v[1] as u16;
+        config.half_min_std = v[2] as f32;
+        config.half_min_correlation = v[3] as f32;
+        if let Some(&margin) = v.get(4) {
+            config.uniqueness_margin = margin as f32;
+        }
+        println!("stereo rules {rules}");
+    }
+    config
+}
+
 #[test]
 #[ignore = "needs VO_MIDDLEBURY_DIR from tools/middlebury_eval.py"]
 fn vo_14_middlebury_disparity() {
-    let config = VoConfig::default();
+    let config = tuned_config();
     let mut failures = Vec::new();
     for (name, dir) in dataset_dirs() {
         let stats = match_pair(&dir, &config);
@@ -179,8 +215,10 @@ fn vo_14_middlebury_disparity() {
                 stats.features
             ));
         }
-        if gross * 100 > 3 * with_truth {
-            failures.push(std::format!("{name}: {gross} gross of {with_truth}"));
+        // Acceptance (issue 15): gross errors at most 3 % of the matched features. The share of
+        // the matches with ground truth is printed as well (it is the stricter figure).
+        if gross * 100 > 3 * matched {
+            failures.push(std::format!("{name}: {gross} gross of {matched} matched"));
         }
         if range_end > 0 {
             failures.push(std::format!("{name}: {range_end} range-end matches"));

@@ -102,6 +102,18 @@ pub struct VoConfig {
     /// A stereo match is ambiguous when another disparity more than 2 px away scores within this
     /// margin of the best.
     pub uniqueness_margin: f32,
+    /// Left-right consistency: largest distance between the left feature and the column found by
+    /// matching the right template back along the left row, pixels.
+    pub left_right_tolerance_px: f64,
+    /// Depth-discontinuity rule: half window of disparities around the match over which each
+    /// template half is correlated, pixels.
+    pub half_window_px: u16,
+    /// Depth-discontinuity rule: smallest grey-level standard deviation of a template half for
+    /// it to be checked (a flat half says nothing), grey levels.
+    pub half_min_std: f32,
+    /// Depth-discontinuity rule: smallest correlation of a textured half at the match's
+    /// disparity (-1..1).
+    pub half_min_correlation: f32,
     /// Largest vertical offset between left and right match of a rectified pair, pixels.
     pub max_row_offset_px: f64,
     /// Largest ray gap (eq. 1-4) as an angle seen from the left camera, in pixels of focal length.
@@ -162,6 +174,10 @@ impl Default for VoConfig {
             min_correlation: 0.8,
             uniqueness_margin: 0.02,
             max_row_offset_px: 1.5,
+            left_right_tolerance_px: 1.0,
+            half_window_px: 3,
+            half_min_std: 4.0,
+            half_min_correlation: 0.5,
             max_gap_px: 1.5,
             min_range_m: 0.2,
             max_range_m: 30.0,
@@ -189,6 +205,7 @@ impl VoConfig {
     pub fn is_valid(&self) -> bool {
         let finite = [
             self.max_row_offset_px,
+            self.left_right_tolerance_px,
             self.max_gap_px,
             self.min_range_m,
             self.max_range_m,
@@ -207,6 +224,8 @@ impl VoConfig {
                 self.min_distance_px,
                 self.min_correlation,
                 self.uniqueness_margin,
+                self.half_min_std,
+                self.half_min_correlation,
             ]
             .iter()
             .all(|v| v.is_finite());
@@ -221,6 +240,11 @@ impl VoConfig {
             && (-1.0..1.0).contains(&self.min_correlation)
             && self.uniqueness_margin >= 0.0
             && self.max_row_offset_px > 0.0
+            && self.left_right_tolerance_px >= 0.0
+            && self.half_window_px >= 2
+            && usize::from(self.half_window_px) <= MAX_DISPARITY_PX
+            && self.half_min_std >= 0.0
+            && (-1.0..=1.0).contains(&self.half_min_correlation)
             && self.max_gap_px > 0.0
             && self.min_range_m > 0.0
             && self.max_range_m > self.min_range_m

@@ -618,10 +618,16 @@ impl<const N: usize> VisualOdometry<N> {
         // window around it (the prior already placed the feature within the tracking radius).
         let predicted_disparity = self.camera.fx_px * self.camera.baseline_m / predicted.z;
         let window = (self.config.track_disparity_margin_px > 0).then_some(predicted_disparity);
-        let Ok((current, _)) =
-            match_and_triangulate(&self.camera, left, right, (xt, yt), window, &self.config)
-        else {
-            return;
+        let current = match match_and_triangulate(
+            &self.camera,
+            left,
+            right,
+            (xt, yt),
+            window,
+            &self.config,
+        ) {
+            Ok((current, _)) => current,
+            Err(reason) => return self.quality.stereo_rejects.count(reason),
         };
         let pair = Correspondence::new(
             previous.position_m,
@@ -753,11 +759,11 @@ impl<const N: usize> VisualOdometry<N> {
             return;
         };
         let (xl, yl) = (f64::from(x), f64::from(y));
-        let Ok((_, (xr, yr))) =
-            match_and_triangulate(&self.camera, left, right, (xl, yl), None, &self.config)
-        else {
-            return;
-        };
+        let (xr, yr) =
+            match match_and_triangulate(&self.camera, left, right, (xl, yl), None, &self.config) {
+                Ok((_, right_px)) => right_px,
+                Err(reason) => return self.quality.stereo_rejects.count(reason),
+            };
         let Some(template) = left.template(i32::from(x), i32::from(y)) else {
             return;
         };

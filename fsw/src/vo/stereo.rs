@@ -4,9 +4,11 @@
 //! All geometry is in the left camera frame `K` (x right, y down, z optical axis); the left
 //! camera centre is `C1 = 0` and the right one `C2 = (baseline, 0, 0)`.
 
-use super::image::{ncc, ncc_scan, template_stats, Image};
+use super::image::{
+    ncc, ncc_scan, region_ncc, region_stats, template_stats, Image, TemplateRegion,
+};
 use super::track::{refine_warp, Affine2, WarpModel};
-use super::{VoConfig, VoError, MAX_DISPARITY_PX};
+use super::{VoConfig, VoError, MAX_DISPARITY_PX, TEMPLATE_HALF, TEMPLATE_SIDE};
 use crate::types::{Mat3, Vec3};
 use nalgebra::{Matrix3x4, Vector3};
 use rover_hal::StereoCalibration;
@@ -363,6 +365,9 @@ fn match_in_range(
     if rival > best_score - config.uniqueness_margin {
         return Err(StereoReject::Ambiguous);
     }
+    let lo = d_min;
+    check_range_end(right, &template, stats, (xi, yi), best_d, (lo, d_max))?;
+    check_discontinuity(right, &template, (xi, yi), best_d, (lo, d_max), config)?;
     let template_f = left.template_f(xl, yl).ok_or(StereoReject::OutOfImage)?;
     let x0 = xl - best_d as f64;
     let init = Affine2::translation(x0, yl);
@@ -375,7 +380,159 @@ fn match_in_range(
     if !(xl - xr >= f64::from(config.min_disparity_px) - 1.0) {
         return Err(StereoReject::Degenerate);
     }
+    check_left_right(left, right, (xi, yi), xr, (lo, d_max), step, config)?;
     Ok((xr, yr))
+}
+
+/// Range-end rule: the integer correlation peak `best_d` must have both neighbouring disparities
+/// strictly inside the searched range `range` and with the template inside the image, so that
+/// it is a true (sub-pixel) peak. A peak at an end of the range is the slope of a peak outside
+/// it (measured on the Middlebury pairs: a disparity of 2.00 where the truth is 52); rejected as
+/// [`StereoReject::RangeEnd`].
+fn check_range_end(
+    right: &Image,
+    template: &super::image::Template,
+    stats: (i64, i64),
+    (xi, yi): (i32, i32),
+    best_d: usize,
+    (lo, hi): (usize, usize),
+) -> Result<(), StereoReject> {
+    if best_d <= lo || best_d >= hi {
+        return Err(StereoReject::RangeEnd);
+    }
+    let d = best_d as i32;
+    let inside = ncc(right, template, stats, xi - d - 1, yi).is_some()
+        && ncc(right, template, stats, xi - d + 1, yi).is_some();
+    if inside {
+        Ok(())
+    } else {
+        Err(StereoReject::RangeEnd)
+    }
+}
+
+/// The regions of the depth-discontinuity rule: the four halves of the template (left, right,
+/// top, bottom; 6 of the 11 columns or rows each, the centre line shared) and the central 5x5
+/// window (the Forstner window of the feature, textured by construction).
+const HALVES: [TemplateRegion; 5] = [
+    TemplateRegion {
+        rows: (TEMPLATE_HALF - 2, TEMPLATE_HALF + 3),
+        cols: (TEMPLATE_HALF - 2, TEMPLATE_HALF + 3),
+    },
+    TemplateRegion {
+        rows: (0, TEMPLATE_SIDE),
+        cols: (0, TEMPLATE_HALF + 1),
+    },
+    TemplateRegion {
+        rows: (0, TEMPLATE_SIDE),
+        cols: (TEMPLATE_HALF, TEMPLATE_SIDE),
+    },
+    TemplateRegion {
+        rows: (0, TEMPLATE_HALF + 1),
+        cols: (0, TEMPLATE_SIDE),
+    },
+    TemplateRegion {
+        rows: (TEMPLATE_HALF, TEMPLATE_SIDE),
+        cols: (0, TEMPLATE_SIDE),
+    },
+];
+
+/// Depth-discontinuity rule: a template across a depth edge matches at the disparity of its
+/// dominant (often the foreground) side, while the feature may lie on the other. Each half of
+/// the template ([`HALVES`]) with texture (grey-level standard deviation at least
+/// `config.half_min_std`) is correlated on its own at the integer disparities
+/// `best_d +- config.half_window_px` (inside `range`); the match is rejected
+/// ([`StereoReject::Discontinuity`]) when a half peaks more than 1 px away from `best_d`, or
+/// correlates below `config.half_min_correlation` at `best_d`.
+fn check_discontinuity(
+    right: &Image,
+    template: &super::image::Template,
+    (xi, yi): (i32, i32),
+    best_d: usize,
+    (lo, hi): (usize, usize),
+    config: &VoConfig,
+) -> Result<(), StereoReject> {
+    let window = usize::from(config.half_window_px);
+    let (d_lo, d_hi) = (
+        best_d.saturating_sub(window).max(lo),
+        (best_d + window).min(hi),
+    );
+    let min_var = f64::from(config.half_min_std) * f64::from(config.half_min_std);
+    for region in HALVES {
+        let stats = region_stats(template, region);
+        let (_, var_n2, n) = stats;
+        if n <= 0 || !(var_n2 as f64 >= min_var * (n * n) as f64) {
+            continue;
+        }
+        let mut best = (f32::NEG_INFINITY, best_d);
+        let mut at_match = f32::NEG_INFINITY;
+        for d in d_lo..=d_hi {
+            let Some(score) = region_ncc(right, template, region, stats, xi - d as i32, yi) else {
+                continue;
+            };
+            if d == best_d {
+                at_match = score;
+            }
+            if score > best.0 {
+                best = (score, d);
+            }
+        }
+        if best.1.abs_diff(best_d) > 1 || !(at_match >= config.half_min_correlation) {
+            return Err(StereoReject::Discontinuity);
+        }
+    }
+    Ok(())
+}
+
+/// Left-right consistency rule: the right template at the match (integer column nearest `xr`,
+/// row `yi`) is matched back along the left row over the same disparities `range` and `step`
+/// (coarse scan, then the neighbours of the best); the left column found must be within
+/// `config.left_right_tolerance_px` (1 px) of the feature's `xi`, otherwise
+/// [`StereoReject::LeftRightMismatch`]. Run only at the matched features (one scan each).
+fn check_left_right(
+    left: &Image,
+    right: &Image,
+    (xi, yi): (i32, i32),
+    xr: f64,
+    (lo, hi): (usize, usize),
+    step: usize,
+    config: &VoConfig,
+) -> Result<(), StereoReject> {
+    let xri = libm::round(xr) as i32;
+    let back = right.template(xri, yi).ok_or(StereoReject::OutOfImage)?;
+    let stats = template_stats(&back);
+    let mut scan = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
+    let count = hi.saturating_sub(lo) / step + 1;
+    if let Some(window) = scan.get_mut(..count) {
+        // scan[k] is the left column xri + lo + k * step (disparity lo + k * step).
+        ncc_scan(left, &back, stats, yi, xri + lo as i32, step, window);
+    }
+    let mut best = (f32::NEG_INFINITY, lo);
+    for (k, &score) in scan.iter().take(count).enumerate() {
+        if score > best.0 {
+            best = (score, lo + k * step);
+        }
+    }
+    if step > 1 {
+        let centre = best.1;
+        for d in centre.saturating_sub(1).max(lo)..=(centre + 1).min(hi) {
+            if d == centre {
+                continue;
+            }
+            if let Some(score) = ncc(left, &back, stats, xri + d as i32, yi) {
+                if score > best.0 {
+                    best = (score, d);
+                }
+            }
+        }
+    }
+    let x_back = f64::from(xri) + best.1 as f64;
+    if best.0 > f32::NEG_INFINITY
+        && (x_back - f64::from(xi)).abs() <= config.left_right_tolerance_px
+    {
+        Ok(())
+    } else {
+        Err(StereoReject::LeftRightMismatch)
+    }
 }
 
 /// Matches and triangulates one left feature: [`match_along_row`] (or [`match_along_row_near`]
