@@ -69,6 +69,7 @@ struct Matched {
 /// Statistics of one pair.
 struct PairStats {
     features: usize,
+    rejected: Vec<(u16, u16)>,
     matched: Vec<Matched>,
     rejects: StereoRejectCounts,
 }
@@ -87,6 +88,7 @@ fn match_pair(dir: &Path, config: &VoConfig) -> PairStats {
     let n = select_with_min_distance(detector.candidates(), config.min_distance_px, &mut selected);
     let mut matched = Vec::new();
     let mut rejects = StereoRejectCounts::default();
+    let mut rejected = Vec::new();
     for &(x, y) in &selected[..n] {
         match match_along_row(&l, &r, f64::from(x), f64::from(y), config) {
             Ok((xr, yr)) => matched.push(Matched {
@@ -96,18 +98,22 @@ fn match_pair(dir: &Path, config: &VoConfig) -> PairStats {
                 yr,
                 truth: f64::from(truth[usize::from(y) * IMAGE_WIDTH_PX + usize::from(x)]),
             }),
-            Err(e) => rejects.count(e),
+            Err(e) => {
+                rejects.count(e);
+                rejected.push((x, y));
+            }
         }
     }
     PairStats {
         features: n,
+        rejected,
         matched,
         rejects,
     }
 }
 
-/// Prints the VO-14 figures of one pair; returns (gross errors, range-end matches, with truth).
-fn report_pair(name: &str, stats: &PairStats, config: &VoConfig) -> (usize, usize, usize) {
+/// Prints the VO-14 figures of one pair; returns (gross errors, range-end matches).
+fn report_pair(name: &str, stats: &PairStats, config: &VoConfig) -> (usize, usize) {
     let mut errors = Vec::new();
     let mut range_end = 0;
     for m in &stats.matched {
@@ -164,7 +170,7 @@ fn report_pair(name: &str, stats: &PairStats, config: &VoConfig) -> (usize, usiz
         gross as f64 / n as f64 * 100.0,
         errors.len()
     );
-    (gross, range_end, errors.len())
+    (gross, range_end)
 }
 
 fn dataset_dirs() -> Vec<(String, std::path::PathBuf)> {
@@ -207,7 +213,17 @@ fn vo_14_middlebury_disparity() {
     let mut failures = Vec::new();
     for (name, dir) in dataset_dirs() {
         let stats = match_pair(&dir, &config);
-        let (gross, range_end, with_truth) = report_pair(&name, &stats, &config);
+        // For the side-by-side with OpenCV (`tools/middlebury_eval.py --compare`): the flight
+        // matcher's features and matches, one line each (xl, yl, xr, yr; NaN when rejected).
+        let mut csv = String::from("xl,yl,xr,yr\n");
+        for m in &stats.matched {
+            csv.push_str(&std::format!("{},{},{:.4},{:.4}\n", m.xl, m.yl, m.xr, m.yr));
+        }
+        for &(x, y) in &stats.rejected {
+            csv.push_str(&std::format!("{x},{y},nan,nan\n"));
+        }
+        std::fs::write(dir.join("flight_matches.csv"), csv).unwrap();
+        let (gross, range_end) = report_pair(&name, &stats, &config);
         let matched = stats.matched.len();
         if matched < stats.features / 2 {
             failures.push(std::format!(
