@@ -185,7 +185,7 @@ fn dataset_dirs() -> Vec<(String, std::path::PathBuf)> {
 }
 
 /// The default configuration, or with the stereo rules' settings from `VO_STEREO_RULES`
-/// ("left_right_tolerance_px,half_window_px,half_min_std,half_min_correlation[,uniqueness_margin]")
+/// ("left_right_tolerance_px,half_window_px,half_min_std,half_min_correlation[,uniqueness_margin[,left_right_window_px[,left_right_step]]]")
 /// to explore them.
 fn tuned_config() -> VoConfig {
     let mut config = VoConfig::default();
@@ -200,6 +200,12 @@ fn tuned_config() -> VoConfig {
         config.half_min_correlation = v[3] as f32;
         if let Some(&margin) = v.get(4) {
             config.uniqueness_margin = margin as f32;
+        }
+        if let Some(&window) = v.get(5) {
+            config.left_right_window_px = window as u16;
+        }
+        if let Some(&step) = v.get(6) {
+            config.left_right_step = step as u8;
         }
         println!("stereo rules {rules}");
     }

@@ -105,6 +105,12 @@ pub struct VoConfig {
     /// Left-right consistency: largest distance between the left feature and the column found by
     /// matching the right template back along the left row, pixels.
     pub left_right_tolerance_px: f64,
+    /// Left-right consistency: half width of the back-scan around the match's disparity,
+    /// pixels (0: the whole searched range).
+    pub left_right_window_px: u16,
+    /// Left-right consistency: the back-scan samples every this many pixels, then the columns
+    /// within half a step of the best (1..=4).
+    pub left_right_step: u8,
     /// Depth-discontinuity rule: half window of disparities around the match over which each
     /// template half is correlated, pixels.
     pub half_window_px: u16,
@@ -175,7 +181,9 @@ impl Default for VoConfig {
             uniqueness_margin: 0.02,
             max_row_offset_px: 1.5,
             left_right_tolerance_px: 1.0,
-            half_window_px: 3,
+            left_right_window_px: 0,
+            left_right_step: 2,
+            half_window_px: 2,
             half_min_std: 4.0,
             half_min_correlation: 0.5,
             max_gap_px: 1.5,
@@ -195,7 +203,7 @@ impl Default for VoConfig {
             min_inliers: 6,
             min_image_std: 3.0,
             max_clipped_fraction: 0.5,
-            work_cost: [30, 52, 9, 26, 11, 12, 19, 1],
+            work_cost: [30, 52, 9, 26, 11, 12, 29, 1],
         }
     }
 }
@@ -241,6 +249,7 @@ impl VoConfig {
             && self.uniqueness_margin >= 0.0
             && self.max_row_offset_px > 0.0
             && self.left_right_tolerance_px >= 0.0
+            && (1..=4).contains(&self.left_right_step)
             && self.half_window_px >= 2
             && usize::from(self.half_window_px) <= MAX_DISPARITY_PX
             && self.half_min_std >= 0.0

@@ -380,7 +380,7 @@ fn match_in_range(
     if !(xl - xr >= f64::from(config.min_disparity_px) - 1.0) {
         return Err(StereoReject::Degenerate);
     }
-    check_left_right(left, right, (xi, yi), xr, (lo, d_max), step, config)?;
+    check_left_right(left, right, (xi, yi), xr, (lo, d_max), config)?;
     Ok((xr, yr))
 }
 
@@ -484,27 +484,40 @@ fn check_discontinuity(
 }
 
 /// Left-right consistency rule: the right template at the match (integer column nearest `xr`,
-/// row `yi`) is matched back along the left row over the same disparities `range` and `step`
-/// (coarse scan, then the neighbours of the best); the left column found must be within
-/// `config.left_right_tolerance_px` (1 px) of the feature's `xi`, otherwise
-/// [`StereoReject::LeftRightMismatch`]. Run only at the matched features (one scan each).
+/// row `yi`) is matched back along the left row over the disparities of `range` within
+/// `config.left_right_window_px` of the match's (all of `range` for 0): a scan every
+/// `config.left_right_step` pixels, then the columns within half a step of the best. The left
+/// column found must be within `config.left_right_tolerance_px` (1 px) of the feature's `xi`,
+/// otherwise [`StereoReject::LeftRightMismatch`] (typically an occlusion: the background seen in
+/// the left image is hidden by the foreground in the right one, whose patch belongs to another
+/// left column). Run only at the matched features (one scan each).
 fn check_left_right(
     left: &Image,
     right: &Image,
     (xi, yi): (i32, i32),
     xr: f64,
     (lo, hi): (usize, usize),
-    step: usize,
     config: &VoConfig,
 ) -> Result<(), StereoReject> {
     let xri = libm::round(xr) as i32;
+    let d_match = usize::try_from(xi - xri).unwrap_or(0);
+    let window = usize::from(config.left_right_window_px);
+    let (lo, hi) = if window == 0 {
+        (lo, hi)
+    } else {
+        (
+            d_match.saturating_sub(window).max(lo),
+            (d_match + window).min(hi),
+        )
+    };
     let back = right.template(xri, yi).ok_or(StereoReject::OutOfImage)?;
     let stats = template_stats(&back);
+    let step = usize::from(config.left_right_step.max(1));
     let mut scan = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
     let count = hi.saturating_sub(lo) / step + 1;
-    if let Some(window) = scan.get_mut(..count) {
-        // scan[k] is the left column xri + lo + k * step (disparity lo + k * step).
-        ncc_scan(left, &back, stats, yi, xri + lo as i32, step, window);
+    if let Some(samples) = scan.get_mut(..count) {
+        // samples[k] is the left column xri + lo + k * step (disparity lo + k * step).
+        ncc_scan(left, &back, stats, yi, xri + lo as i32, step, samples);
     }
     let mut best = (f32::NEG_INFINITY, lo);
     for (k, &score) in scan.iter().take(count).enumerate() {
@@ -512,16 +525,16 @@ fn check_left_right(
             best = (score, lo + k * step);
         }
     }
-    if step > 1 {
-        let centre = best.1;
-        for d in centre.saturating_sub(1).max(lo)..=(centre + 1).min(hi) {
-            if d == centre {
-                continue;
-            }
-            if let Some(score) = ncc(left, &back, stats, xri + d as i32, yi) {
-                if score > best.0 {
-                    best = (score, d);
-                }
+    // The peak lies within half a step of the best sample.
+    let centre = best.1;
+    let half = step / 2;
+    for d in centre.saturating_sub(half).max(lo)..=(centre + half).min(hi) {
+        if d == centre {
+            continue;
+        }
+        if let Some(score) = ncc(left, &back, stats, xri + d as i32, yi) {
+            if score > best.0 {
+                best = (score, d);
             }
         }
     }
@@ -685,5 +698,155 @@ mod tests {
             accept_point(&cam, &s, &config).err(),
             Some(StereoReject::LargeGap)
         );
+    }
+
+    /// A 640x480 test pair: a textured background plane at disparity 10 px (texture amplitude
+    /// `bg_amp`) and, right of left-image column 300, a strongly textured foreground at
+    /// disparity 20 px; the foreground hides the background in the right image.
+    fn step_pair(bg_amp: f64) -> (std::vec::Vec<u8>, std::vec::Vec<u8>) {
+        use rover_hal::{IMAGE_HEIGHT_PX as H, IMAGE_WIDTH_PX as W};
+        let noise = |x: i64, y: i64| -> f64 {
+            let mut h = (x as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                ^ (y as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f);
+            h ^= h >> 29;
+            h = h.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            h ^= h >> 32;
+            (h % 1000) as f64 / 1000.0 - 0.5
+        };
+        // Smoothed noise (2x2 box) so that the sub-pixel refinement has gradients.
+        let texture = |x: i64, y: i64| {
+            (noise(x, y) + noise(x + 1, y) + noise(x, y + 1) + noise(x + 1, y + 1)) / 2.0
+        };
+        let edge = 300i64;
+        let scene = |xl: i64, y: i64| -> f64 {
+            if xl >= edge {
+                128.0 + 90.0 * texture(xl, y)
+            } else {
+                128.0 + bg_amp * texture(xl + 7919, y)
+            }
+        };
+        let mut left = std::vec![0u8; W * H];
+        let mut right = std::vec![0u8; W * H];
+        for y in 0..H as i64 {
+            for x in 0..W as i64 {
+                let i = y as usize * W + x as usize;
+                left[i] = scene(x, y).clamp(0.0, 255.0) as u8;
+                // Right pixel x sees the foreground at left column x + 20 when that is in the
+                // foreground, else the background at left column x + 10.
+                let v = if x + 20 >= edge {
+                    scene(x + 20, y)
+                } else {
+                    scene(x + 10, y)
+                };
+                right[i] = v.clamp(0.0, 255.0) as u8;
+            }
+        }
+        (left, right)
+    }
+
+    /// Background texture amplitude of the depth-step test: a grey-level standard deviation of
+    /// about 6, above `half_min_std` (a flatter background gives the rule nothing to see).
+    const BG_AMPLITUDE: f64 = 20.0;
+
+    #[test]
+    fn vo_2_templates_across_a_depth_step_are_rejected() {
+        let (l, r) = step_pair(BG_AMPLITUDE);
+        let (left, right) = (Image::new(&l).unwrap(), Image::new(&r).unwrap());
+        let config = VoConfig::default();
+        // Away from the step both depths match exactly.
+        for (x, d) in [(250.0, 10.0), (360.0, 20.0)] {
+            for y in [100.0, 240.0, 380.0] {
+                let (xr, _) = match_along_row(&left, &right, x, y, &config).unwrap();
+                assert!((x - xr - d).abs() < 0.3, "({x}, {y}): {}", x - xr);
+            }
+        }
+        // Background features 1-4 px left of the step: the template's foreground columns
+        // dominate the correlation. No match may lock onto the foreground disparity.
+        let no_rule = VoConfig {
+            half_min_std: 1e6,
+            ..config
+        };
+        let (mut locked_without, mut rejected) = (0, 0);
+        for x in [296.0, 297.0, 298.0, 299.0] {
+            for y in (60..420).step_by(15) {
+                let y = f64::from(y);
+                let locked = |m: Result<(f64, f64), StereoReject>| {
+                    m.is_ok_and(|(xr, _)| (x - xr - 20.0).abs() < 2.0)
+                };
+                locked_without +=
+                    usize::from(locked(match_along_row(&left, &right, x, y, &no_rule)));
+                let with_rule = match_along_row(&left, &right, x, y, &config);
+                assert!(!locked(with_rule), "({x}, {y}) locked onto the foreground");
+                rejected += usize::from(with_rule == Err(StereoReject::Discontinuity));
+            }
+        }
+        println!("VO-2 depth step: {locked_without} foreground locks without the rule, {rejected} rejected with it");
+        assert!(locked_without > 0, "the pair does not exercise the rule");
+        assert!(rejected > 0);
+    }
+
+    #[test]
+    fn vo_2_peaks_at_the_range_ends_are_rejected() {
+        let (l, r) = step_pair(40.0);
+        let (left, right) = (Image::new(&l).unwrap(), Image::new(&r).unwrap());
+        // Foreground at disparity 20, range 1..=19: the best is the slope at 19.
+        let short = VoConfig {
+            max_disparity_px: 19,
+            stereo_coarse_step: 1,
+            min_correlation: -0.99,
+            uniqueness_margin: 0.0,
+            ..VoConfig::default()
+        };
+        let mut range_end = 0;
+        for y in (60..420).step_by(20) {
+            let m = match_along_row(&left, &right, 400.0, f64::from(y), &short);
+            if let Ok((xr, _)) = m {
+                assert!(
+                    400.0 - xr < 16.0,
+                    "y {y}: accepted the range end {}",
+                    400.0 - xr
+                );
+            }
+            range_end += usize::from(m == Err(StereoReject::RangeEnd));
+        }
+        assert!(range_end > 10, "{range_end}");
+        // A window around a prediction 9 px short of the truth ends at 19: rejected too.
+        let windowed = VoConfig {
+            track_disparity_margin_px: 8,
+            max_disparity_px: 128,
+            ..short
+        };
+        assert_eq!(
+            match_along_row_near(&left, &right, 400.0, 200.0, 11.0, &windowed),
+            Err(StereoReject::RangeEnd)
+        );
+        assert!(match_along_row_near(&left, &right, 400.0, 200.0, 18.0, &windowed).is_ok());
+    }
+
+    #[test]
+    fn vo_2_left_right_check_rejects_a_wrong_match() {
+        let (l, r) = step_pair(40.0);
+        let (left, right) = (Image::new(&l).unwrap(), Image::new(&r).unwrap());
+        let config = VoConfig::default();
+        let range = (1usize, 128usize);
+        // The true match (disparity 10 on the background) comes back to the feature.
+        assert_eq!(
+            check_left_right(&left, &right, (200, 240), 190.0, range, &config),
+            Ok(())
+        );
+        // A match 6 px off comes back 6 px away.
+        assert_eq!(
+            check_left_right(&left, &right, (200, 240), 184.0, range, &config),
+            Err(StereoReject::LeftRightMismatch)
+        );
+        // The occluded background strip (left columns 290-299, hidden in the right image):
+        // its best right match belongs to another left column.
+        let occluded = (290..300)
+            .filter(|&x| {
+                check_left_right(&left, &right, (x, 240), f64::from(x) - 10.0, range, &config)
+                    .is_err()
+            })
+            .count();
+        assert!(occluded >= 8, "{occluded}");
     }
 }
