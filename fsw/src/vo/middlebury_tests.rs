@@ -341,6 +341,9 @@ fn vo_16_middlebury_geometry_synthetic_motion() {
         match estimate_motion(&pairs, &config, &mut inliers, &mut scratch) {
             Ok(est) => {
                 ok += 1;
+                if est.rounds_reverted > 0 {
+                    println!("VO-16 trial {trial}: a round was dropped");
+                }
                 let d_rot = Rotation3::from_matrix_unchecked(rot * est.motion.rotation.transpose())
                     .scaled_axis();
                 let d_t = trans - est.motion.translation_m;
