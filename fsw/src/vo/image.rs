@@ -283,6 +283,72 @@ pub fn ncc(image: &Image, template: &Template, stats: (i64, i64), x: i32, y: i32
     Some((cov as f64 / denominator) as f32)
 }
 
+/// A rectangle of template pixels: rows `rows.0..rows.1`, columns `cols.0..cols.1` (template
+/// coordinates, `0..TEMPLATE_SIDE`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TemplateRegion {
+    /// First and one-past-last row.
+    pub rows: (usize, usize),
+    /// First and one-past-last column.
+    pub cols: (usize, usize),
+}
+
+/// Grey-level variance times the pixel count squared (`n sum_sq - sum^2`) of a region of a
+/// template, and the pixel count `n`.
+pub fn region_stats(template: &Template, region: TemplateRegion) -> (i64, i64, i64) {
+    let (mut s, mut s2, mut n) = (0i64, 0i64, 0i64);
+    for row in template
+        .chunks_exact(TEMPLATE_SIDE)
+        .skip(region.rows.0)
+        .take(region.rows.1.saturating_sub(region.rows.0))
+    {
+        for &p in row.get(region.cols.0..region.cols.1).unwrap_or(&[]) {
+            let v = i64::from(p);
+            s += v;
+            s2 += v * v;
+            n += 1;
+        }
+    }
+    (s, n * s2 - s * s, n)
+}
+
+/// Zero-mean normalised cross-correlation (-1..1) of a region of `template` (with its
+/// [`region_stats`]) against the same region of the image window centred on integer `(x, y)`;
+/// `None` if the window leaves the image or either patch has no contrast.
+pub fn region_ncc(
+    image: &Image,
+    template: &Template,
+    region: TemplateRegion,
+    stats: (i64, i64, i64),
+    x: i32,
+    y: i32,
+) -> Option<f32> {
+    let half = TEMPLATE_HALF as i32;
+    let x0 = usize::try_from(x.checked_sub(half)?).ok()? + region.cols.0;
+    let y0 = usize::try_from(y.checked_sub(half)?).ok()? + region.rows.0;
+    let width = region.cols.1.checked_sub(region.cols.0)?;
+    let height = region.rows.1.checked_sub(region.rows.0)?;
+    let (mut s, mut s2, mut st) = (0u32, 0u32, 0u32);
+    let t_rows = template.chunks_exact(TEMPLATE_SIDE).skip(region.rows.0);
+    for (t_row, dy) in t_rows.zip(0..height) {
+        let row = image.row(y0 + dy)?.get(x0..x0 + width)?;
+        let t_row = t_row.get(region.cols.0..region.cols.1)?;
+        for (&p, &t) in row.iter().zip(t_row.iter()) {
+            let p = u32::from(p);
+            s += p;
+            s2 += p * p;
+            st += p * u32::from(t);
+        }
+    }
+    let (ts, tvar, n) = stats;
+    let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
+    if ivar <= 0 || tvar <= 0 {
+        return None;
+    }
+    let cov = n * i64::from(st) - ts * i64::from(s);
+    Some((cov as f64 / libm::sqrt(ivar as f64 * tvar as f64)) as f32)
+}
+
 /// Largest number of columns [`ncc_scan`] covers in one call.
 pub const SCAN_MAX_COLUMNS: usize = 256;
 

@@ -102,6 +102,24 @@ pub struct VoConfig {
     /// A stereo match is ambiguous when another disparity more than 2 px away scores within this
     /// margin of the best.
     pub uniqueness_margin: f32,
+    /// Left-right consistency: largest distance between the left feature and the column found by
+    /// matching the right template back along the left row, pixels.
+    pub left_right_tolerance_px: f64,
+    /// Left-right consistency: half width of the back-scan around the match's disparity,
+    /// pixels (0: the whole searched range).
+    pub left_right_window_px: u16,
+    /// Left-right consistency: the back-scan samples every this many pixels, then the columns
+    /// within half a step of the best (1..=4).
+    pub left_right_step: u8,
+    /// Depth-discontinuity rule: half window of disparities around the match over which each
+    /// template half is correlated, pixels.
+    pub half_window_px: u16,
+    /// Depth-discontinuity rule: smallest grey-level standard deviation of a template half for
+    /// it to be checked (a flat half says nothing), grey levels.
+    pub half_min_std: f32,
+    /// Depth-discontinuity rule: smallest correlation of a textured half at the match's
+    /// disparity (-1..1).
+    pub half_min_correlation: f32,
     /// Largest vertical offset between left and right match of a rectified pair, pixels.
     pub max_row_offset_px: f64,
     /// Largest ray gap (eq. 1-4) as an angle seen from the left camera, in pixels of focal length.
@@ -110,8 +128,13 @@ pub struct VoConfig {
     pub min_range_m: f64,
     /// Range limits of a triangulated point from the left camera, m.
     pub max_range_m: f64,
-    /// Standard deviation of a matched image coordinate, pixels (Sigma_l, Sigma_r of eq. 8).
+    /// Standard deviation of a matched image coordinate, pixels (Sigma_l, Sigma_r of eq. 8);
+    /// values below `stereo::MATCH_SIGMA_FLOOR_PX` (0.3 px) are raised to it.
     pub sigma_px: f64,
+    /// Calibration term of the point covariances: standard deviation of the disparity error
+    /// left by the calibration (rectification and distortion residuals), pixels
+    /// (`stereo::triangulate_model`).
+    pub sigma_calibration_px: f64,
     /// Tracking: half side of the correlation search window around the predicted position, px.
     pub search_radius_px: u16,
     /// Tracking: largest motion of the affine refinement from the correlation peak, pixels.
@@ -157,10 +180,17 @@ impl Default for VoConfig {
             min_correlation: 0.8,
             uniqueness_margin: 0.02,
             max_row_offset_px: 1.5,
+            left_right_tolerance_px: 1.0,
+            left_right_window_px: 0,
+            left_right_step: 2,
+            half_window_px: 2,
+            half_min_std: 4.0,
+            half_min_correlation: 0.5,
             max_gap_px: 1.5,
             min_range_m: 0.2,
             max_range_m: 30.0,
             sigma_px: 0.3,
+            sigma_calibration_px: 0.2,
             search_radius_px: 24,
             max_refine_shift_px: 3.0,
             lmeds_hypotheses: 64,
@@ -173,7 +203,7 @@ impl Default for VoConfig {
             min_inliers: 6,
             min_image_std: 3.0,
             max_clipped_fraction: 0.5,
-            work_cost: [30, 52, 9, 26, 11, 12, 19, 1],
+            work_cost: [30, 52, 9, 26, 11, 12, 29, 1],
         }
     }
 }
@@ -183,10 +213,12 @@ impl VoConfig {
     pub fn is_valid(&self) -> bool {
         let finite = [
             self.max_row_offset_px,
+            self.left_right_tolerance_px,
             self.max_gap_px,
             self.min_range_m,
             self.max_range_m,
             self.sigma_px,
+            self.sigma_calibration_px,
             self.max_refine_shift_px,
             self.inlier_gate_chi2,
             self.min_image_std,
@@ -200,6 +232,8 @@ impl VoConfig {
                 self.min_distance_px,
                 self.min_correlation,
                 self.uniqueness_margin,
+                self.half_min_std,
+                self.half_min_correlation,
             ]
             .iter()
             .all(|v| v.is_finite());
@@ -214,10 +248,17 @@ impl VoConfig {
             && (-1.0..1.0).contains(&self.min_correlation)
             && self.uniqueness_margin >= 0.0
             && self.max_row_offset_px > 0.0
+            && self.left_right_tolerance_px >= 0.0
+            && (1..=4).contains(&self.left_right_step)
+            && self.half_window_px >= 2
+            && usize::from(self.half_window_px) <= MAX_DISPARITY_PX
+            && self.half_min_std >= 0.0
+            && (-1.0..=1.0).contains(&self.half_min_correlation)
             && self.max_gap_px > 0.0
             && self.min_range_m > 0.0
             && self.max_range_m > self.min_range_m
             && self.sigma_px > 0.0
+            && self.sigma_calibration_px >= 0.0
             && self.search_radius_px >= 1
             && usize::from(self.search_radius_px) <= MAX_SEARCH_RADIUS_PX
             && self.max_refine_shift_px > 0.0
@@ -287,6 +328,46 @@ pub enum VoError {
     NonFinite,
 }
 
+/// Stereo matches rejected in one update, per reason ([`stereo::StereoReject`]), over the
+/// tracked features' and the new keyframe's matches. Counts saturate at `u16::MAX`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StereoRejectCounts {
+    /// Template or search outside the image.
+    pub out_of_image: u16,
+    /// Best correlation below `min_correlation`.
+    pub weak_correlation: u16,
+    /// A rival peak within `uniqueness_margin`.
+    pub ambiguous: u16,
+    /// Sub-pixel refinement failed or moved too far.
+    pub refinement_failed: u16,
+    /// Peak at an end of the disparity search range.
+    pub range_end: u16,
+    /// Left-right consistency check failed (more than 1 px).
+    pub left_right: u16,
+    /// Template across a depth discontinuity (its halves disagree).
+    pub discontinuity: u16,
+    /// Degenerate rays, large gap, out of range or non-finite triangulation.
+    pub triangulation: u16,
+}
+
+impl StereoRejectCounts {
+    /// Counts one rejection.
+    pub fn count(&mut self, reason: stereo::StereoReject) {
+        use stereo::StereoReject as R;
+        let slot = match reason {
+            R::OutOfImage => &mut self.out_of_image,
+            R::WeakCorrelation => &mut self.weak_correlation,
+            R::Ambiguous => &mut self.ambiguous,
+            R::RefinementFailed => &mut self.refinement_failed,
+            R::RangeEnd => &mut self.range_end,
+            R::LeftRightMismatch => &mut self.left_right,
+            R::Discontinuity => &mut self.discontinuity,
+            R::Degenerate | R::LargeGap | R::OutOfRange | R::NonFinite => &mut self.triangulation,
+        };
+        *slot = slot.saturating_add(1);
+    }
+}
+
 /// Quality figures of one update (for telemetry and for the estimator's trust).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct VoQuality {
@@ -302,6 +383,12 @@ pub struct VoQuality {
     pub residual_rms_m: f64,
     /// Sum of squared Mahalanobis residuals of the inliers per degree of freedom.
     pub chi2_per_dof: f64,
+    /// Factor applied to the motion covariance (>= 1; `motion::finish_estimate`).
+    pub covariance_scale: f64,
+    /// Maximum-likelihood rounds dropped to keep the previous round's solution (0 or 1).
+    pub rounds_reverted: u8,
+    /// Stereo matches rejected, per reason (tracked and new features).
+    pub stereo_rejects: StereoRejectCounts,
     /// Work items this update used (a deterministic function of the input).
     pub work_items: u32,
 }

@@ -7,7 +7,7 @@
 //! `Q_c` the same feature in the current one `K1`; so `R` rotates `K0` vectors into `K1` and `T`
 //! is in `K1`, metres.
 
-use super::VoError;
+use super::{VoConfig, VoError};
 use crate::types::{Mat3, Mat6, Quat, RelativePose, Vec3};
 use nalgebra::{Matrix3x6, Rotation3, UnitQuaternion, Vector6};
 use rover_hal::StereoCalibration;
@@ -250,6 +250,17 @@ pub const ML_ROUNDS: u8 = 4;
 /// Median of a chi-square variable with 3 degrees of freedom.
 pub const CHI2_3_MEDIAN: f64 = 2.366;
 
+/// Squared Mahalanobis residual `r^T (cov_c + R cov_p R^T)^-1 r` of eq. 11 of one
+/// correspondence under `motion` (3 degrees of freedom), `None` if the combined covariance is not
+/// positive definite.
+pub fn mahalanobis2(c: &Correspondence, motion: &RigidMotion) -> Option<f64> {
+    let r = motion.residual(c);
+    let combined = c.cov_c + motion.rotation * c.cov_p * motion.rotation.transpose();
+    combined
+        .cholesky()
+        .map(|ch| (r.transpose() * ch.inverse() * r)[(0, 0)])
+}
+
 /// Marks as inliers the correspondences whose squared Mahalanobis residual under `motion` (with
 /// the exact combined covariance `cov_c + R cov_p R^T`) is within `gate`. Returns the count.
 pub fn mark_inliers(
@@ -260,17 +271,45 @@ pub fn mark_inliers(
 ) -> u16 {
     let mut count = 0u16;
     for (flag, c) in inliers.iter_mut().zip(pairs.iter()) {
-        let r = motion.residual(c);
-        let combined = c.cov_c + motion.rotation * c.cov_p * motion.rotation.transpose();
-        *flag = combined
-            .cholesky()
-            .map(|ch| (r.transpose() * ch.inverse() * r)[(0, 0)])
-            .is_some_and(|d2| d2 <= gate);
+        *flag = mahalanobis2(c, motion).is_some_and(|d2| d2 <= gate);
         if *flag {
             count = count.saturating_add(1);
         }
     }
     count
+}
+
+/// Median of the squared Mahalanobis residuals ([`mahalanobis2`]) of ALL correspondences
+/// under `motion` (a pair without a positive definite covariance counts as infinite), by
+/// quickselect in `scratch` (at least as long as `pairs`). `None` for no pairs.
+pub fn residual_median(
+    pairs: &[Correspondence],
+    motion: &RigidMotion,
+    scratch: &mut [f64],
+) -> Option<f64> {
+    let n = pairs.len();
+    let values = scratch.get_mut(..n)?;
+    for (slot, c) in values.iter_mut().zip(pairs.iter()) {
+        *slot = mahalanobis2(c, motion).unwrap_or(f64::INFINITY);
+    }
+    select_kth(values, n / 2)
+}
+
+/// Robust variance scale of the point covariances (Rousseeuw and Leroy 1987, the LMedS scale
+/// `s0 = 1.4826 (1 + 5 / (n - p)) sqrt(median r^2)` carried over to 3-dof Mahalanobis residuals):
+/// `k = (1 + 5 / (n - 3))^2 median(d^2) / CHI2_3_MEDIAN`, where `d^2` are the squared
+/// Mahalanobis residuals of all `n` correspondences and [`CHI2_3_MEDIAN`] (2.366) is the median
+/// of `d^2` when the covariances are right (the 1-D `1.4826^2 = 1 / 0.4549` becomes `1 / 2.366`
+/// for 3 dof; `p = 3` correspondences make a minimal subset). Never below 1: the data only ever
+/// widen the covariances, never narrow them below the noise model. 1 for non-finite input.
+pub fn robust_variance_scale(median_d2: f64, n: usize) -> f64 {
+    let small_sample = 1.0 + 5.0 / (n.saturating_sub(3).max(1) as f64);
+    let k = small_sample * small_sample * median_d2 / CHI2_3_MEDIAN;
+    if k.is_finite() {
+        k.max(1.0)
+    } else {
+        1.0
+    }
 }
 
 /// Sums of one maximum-likelihood iteration.
@@ -420,8 +459,8 @@ impl CameraMount {
 pub struct MotionEstimate {
     /// The motion of eq. 11.
     pub motion: RigidMotion,
-    /// Covariance of `[theta (rad); T (m)]` (inverse information, scaled up by the residual
-    /// chi-square per degree of freedom when that exceeds 1).
+    /// Covariance of `[theta (rad); T (m)]`: the inverse information matrix of eq. 11 times
+    /// [`MotionEstimate::covariance_scale`].
     pub covariance: Mat6,
     /// Inliers used by the final fit.
     pub inliers: u16,
@@ -429,11 +468,25 @@ pub struct MotionEstimate {
     pub residual_rms_m: f64,
     /// Chi-square of the inliers per degree of freedom.
     pub chi2_per_dof: f64,
+    /// Factor applied to the inverse information matrix (>= 1): the larger of the inliers'
+    /// chi-square per degree of freedom and the robust scale over all correspondences
+    /// ([`robust_variance_scale`]).
+    pub covariance_scale: f64,
+    /// Maximum-likelihood rounds dropped because their fit failed or their re-gating left too
+    /// few inliers (the previous round's solution and inlier set were kept): 0 or 1.
+    pub rounds_reverted: u8,
 }
 
 /// Finishes an estimate from the last maximum-likelihood iteration's sums (evaluated at
-/// `motion`).
-pub fn finish_estimate(motion: RigidMotion, last: &MlIteration) -> Result<MotionEstimate, VoError> {
+/// `motion`). The covariance is the inverse information matrix of eq. 11 scaled by
+/// `max(1, chi2 / dof of the inliers, robust_scale)`, where `robust_scale` is
+/// [`robust_variance_scale`] of the residuals of ALL correspondences at `motion` (the inliers'
+/// chi-square alone is biased low by the gate).
+pub fn finish_estimate(
+    motion: RigidMotion,
+    last: &MlIteration,
+    robust_scale: f64,
+) -> Result<MotionEstimate, VoError> {
     let dof = (3 * usize::from(last.count)).saturating_sub(6).max(1) as f64;
     let chi2_per_dof = last.chi2 / dof;
     let inverse = last
@@ -441,7 +494,13 @@ pub fn finish_estimate(motion: RigidMotion, last: &MlIteration) -> Result<Motion
         .cholesky()
         .ok_or(VoError::DegenerateGeometry)?
         .inverse();
-    let covariance = inverse * chi2_per_dof.max(1.0);
+    let robust = if robust_scale.is_finite() {
+        robust_scale
+    } else {
+        1.0
+    };
+    let covariance_scale = chi2_per_dof.max(robust).max(1.0);
+    let covariance = inverse * covariance_scale;
     let residual_rms_m = libm::sqrt(last.sum_sq_m2 / f64::from(last.count.max(1)));
     if !covariance.iter().all(|v| v.is_finite()) {
         return Err(VoError::NonFinite);
@@ -452,48 +511,120 @@ pub fn finish_estimate(motion: RigidMotion, last: &MlIteration) -> Result<Motion
         inliers: last.count,
         residual_rms_m,
         chi2_per_dof,
+        covariance_scale,
+        rounds_reverted: 0,
     })
 }
 
+/// The inlier gate of a round on the squared Mahalanobis residual (3 dof): `gate_chi2` (16.27,
+/// 99.9 %) times the robust variance scale ([`robust_variance_scale`]) of all `n`
+/// correspondences' residuals at the round's motion (`median_d2`), so that covariances too small
+/// for the real noise widen the gate instead of emptying the inlier set.
+pub fn robust_gate(gate_chi2: f64, median_d2: f64, n: usize) -> f64 {
+    gate_chi2 * robust_variance_scale(median_d2, n)
+}
+
+/// How an inlier set was gated: the motion and the gate (so that the set can be rebuilt
+/// exactly without a second buffer).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gating {
+    /// Motion the residuals were evaluated at (eq. 11).
+    pub motion: RigidMotion,
+    /// Gate on the squared Mahalanobis residual (3 dof).
+    pub gate: f64,
+}
+
+/// The solution of the last completed maximum-likelihood round and how its inliers were gated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Kept {
+    /// Motion at the end of the round (eq. 11).
+    pub solution: RigidMotion,
+    /// Gating of the round's inlier set.
+    pub gating: Gating,
+}
+
+impl Kept {
+    /// Rebuilds the round's inlier set in `inliers` (same motion, same gate, so the same flags)
+    /// and returns the round's solution.
+    pub fn restore(&self, pairs: &[Correspondence], inliers: &mut [bool]) -> RigidMotion {
+        mark_inliers(pairs, &self.gating.motion, self.gating.gate, inliers);
+        self.solution
+    }
+}
+
 /// The whole motion stage in one call (the pipeline runs the same pieces one work item at a
-/// time): `hypotheses` least-median-of-squares draws, inlier gate, maximum likelihood with one
-/// re-gating between [`ML_ROUNDS`] rounds. `inliers` and `scratch` at least as long as `pairs`.
+/// time, in the same order): `config.lmeds_hypotheses` least-median-of-squares draws; inliers
+/// within the robust gate of the best hypothesis' median ([`robust_gate`]); [`ML_ROUNDS`]
+/// maximum-likelihood rounds of eq. 11, each re-gated with the robust gate at its motion. A round
+/// whose fit fails, or whose re-gating leaves fewer than `config.min_inliers`, is dropped: the
+/// previous round's motion and inlier set are kept and the estimate finishes there.
+/// `inliers` and `scratch` at least as long as `pairs`.
 pub fn estimate_motion(
     pairs: &[Correspondence],
-    hypotheses: u16,
-    seed: u64,
-    gate_chi2: f64,
-    iterations: u8,
+    config: &VoConfig,
     inliers: &mut [bool],
     scratch: &mut [f64],
 ) -> Result<MotionEstimate, VoError> {
-    let mut lmeds = Lmeds::new(seed);
-    for _ in 0..hypotheses {
+    let n = pairs.len();
+    let mut lmeds = Lmeds::new(config.lmeds_seed);
+    for _ in 0..config.lmeds_hypotheses {
         lmeds.hypothesis(pairs, scratch);
     }
     let (start, median) = lmeds.best().ok_or(VoError::DegenerateGeometry)?;
     let mut motion = start;
-    mark_inliers(pairs, &motion, inlier_gate(gate_chi2, median), inliers);
-    for round in 0..ML_ROUNDS {
-        for _ in 0..iterations {
-            let it = ml_iteration(pairs, inliers, &motion)?;
-            motion = it.motion;
-            if it.step < 1e-12 {
+    let mut gating = Gating {
+        motion: start,
+        gate: robust_gate(config.inlier_gate_chi2, median, n),
+    };
+    let count = mark_inliers(pairs, &motion, gating.gate, inliers);
+    if count < config.min_inliers {
+        return Err(VoError::TooFewInliers { found: count });
+    }
+    let mut kept: Option<Kept> = None;
+    let mut reverted = 0u8;
+    'rounds: for round in 0..ML_ROUNDS {
+        for _ in 0..config.ml_iterations {
+            match ml_iteration(pairs, inliers, &motion) {
+                Ok(it) => {
+                    motion = it.motion;
+                    if it.step < 1e-12 {
+                        break;
+                    }
+                }
+                Err(e) => match kept {
+                    Some(k) => {
+                        motion = k.restore(pairs, inliers);
+                        reverted = 1;
+                        break 'rounds;
+                    }
+                    None => return Err(e),
+                },
+            }
+        }
+        kept = Some(Kept {
+            solution: motion,
+            gating,
+        });
+        if round + 1 < ML_ROUNDS {
+            let median = residual_median(pairs, &motion, scratch).unwrap_or(f64::INFINITY);
+            gating = Gating {
+                motion,
+                gate: robust_gate(config.inlier_gate_chi2, median, n),
+            };
+            if mark_inliers(pairs, &motion, gating.gate, inliers) < config.min_inliers {
+                if let Some(k) = kept {
+                    motion = k.restore(pairs, inliers);
+                    reverted = 1;
+                }
                 break;
             }
         }
-        if round + 1 < ML_ROUNDS {
-            mark_inliers(pairs, &motion, gate_chi2, inliers);
-        }
     }
     let final_sums = ml_iteration(pairs, inliers, &motion)?;
-    finish_estimate(motion, &final_sums)
-}
-
-/// The inlier gate after least-median-of-squares: `gate_chi2`, widened when the median squared
-/// residual shows the covariances are too small (`median / CHI2_3_MEDIAN > 1`).
-pub fn inlier_gate(gate_chi2: f64, median: f64) -> f64 {
-    gate_chi2 * (median / CHI2_3_MEDIAN).max(1.0)
+    let median = residual_median(pairs, &motion, scratch).unwrap_or(f64::INFINITY);
+    let mut estimate = finish_estimate(motion, &final_sums, robust_variance_scale(median, n))?;
+    estimate.rounds_reverted = reverted;
+    Ok(estimate)
 }
 
 /// Builds the [`RelativePose`] for the estimator from a motion estimate.

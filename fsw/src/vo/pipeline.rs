@@ -12,10 +12,11 @@
 use super::features::{select_more, ForstnerDetector, CELL_COUNT, END_ROW, FIRST_ROW};
 use super::image::{CheckSums, Image, Template, CHECK_BANDS};
 use super::motion::{
-    finish_estimate, inlier_gate, mark_inliers, ml_iteration, relative_pose, CameraMount,
-    Correspondence, Lmeds, MotionEstimate, RigidMotion, ML_ROUNDS,
+    finish_estimate, mark_inliers, ml_iteration, relative_pose, residual_median, robust_gate,
+    robust_variance_scale, CameraMount, Correspondence, Gating, Kept, Lmeds, MotionEstimate,
+    RigidMotion, ML_ROUNDS,
 };
-use super::stereo::{match_and_triangulate, triangulate, PinholeStereo};
+use super::stereo::{match_and_triangulate, triangulate_config, PinholeStereo};
 use super::track::{refine_warp, search_window, Affine2, WarpModel};
 use super::{VoConfig, VoError, VoOutput, VoQuality, TEMPLATE_PIXELS};
 use crate::types::{Mat3, RelativePose, Vec3};
@@ -177,6 +178,9 @@ pub struct VisualOdometry<const N: usize> {
     detector: ForstnerDetector,
     lmeds: Lmeds,
     motion: RigidMotion,
+    gating: Gating,
+    kept: Option<Kept>,
+    rounds_reverted: u8,
     estimate: Option<MotionEstimate>,
     pending: Option<VoError>,
     phase: Phase,
@@ -228,6 +232,12 @@ impl<const N: usize> VisualOdometry<N> {
             detector: ForstnerDetector::default(),
             lmeds: Lmeds::new(config.lmeds_seed),
             motion: RigidMotion::identity(),
+            gating: Gating {
+                motion: RigidMotion::identity(),
+                gate: 0.0,
+            },
+            kept: None,
+            rounds_reverted: 0,
             estimate: None,
             pending: None,
             phase: Phase::Idle,
@@ -297,6 +307,8 @@ impl<const N: usize> VisualOdometry<N> {
         self.pair_count = 0;
         self.selected_count = 0;
         self.estimate = None;
+        self.kept = None;
+        self.rounds_reverted = 0;
         self.pending = None;
         self.lmeds = Lmeds::new(self.config.lmeds_seed);
         self.phase = Phase::Check {
@@ -573,7 +585,7 @@ impl<const N: usize> VisualOdometry<N> {
             return;
         };
         let [xl, yl, xr, yr] = feature.pixels.map(f64::from);
-        let Ok(previous) = triangulate(&self.camera, [xl, yl, xr, yr], self.config.sigma_px) else {
+        let Ok(previous) = triangulate_config(&self.camera, [xl, yl, xr, yr], &self.config) else {
             return;
         };
         // Projection with the motion prior (eq. 11 without noise).
@@ -606,10 +618,16 @@ impl<const N: usize> VisualOdometry<N> {
         // window around it (the prior already placed the feature within the tracking radius).
         let predicted_disparity = self.camera.fx_px * self.camera.baseline_m / predicted.z;
         let window = (self.config.track_disparity_margin_px > 0).then_some(predicted_disparity);
-        let Ok((current, _)) =
-            match_and_triangulate(&self.camera, left, right, (xt, yt), window, &self.config)
-        else {
-            return;
+        let current = match match_and_triangulate(
+            &self.camera,
+            left,
+            right,
+            (xt, yt),
+            window,
+            &self.config,
+        ) {
+            Ok((current, _)) => current,
+            Err(reason) => return self.quality.stereo_rejects.count(reason),
         };
         let pair = Correspondence::new(
             previous.position_m,
@@ -624,17 +642,21 @@ impl<const N: usize> VisualOdometry<N> {
         }
     }
 
-    /// Ends the least-median-of-squares search: best hypothesis, inlier gate.
+    /// Ends the least-median-of-squares search: best hypothesis, robust inlier gate
+    /// ([`robust_gate`] of the best median).
     fn after_hypotheses(&mut self) {
         let Some((motion, median)) = self.lmeds.best() else {
             self.fail_motion(VoError::DegenerateGeometry);
             return;
         };
         self.motion = motion;
-        let gate = inlier_gate(self.config.inlier_gate_chi2, median);
         let n = self.pair_count.min(N);
         let pairs = self.pairs.get(..n).unwrap_or(&[]);
-        let count = mark_inliers(pairs, &self.motion, gate, &mut self.inliers);
+        self.gating = Gating {
+            motion,
+            gate: robust_gate(self.config.inlier_gate_chi2, median, n),
+        };
+        let count = mark_inliers(pairs, &self.motion, self.gating.gate, &mut self.inliers);
         self.quality.inliers = count;
         if count < self.config.min_inliers {
             self.fail_motion(VoError::TooFewInliers { found: count });
@@ -646,24 +668,51 @@ impl<const N: usize> VisualOdometry<N> {
         }
     }
 
-    /// One maximum-likelihood iteration (eq. 11); `ML_ROUNDS` rounds with re-gating between; the
-    /// last item evaluates the covariance at the converged motion.
+    /// Drops the running round: the previous round's motion and inlier set come back and the
+    /// next item computes the covariance there. Without a completed round, fails with `error`.
+    fn revert_round(&mut self, error: VoError) {
+        let n = self.pair_count.min(N);
+        let pairs = self.pairs.get(..n).unwrap_or(&[]);
+        match self.kept {
+            Some(kept) => {
+                self.motion = kept.restore(pairs, &mut self.inliers);
+                self.rounds_reverted = 1;
+                self.phase = Phase::Refine {
+                    round: ML_ROUNDS,
+                    iteration: 0,
+                };
+            }
+            None => self.fail_motion(error),
+        }
+    }
+
+    /// One maximum-likelihood iteration (eq. 11); `ML_ROUNDS` rounds, each re-gated with the
+    /// robust gate at its motion; a round that fails or leaves too few inliers is dropped
+    /// ([`Self::revert_round`]); the last item evaluates the covariance at the converged motion
+    /// (scaled by the robust scale over all correspondences, see `motion::finish_estimate`).
     fn refine_item(&mut self, round: u8, iteration: u8) {
         let n = self.pair_count.min(N);
         let pairs = self.pairs.get(..n).unwrap_or(&[]);
         let inliers = self.inliers.get(..n).unwrap_or(&[]);
         let it = match ml_iteration(pairs, inliers, &self.motion) {
             Ok(it) => it,
+            Err(e) if round < ML_ROUNDS => return self.revert_round(e),
             Err(e) => return self.fail_motion(e),
         };
         let max_iterations = self.config.ml_iterations.min(MAX_ML_ITERATIONS);
         if round >= ML_ROUNDS {
             // Covariance and quality at the converged motion (the update is not applied).
-            match finish_estimate(self.motion, &it) {
-                Ok(estimate) => {
+            let median =
+                residual_median(pairs, &self.motion, &mut self.scratch).unwrap_or(f64::INFINITY);
+            let scale = robust_variance_scale(median, n);
+            match finish_estimate(self.motion, &it, scale) {
+                Ok(mut estimate) => {
+                    estimate.rounds_reverted = self.rounds_reverted;
                     self.quality.inliers = estimate.inliers;
                     self.quality.residual_rms_m = estimate.residual_rms_m;
                     self.quality.chi2_per_dof = estimate.chi2_per_dof;
+                    self.quality.covariance_scale = estimate.covariance_scale;
+                    self.quality.rounds_reverted = estimate.rounds_reverted;
                     self.estimate = Some(estimate);
                     self.phase = Phase::Detect { row: FIRST_ROW };
                 }
@@ -680,13 +729,23 @@ impl<const N: usize> VisualOdometry<N> {
             };
             return;
         }
+        self.kept = Some(Kept {
+            solution: self.motion,
+            gating: self.gating,
+        });
         if round + 1 < ML_ROUNDS {
-            let gate = self.config.inlier_gate_chi2;
-            let count = mark_inliers(pairs, &self.motion, gate, &mut self.inliers);
-            self.quality.inliers = count;
+            let median =
+                residual_median(pairs, &self.motion, &mut self.scratch).unwrap_or(f64::INFINITY);
+            let gating = Gating {
+                motion: self.motion,
+                gate: robust_gate(self.config.inlier_gate_chi2, median, n),
+            };
+            let count = mark_inliers(pairs, &self.motion, gating.gate, &mut self.inliers);
             if count < self.config.min_inliers {
-                return self.fail_motion(VoError::TooFewInliers { found: count });
+                return self.revert_round(VoError::TooFewInliers { found: count });
             }
+            self.gating = gating;
+            self.quality.inliers = count;
         }
         self.phase = Phase::Refine {
             round: round + 1,
@@ -700,11 +759,11 @@ impl<const N: usize> VisualOdometry<N> {
             return;
         };
         let (xl, yl) = (f64::from(x), f64::from(y));
-        let Ok((_, (xr, yr))) =
-            match_and_triangulate(&self.camera, left, right, (xl, yl), None, &self.config)
-        else {
-            return;
-        };
+        let (xr, yr) =
+            match match_and_triangulate(&self.camera, left, right, (xl, yl), None, &self.config) {
+                Ok((_, right_px)) => right_px,
+                Err(reason) => return self.quality.stereo_rejects.count(reason),
+            };
         let Some(template) = left.template(i32::from(x), i32::from(y)) else {
             return;
         };

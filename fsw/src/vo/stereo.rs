@@ -4,9 +4,11 @@
 //! All geometry is in the left camera frame `K` (x right, y down, z optical axis); the left
 //! camera centre is `C1 = 0` and the right one `C2 = (baseline, 0, 0)`.
 
-use super::image::{ncc, ncc_scan, template_stats, Image};
+use super::image::{
+    ncc, ncc_scan, region_ncc, region_stats, template_stats, Image, TemplateRegion,
+};
 use super::track::{refine_warp, Affine2, WarpModel};
-use super::{VoConfig, VoError, MAX_DISPARITY_PX};
+use super::{VoConfig, VoError, MAX_DISPARITY_PX, TEMPLATE_HALF, TEMPLATE_SIDE};
 use crate::types::{Mat3, Vec3};
 use nalgebra::{Matrix3x4, Vector3};
 use rover_hal::StereoCalibration;
@@ -107,6 +109,38 @@ pub enum StereoReject {
     OutOfRange,
     /// A non-finite number.
     NonFinite,
+    /// The correlation peak is at an end of the searched disparity range (or of the part of it
+    /// where the template fits in the image): no sub-pixel peak, the true one may lie outside.
+    RangeEnd,
+    /// Left-right consistency: matching the right template back along the left row does not
+    /// land within 1 px of the left feature.
+    LeftRightMismatch,
+    /// The template straddles a depth discontinuity: its halves prefer different disparities.
+    Discontinuity,
+}
+
+/// Floor of the matching noise of one image coordinate, pixels: the per-point covariances of the
+/// flight noise model ([`triangulate_model`]) never assume less. 0.3 px: the normalised
+/// cross-correlation peak refined by eq. 10 on 11x11 templates; measured on real images
+/// (Middlebury 2014 motorcycle, `docs/vo.md`) the disparity error of the good matches has a
+/// robust sigma of about 0.17-0.2 px, i.e. 0.12-0.14 px per coordinate, so 0.3 px leaves room for
+/// tracking over time (perspective change, interpolation) that the stereo check does not see.
+pub const MATCH_SIGMA_FLOOR_PX: f64 = 0.3;
+
+/// Eq. 1-8 (H04) with the flight noise model of `config`: [`triangulate_model`] with the
+/// matching noise `max(config.sigma_px, MATCH_SIGMA_FLOOR_PX)` on all four coordinates and the
+/// calibration term `config.sigma_calibration_px` on the disparity.
+pub fn triangulate_config(
+    cam: &PinholeStereo,
+    pixels: [f64; 4],
+    config: &VoConfig,
+) -> Result<StereoPoint, StereoReject> {
+    triangulate_model(
+        cam,
+        pixels,
+        config.sigma_px.max(MATCH_SIGMA_FLOOR_PX),
+        config.sigma_calibration_px,
+    )
 }
 
 /// Eq. 1-8 (H04): triangulates the left pixel `(xl, yl)` and right pixel `(xr, yr)` as the
@@ -117,6 +151,22 @@ pub fn triangulate(
     cam: &PinholeStereo,
     pixels: [f64; 4],
     sigma_px: f64,
+) -> Result<StereoPoint, StereoReject> {
+    triangulate_model(cam, pixels, sigma_px, 0.0)
+}
+
+/// [`triangulate`] with a calibration term: eq. 8 with `Sigma_l = sigma_px^2 I` and
+/// `Sigma_r = diag(sigma_px^2 + sigma_calibration_px^2, sigma_px^2)`, i.e. an extra
+/// disparity error of `sigma_calibration_px` (pixels) from the calibration (rectification and
+/// lens-distortion residuals along the row, the error of the principal points' difference),
+/// propagated through the same Jacobian `P'` (eq. 5-7). Treated as independent per point: an
+/// approximation of an error that is smooth over the image, conservative for the weights of
+/// eq. 11.
+pub fn triangulate_model(
+    cam: &PinholeStereo,
+    pixels: [f64; 4],
+    sigma_px: f64,
+    sigma_calibration_px: f64,
 ) -> Result<StereoPoint, StereoReject> {
     let [xl, yl, xr, yr] = pixels;
     let b = Vec3::new(cam.baseline_m, 0.0, 0.0); // B = C2 - C1
@@ -154,9 +204,13 @@ pub fn triangulate(
         jacobian.set_column(k, &p_d);
     }
     let variance = sigma_px * sigma_px;
-    // eq. 8 with Sigma_l = Sigma_r = sigma^2 I.
-    let covariance =
-        jacobian * jacobian.transpose() * variance + Mat3::identity() * (0.25 * gap * gap);
+    // eq. 8 with Sigma_l = sigma^2 I, Sigma_r = sigma^2 I + diag(sigma_cal^2, 0).
+    let xr_column = jacobian.column(2);
+    let calibration =
+        xr_column * xr_column.transpose() * (sigma_calibration_px * sigma_calibration_px);
+    let covariance = jacobian * jacobian.transpose() * variance
+        + calibration
+        + Mat3::identity() * (0.25 * gap * gap);
     let finite = position.iter().all(|v| v.is_finite())
         && covariance.iter().all(|v| v.is_finite())
         && gap.is_finite();
@@ -168,6 +222,18 @@ pub fn triangulate(
         covariance,
         gap_m: gap,
     })
+}
+
+/// The triangulated point of a stereo match with the flight noise model of `config`
+/// ([`triangulate_config`]) after the gap and range checks of [`accept_point`].
+pub fn point_from_pixels(
+    cam: &PinholeStereo,
+    pixels: [f64; 4],
+    config: &VoConfig,
+) -> Result<StereoPoint, StereoReject> {
+    let point = triangulate_config(cam, pixels, config)?;
+    accept_point(cam, &point, config)?;
+    Ok(point)
 }
 
 /// Checks a triangulated point against the gap and range limits of `config` (H04: "features
@@ -299,6 +365,9 @@ fn match_in_range(
     if rival > best_score - config.uniqueness_margin {
         return Err(StereoReject::Ambiguous);
     }
+    let lo = d_min;
+    check_range_end(right, &template, stats, (xi, yi), best_d, (lo, d_max))?;
+    check_discontinuity(right, &template, (xi, yi), best_d, (lo, d_max), config)?;
     let template_f = left.template_f(xl, yl).ok_or(StereoReject::OutOfImage)?;
     let x0 = xl - best_d as f64;
     let init = Affine2::translation(x0, yl);
@@ -311,7 +380,172 @@ fn match_in_range(
     if !(xl - xr >= f64::from(config.min_disparity_px) - 1.0) {
         return Err(StereoReject::Degenerate);
     }
+    check_left_right(left, right, (xi, yi), xr, (lo, d_max), config)?;
     Ok((xr, yr))
+}
+
+/// Range-end rule: the integer correlation peak `best_d` must have both neighbouring disparities
+/// strictly inside the searched range `range` and with the template inside the image, so that
+/// it is a true (sub-pixel) peak. A peak at an end of the range is the slope of a peak outside
+/// it (measured on the Middlebury pairs: a disparity of 2.00 where the truth is 52); rejected as
+/// [`StereoReject::RangeEnd`].
+fn check_range_end(
+    right: &Image,
+    template: &super::image::Template,
+    stats: (i64, i64),
+    (xi, yi): (i32, i32),
+    best_d: usize,
+    (lo, hi): (usize, usize),
+) -> Result<(), StereoReject> {
+    if best_d <= lo || best_d >= hi {
+        return Err(StereoReject::RangeEnd);
+    }
+    let d = best_d as i32;
+    let inside = ncc(right, template, stats, xi - d - 1, yi).is_some()
+        && ncc(right, template, stats, xi - d + 1, yi).is_some();
+    if inside {
+        Ok(())
+    } else {
+        Err(StereoReject::RangeEnd)
+    }
+}
+
+/// The regions of the depth-discontinuity rule: the four halves of the template (left, right,
+/// top, bottom; 6 of the 11 columns or rows each, the centre line shared) and the central 5x5
+/// window (the Forstner window of the feature, textured by construction).
+const HALVES: [TemplateRegion; 5] = [
+    TemplateRegion {
+        rows: (TEMPLATE_HALF - 2, TEMPLATE_HALF + 3),
+        cols: (TEMPLATE_HALF - 2, TEMPLATE_HALF + 3),
+    },
+    TemplateRegion {
+        rows: (0, TEMPLATE_SIDE),
+        cols: (0, TEMPLATE_HALF + 1),
+    },
+    TemplateRegion {
+        rows: (0, TEMPLATE_SIDE),
+        cols: (TEMPLATE_HALF, TEMPLATE_SIDE),
+    },
+    TemplateRegion {
+        rows: (0, TEMPLATE_HALF + 1),
+        cols: (0, TEMPLATE_SIDE),
+    },
+    TemplateRegion {
+        rows: (TEMPLATE_HALF, TEMPLATE_SIDE),
+        cols: (0, TEMPLATE_SIDE),
+    },
+];
+
+/// Depth-discontinuity rule: a template across a depth edge matches at the disparity of its
+/// dominant (often the foreground) side, while the feature may lie on the other. Each half of
+/// the template ([`HALVES`]) with texture (grey-level standard deviation at least
+/// `config.half_min_std`) is correlated on its own at the integer disparities
+/// `best_d +- config.half_window_px` (inside `range`); the match is rejected
+/// ([`StereoReject::Discontinuity`]) when a half peaks more than 1 px away from `best_d`, or
+/// correlates below `config.half_min_correlation` at `best_d`.
+fn check_discontinuity(
+    right: &Image,
+    template: &super::image::Template,
+    (xi, yi): (i32, i32),
+    best_d: usize,
+    (lo, hi): (usize, usize),
+    config: &VoConfig,
+) -> Result<(), StereoReject> {
+    let window = usize::from(config.half_window_px);
+    let (d_lo, d_hi) = (
+        best_d.saturating_sub(window).max(lo),
+        (best_d + window).min(hi),
+    );
+    let min_var = f64::from(config.half_min_std) * f64::from(config.half_min_std);
+    for region in HALVES {
+        let stats = region_stats(template, region);
+        let (_, var_n2, n) = stats;
+        if n <= 0 || !(var_n2 as f64 >= min_var * (n * n) as f64) {
+            continue;
+        }
+        let mut best = (f32::NEG_INFINITY, best_d);
+        let mut at_match = f32::NEG_INFINITY;
+        for d in d_lo..=d_hi {
+            let Some(score) = region_ncc(right, template, region, stats, xi - d as i32, yi) else {
+                continue;
+            };
+            if d == best_d {
+                at_match = score;
+            }
+            if score > best.0 {
+                best = (score, d);
+            }
+        }
+        if best.1.abs_diff(best_d) > 1 || !(at_match >= config.half_min_correlation) {
+            return Err(StereoReject::Discontinuity);
+        }
+    }
+    Ok(())
+}
+
+/// Left-right consistency rule: the right template at the match (integer column nearest `xr`,
+/// row `yi`) is matched back along the left row over the disparities of `range` within
+/// `config.left_right_window_px` of the match's (all of `range` for 0): a scan every
+/// `config.left_right_step` pixels, then the columns within half a step of the best. The left
+/// column found must be within `config.left_right_tolerance_px` (1 px) of the feature's `xi`,
+/// otherwise [`StereoReject::LeftRightMismatch`] (typically an occlusion: the background seen in
+/// the left image is hidden by the foreground in the right one, whose patch belongs to another
+/// left column). Run only at the matched features (one scan each).
+fn check_left_right(
+    left: &Image,
+    right: &Image,
+    (xi, yi): (i32, i32),
+    xr: f64,
+    (lo, hi): (usize, usize),
+    config: &VoConfig,
+) -> Result<(), StereoReject> {
+    let xri = libm::round(xr) as i32;
+    let d_match = usize::try_from(xi - xri).unwrap_or(0);
+    let window = usize::from(config.left_right_window_px);
+    let (lo, hi) = if window == 0 {
+        (lo, hi)
+    } else {
+        (
+            d_match.saturating_sub(window).max(lo),
+            (d_match + window).min(hi),
+        )
+    };
+    let back = right.template(xri, yi).ok_or(StereoReject::OutOfImage)?;
+    let stats = template_stats(&back);
+    let step = usize::from(config.left_right_step.max(1));
+    let mut scan = [f32::NEG_INFINITY; MAX_DISPARITY_PX + 1];
+    let count = hi.saturating_sub(lo) / step + 1;
+    if let Some(samples) = scan.get_mut(..count) {
+        // samples[k] is the left column xri + lo + k * step (disparity lo + k * step).
+        ncc_scan(left, &back, stats, yi, xri + lo as i32, step, samples);
+    }
+    let mut best = (f32::NEG_INFINITY, lo);
+    for (k, &score) in scan.iter().take(count).enumerate() {
+        if score > best.0 {
+            best = (score, lo + k * step);
+        }
+    }
+    // The peak lies within half a step of the best sample.
+    let centre = best.1;
+    let half = step / 2;
+    for d in centre.saturating_sub(half).max(lo)..=(centre + half).min(hi) {
+        if d == centre {
+            continue;
+        }
+        if let Some(score) = ncc(left, &back, stats, xri + d as i32, yi) {
+            if score > best.0 {
+                best = (score, d);
+            }
+        }
+    }
+    let x_back = f64::from(xri) + best.1 as f64;
+    if best.0 > f32::NEG_INFINITY
+        && (x_back - f64::from(xi)).abs() <= config.left_right_tolerance_px
+    {
+        Ok(())
+    } else {
+        Err(StereoReject::LeftRightMismatch)
+    }
 }
 
 /// Matches and triangulates one left feature: [`match_along_row`] (or [`match_along_row_near`]
@@ -329,8 +563,7 @@ pub fn match_and_triangulate(
         Some(d) => match_along_row_near(left, right, xl, yl, d, config)?,
         None => match_along_row(left, right, xl, yl, config)?,
     };
-    let point = triangulate(cam, [xl, yl, xr, yr], config.sigma_px)?;
-    accept_point(cam, &point, config)?;
+    let point = point_from_pixels(cam, [xl, yl, xr, yr], config)?;
     Ok((point, (xr, yr)))
 }
 
@@ -465,5 +698,155 @@ mod tests {
             accept_point(&cam, &s, &config).err(),
             Some(StereoReject::LargeGap)
         );
+    }
+
+    /// A 640x480 test pair: a textured background plane at disparity 10 px (texture amplitude
+    /// `bg_amp`) and, right of left-image column 300, a strongly textured foreground at
+    /// disparity 20 px; the foreground hides the background in the right image.
+    fn step_pair(bg_amp: f64) -> (std::vec::Vec<u8>, std::vec::Vec<u8>) {
+        use rover_hal::{IMAGE_HEIGHT_PX as H, IMAGE_WIDTH_PX as W};
+        let noise = |x: i64, y: i64| -> f64 {
+            let mut h = (x as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                ^ (y as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f);
+            h ^= h >> 29;
+            h = h.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            h ^= h >> 32;
+            (h % 1000) as f64 / 1000.0 - 0.5
+        };
+        // Smoothed noise (2x2 box) so that the sub-pixel refinement has gradients.
+        let texture = |x: i64, y: i64| {
+            (noise(x, y) + noise(x + 1, y) + noise(x, y + 1) + noise(x + 1, y + 1)) / 2.0
+        };
+        let edge = 300i64;
+        let scene = |xl: i64, y: i64| -> f64 {
+            if xl >= edge {
+                128.0 + 90.0 * texture(xl, y)
+            } else {
+                128.0 + bg_amp * texture(xl + 7919, y)
+            }
+        };
+        let mut left = std::vec![0u8; W * H];
+        let mut right = std::vec![0u8; W * H];
+        for y in 0..H as i64 {
+            for x in 0..W as i64 {
+                let i = y as usize * W + x as usize;
+                left[i] = scene(x, y).clamp(0.0, 255.0) as u8;
+                // Right pixel x sees the foreground at left column x + 20 when that is in the
+                // foreground, else the background at left column x + 10.
+                let v = if x + 20 >= edge {
+                    scene(x + 20, y)
+                } else {
+                    scene(x + 10, y)
+                };
+                right[i] = v.clamp(0.0, 255.0) as u8;
+            }
+        }
+        (left, right)
+    }
+
+    /// Background texture amplitude of the depth-step test: a grey-level standard deviation of
+    /// about 6, above `half_min_std` (a flatter background gives the rule nothing to see).
+    const BG_AMPLITUDE: f64 = 20.0;
+
+    #[test]
+    fn vo_2_templates_across_a_depth_step_are_rejected() {
+        let (l, r) = step_pair(BG_AMPLITUDE);
+        let (left, right) = (Image::new(&l).unwrap(), Image::new(&r).unwrap());
+        let config = VoConfig::default();
+        // Away from the step both depths match exactly.
+        for (x, d) in [(250.0, 10.0), (360.0, 20.0)] {
+            for y in [100.0, 240.0, 380.0] {
+                let (xr, _) = match_along_row(&left, &right, x, y, &config).unwrap();
+                assert!((x - xr - d).abs() < 0.3, "({x}, {y}): {}", x - xr);
+            }
+        }
+        // Background features 1-4 px left of the step: the template's foreground columns
+        // dominate the correlation. No match may lock onto the foreground disparity.
+        let no_rule = VoConfig {
+            half_min_std: 1e6,
+            ..config
+        };
+        let (mut locked_without, mut rejected) = (0, 0);
+        for x in [296.0, 297.0, 298.0, 299.0] {
+            for y in (60..420).step_by(15) {
+                let y = f64::from(y);
+                let locked = |m: Result<(f64, f64), StereoReject>| {
+                    m.is_ok_and(|(xr, _)| (x - xr - 20.0).abs() < 2.0)
+                };
+                locked_without +=
+                    usize::from(locked(match_along_row(&left, &right, x, y, &no_rule)));
+                let with_rule = match_along_row(&left, &right, x, y, &config);
+                assert!(!locked(with_rule), "({x}, {y}) locked onto the foreground");
+                rejected += usize::from(with_rule == Err(StereoReject::Discontinuity));
+            }
+        }
+        println!("VO-2 depth step: {locked_without} foreground locks without the rule, {rejected} rejected with it");
+        assert!(locked_without > 0, "the pair does not exercise the rule");
+        assert!(rejected > 0);
+    }
+
+    #[test]
+    fn vo_2_peaks_at_the_range_ends_are_rejected() {
+        let (l, r) = step_pair(40.0);
+        let (left, right) = (Image::new(&l).unwrap(), Image::new(&r).unwrap());
+        // Foreground at disparity 20, range 1..=19: the best is the slope at 19.
+        let short = VoConfig {
+            max_disparity_px: 19,
+            stereo_coarse_step: 1,
+            min_correlation: -0.99,
+            uniqueness_margin: 0.0,
+            ..VoConfig::default()
+        };
+        let mut range_end = 0;
+        for y in (60..420).step_by(20) {
+            let m = match_along_row(&left, &right, 400.0, f64::from(y), &short);
+            if let Ok((xr, _)) = m {
+                assert!(
+                    400.0 - xr < 16.0,
+                    "y {y}: accepted the range end {}",
+                    400.0 - xr
+                );
+            }
+            range_end += usize::from(m == Err(StereoReject::RangeEnd));
+        }
+        assert!(range_end > 10, "{range_end}");
+        // A window around a prediction 9 px short of the truth ends at 19: rejected too.
+        let windowed = VoConfig {
+            track_disparity_margin_px: 8,
+            max_disparity_px: 128,
+            ..short
+        };
+        assert_eq!(
+            match_along_row_near(&left, &right, 400.0, 200.0, 11.0, &windowed),
+            Err(StereoReject::RangeEnd)
+        );
+        assert!(match_along_row_near(&left, &right, 400.0, 200.0, 18.0, &windowed).is_ok());
+    }
+
+    #[test]
+    fn vo_2_left_right_check_rejects_a_wrong_match() {
+        let (l, r) = step_pair(40.0);
+        let (left, right) = (Image::new(&l).unwrap(), Image::new(&r).unwrap());
+        let config = VoConfig::default();
+        let range = (1usize, 128usize);
+        // The true match (disparity 10 on the background) comes back to the feature.
+        assert_eq!(
+            check_left_right(&left, &right, (200, 240), 190.0, range, &config),
+            Ok(())
+        );
+        // A match 6 px off comes back 6 px away.
+        assert_eq!(
+            check_left_right(&left, &right, (200, 240), 184.0, range, &config),
+            Err(StereoReject::LeftRightMismatch)
+        );
+        // The occluded background strip (left columns 290-299, hidden in the right image):
+        // its best right match belongs to another left column.
+        let occluded = (290..300)
+            .filter(|&x| {
+                check_left_right(&left, &right, (x, 240), f64::from(x) - 10.0, range, &config)
+                    .is_err()
+            })
+            .count();
+        assert!(occluded >= 8, "{occluded}");
     }
 }
