@@ -360,14 +360,18 @@ pub struct ExtramStereo {
 
 impl ExtramStereo {
     /// A camera on two external-RAM buffers, filled here with a test pattern (the region is
-    /// NOLOAD, so it is written before any read).
+    /// NOLOAD, so it is written before any read): a hashed random texture in 2x2 pixel blocks,
+    /// the right image the left one shifted by [`TEST_PATTERN_DISPARITY_PX`] (a plane at one
+    /// depth). Random, not periodic: VO's left-right check rightly refuses the matches of a
+    /// periodic pattern as ambiguous.
     pub fn new(buffers: [&'static mut ImageBuffer; 2], ticks: &'static AtomicU32) -> Self {
         let [left, right] = buffers;
+        let width = rover_hal::IMAGE_WIDTH_PX;
         for (i, px) in left.iter_mut().enumerate() {
-            *px = (i % 251) as u8;
+            *px = test_pattern(i % width, i / width);
         }
         for (i, px) in right.iter_mut().enumerate() {
-            *px = ((i + 3) % 251) as u8;
+            *px = test_pattern(i % width + TEST_PATTERN_DISPARITY_PX, i / width);
         }
         let buffers = [left, right];
         Self {
@@ -378,6 +382,19 @@ impl ExtramStereo {
             sequence: 0,
         }
     }
+}
+
+/// Disparity of the still camera's test pattern, px (a plane about 2.7 m from the hazcam).
+const TEST_PATTERN_DISPARITY_PX: usize = 12;
+
+/// The still camera's texture at pixel `(x, y)`: a 32-bit integer hash of the 2x2 block.
+fn test_pattern(x: usize, y: usize) -> u8 {
+    let (bx, by) = ((x / 2) as u32, (y / 2) as u32);
+    let mut v = bx.wrapping_mul(0x9e37_79b1) ^ by.wrapping_mul(0x85eb_ca77);
+    v ^= v >> 15;
+    v = v.wrapping_mul(0x2c1b_3c6d);
+    v ^= v >> 12;
+    (v >> 24) as u8
 }
 
 impl StereoCamera for ExtramStereo {
