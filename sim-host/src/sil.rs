@@ -940,7 +940,15 @@ pub fn markdown(results: &[CaseResult]) -> String {
     s += OPEN_NOTES;
     s += "\n## Runs\n\n";
     s += "Distance errors (V99 sec. 6): path length of the estimate against the true horizontal path\n";
-    s += "length; `wheel avg` is averaged wheel odometry with the true pitch (simulator-side baseline).\n\n";
+    s += "length; `wheel avg` is averaged wheel odometry with the true pitch (simulator-side baseline).\n";
+    let fallbacks: u64 = results
+        .iter()
+        .map(|r| r.summary.truth_force_fallbacks)
+        .sum();
+    s += &format!(
+        "Truth steps that fell back from the quasi-static force model to the kinematic solve, over \
+         all runs: {fallbacks} (`truth_force_fallbacks` in `summary.json`).\n\n"
+    );
     s += "| id | distance m | sim time s | EKF % | VO % | kin3d % | kin2d % | kin3d dist % | wheel avg dist % | gate rejects | VO updates/failures | cross-track rms/max m | goal miss m |\n";
     s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.2}"));

@@ -187,6 +187,9 @@ pub struct RunResult {
     pub timing: Vec<GroupTiming>,
     /// Device faults the flight software counted.
     pub device_faults: u32,
+    /// Truth steps whose quasi-static twist was implausible and fell back to the kinematic
+    /// solve ([`crate::world::World::force_fallbacks`]; 0 on every shipped scenario).
+    pub truth_force_fallbacks: u64,
     /// Per-device health counters of the flight software: IMU, joints, camera, sun.
     pub device_health: [fsw::telemetry::DeviceHealth; 4],
     /// Stereo frames the flight software completed.
@@ -398,6 +401,7 @@ pub fn run_with<H: RunHooks>(
         goal_miss_m,
         timing,
         device_faults: state.health.iter().map(|h| h.faults()).sum(),
+        truth_force_fallbacks: w.force_fallbacks,
         device_health: state.health,
         stereo_frames: state.stereo_frames,
         nav: *fsw.nav().counters(),

@@ -126,6 +126,9 @@ pub struct Summary {
     pub goal_miss_m: f64,
     /// True suspension excursions.
     pub suspension: SuspensionSummary,
+    /// Truth steps that fell back from the quasi-static force model to the kinematic solve
+    /// (an implausible twist after a placement that did not converge; 0 is expected).
+    pub truth_force_fallbacks: u64,
     /// Slip.
     pub slip: SlipSummary,
     /// VO.
@@ -321,6 +324,7 @@ pub fn summarise(run: &RunResult) -> Summary {
         goal_reached: run.goal_reached,
         goal_miss_m: run.goal_miss_m,
         suspension: suspension(run),
+        truth_force_fallbacks: run.truth_force_fallbacks,
         slip: SlipSummary {
             gate_reject_fraction: (run.nav.kin_tested > 0)
                 .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
