@@ -27,6 +27,8 @@ const DESIGN_MARGIN: f64 = 0.5;
 
 /// Goals (reported, not enforced).
 const GOAL_PROPAGATE: u64 = 15_000;
+/// Inverse kinematics per RG2 cycle (issue 18).
+const GOAL_IK: u64 = 10_000;
 const GOAL_RG2_FRAME: u64 = 100_000;
 const GOAL_VO: u64 = 60_000_000;
 const GOAL_STACK: u64 = 32 * 1024;
@@ -1004,6 +1006,14 @@ fn document(
         thousands(GOAL_PROPAGATE),
         thousands(prop),
         pass(prop <= GOAL_PROPAGATE)
+    )?;
+    let ik = m.task("inverse_kinematics").max;
+    writeln!(
+        d,
+        "| inverse kinematics <= {} instructions | {} | {} |",
+        thousands(GOAL_IK),
+        thousands(ik),
+        pass(ik <= GOAL_IK)
     )?;
     let rg2_groups = groups[0].insns + groups[1].insns;
     writeln!(

@@ -99,8 +99,21 @@ pub struct InverseSolution {
     pub body_rates: BodyRates,
     /// Unactuated suspension rates of the solution, rad/s.
     pub suspension_rates: SuspensionRates,
-    /// Instantaneous centre of rotation (eq. 16-19).
-    pub icr: Icr,
+}
+
+impl InverseSolution {
+    /// Instantaneous centre of rotation of the solution's command (eq. 16-19), computed on
+    /// demand from the commanded `x_dot`, `y_dot` and yaw rate in [`Self::body_rates`] (the RG2
+    /// inverse kinematics does not need it; it cost an `atan2` per call). Error: non-finite
+    /// rates.
+    pub fn icr(&self) -> Result<Icr, KinematicsError> {
+        let b = &self.body_rates;
+        instantaneous_centre(&VehicleCommand {
+            x_dot_m_s: b[0],
+            y_dot_m_s: b[1],
+            yaw_rate_rad_s: b[5],
+        })
+    }
 }
 
 /// Eq. 16-25 without the wheel-rate limit (the steering limit applies).
@@ -109,7 +122,11 @@ fn solve(
     state: &SuspensionState,
     cmd: &VehicleCommand,
 ) -> Result<InverseSolution, KinematicsError> {
-    let icr = instantaneous_centre(cmd)?;
+    let finite_cmd =
+        cmd.x_dot_m_s.is_finite() && cmd.y_dot_m_s.is_finite() && cmd.yaw_rate_rad_s.is_finite();
+    if !finite_cmd {
+        return Err(KinematicsError::NonFinite);
+    }
     check_suspension(geometry, state)?;
     // Contact points and axes do not depend on steering; `x0` is the rolling direction at
     // `psi = 0` and `y0 = s x x0` the direction a positive `psi` turns it towards.
@@ -198,7 +215,6 @@ fn solve(
         command,
         body_rates: BodyRates::new(v.x, v.y, v.z, w.x, w.y, w.z),
         suspension_rates,
-        icr,
     })
 }
 

@@ -73,7 +73,7 @@ fn kin_5_hand_calculated_cases() {
         assert!(ik.command.steer_angle_rad[i].abs() < 1e-12);
         assert!((ik.command.wheel_rate_rad_s[i] - 1.0).abs() < 1e-12);
     }
-    assert_eq!(ik.icr, Icr::Direction { theta_o_rad: 0.0 });
+    assert_eq!(ik.icr().unwrap(), Icr::Direction { theta_o_rad: 0.0 });
     // Crab 0.1 m/s forward, 0.05 m/s right: psi = atan(0.5) = 0.46365 rad (eq. 22),
     // theta_dot = sqrt(0.0125) / 0.1 = 1.11803 rad/s.
     let ik = inverse_kinematics(&ROCKY8, &s, &cmd(0.1, 0.05, 0.0)).unwrap();
@@ -100,12 +100,12 @@ fn kin_5_hand_calculated_cases() {
     }
     assert!((ik.command.steer_angle_rad[0] + 0.9017).abs() < 1e-4);
     assert!((ik.command.wheel_rate_rad_s[0] + 1.00311).abs() < 1e-4);
-    assert_eq!(ik.icr, Icr::Point { x_m: 0.0, y_m: 0.0 });
+    assert_eq!(ik.icr().unwrap(), Icr::Point { x_m: 0.0, y_m: 0.0 });
     // Arc: 0.1 m/s with a 2 m radius to the right: yaw = 0.05 rad/s, ICR (0, 2) (eq. 16-17).
     // Eq. 21: psi_i = atan(x_i / (2 - y_i)), theta_dot_i = 0.05 * |ICR - p_i| / 0.1.
     let ik = inverse_kinematics(&ROCKY8, &s, &cmd(0.1, 0.0, 0.05)).unwrap();
     assert_eq!(
-        ik.icr,
+        ik.icr().unwrap(),
         Icr::Point {
             x_m: -0.0,
             y_m: 2.0
@@ -182,7 +182,7 @@ fn kin_6_steering_wrap_limits_and_errors() {
     let ik = inverse_kinematics(&ROCKY8, &s, &cmd(0.0, 0.0, 0.0)).unwrap();
     assert_eq!(ik.command.steer_angle_rad, [0.3; 6]);
     assert_eq!(ik.command.wheel_rate_rad_s, [0.0; 6]);
-    assert_eq!(ik.icr, Icr::Stationary);
+    assert_eq!(ik.icr().unwrap(), Icr::Stationary);
     assert_eq!(
         max_speed_scale(&ROCKY8, &s, &cmd(0.0, 0.0, 0.0), 2.0),
         Ok(f64::INFINITY)
