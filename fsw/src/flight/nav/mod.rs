@@ -170,9 +170,10 @@ pub struct NavConfig {
     /// (a systematic slip the gate cannot see), fraction.
     pub vo_loss_drift_fraction: f64,
     /// Crab allowance of a kinematic interval fused while VO is alive: the lateral translation
-    /// is fused with `(kin_crab_allowance * step)^2` added to its variance (m^2; `step` the
-    /// interval's translation, m), after the gate tested the interval at its own covariance
-    /// (`kin_aiding::KinAiding`). `f64::INFINITY` does not fuse the lateral part at all.
+    /// is fused with `(kin_crab_allowance * |sin cross slope| * step)^2` added to its variance
+    /// (m^2; `step` the interval's translation, m; the cross slope from the EKF attitude), after
+    /// the gate tested the interval at its own covariance. `f64::INFINITY` does not fuse the
+    /// lateral part on a slope at all.
     pub kin_crab_allowance: f64,
     /// RG2 cycles the rover waits at the start for VO's first keyframe (VO running) before it
     /// drives without VO.
