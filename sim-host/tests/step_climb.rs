@@ -122,6 +122,20 @@ fn right_wheels_on_top(w: &World, height_m: f64) -> bool {
     })
 }
 
+/// The checks both SIM-28 steps share (`accel_limit_m_s2`: largest specific-force deviation
+/// from rest allowed at the contact events).
+fn assert_climbed(c: &Climb, accel_limit_m_s2: f64) {
+    assert!(c.on_top, "{c:?}");
+    assert!(c.progress > 0.9, "{c:?}");
+    assert!(c.max_penetration_m < 2e-5, "{c:?}");
+    let stops = sim_host::vehicle::placement::JointLimits::rocky8();
+    assert!(c.max_rocker_rad <= stops.rocker_rad + 1e-9, "{c:?}");
+    assert!(c.max_bogie_rad <= stops.bogie_rad + 1e-9, "{c:?}");
+    assert!(c.max_gyro_rad_s < 0.5, "{c:?}");
+    assert!(c.max_accel_dev_m_s2 < accel_limit_m_s2, "{c:?}");
+    assert!(c.accel_events <= 20, "{c:?}");
+}
+
 /// SIM-28: a step of one wheel radius (0.10 m) under the right wheels: every right wheel ends
 /// on top; the body advances more than 90 % of the mean rim travel of the six wheels over the
 /// run (on flat ground the two are equal; the climb itself costs each right wheel 0.57 r of rim
@@ -139,15 +153,7 @@ fn right_wheels_on_top(w: &World, height_m: f64) -> bool {
 fn sim_28_right_side_climbs_a_step_of_one_radius() {
     let c = climb(0.10, 75.0);
     println!("0.10 m step: {c:?}");
-    assert!(c.on_top, "{c:?}");
-    assert!(c.progress > 0.9, "{c:?}");
-    assert!(c.max_penetration_m < 2e-5, "{c:?}");
-    let stops = sim_host::vehicle::placement::JointLimits::rocky8();
-    assert!(c.max_rocker_rad <= stops.rocker_rad + 1e-9, "{c:?}");
-    assert!(c.max_bogie_rad <= stops.bogie_rad + 1e-9, "{c:?}");
-    assert!(c.max_gyro_rad_s < 0.5, "{c:?}");
-    assert!(c.max_accel_dev_m_s2 < 20.0, "{c:?}");
-    assert!(c.accel_events <= 20, "{c:?}");
+    assert_climbed(&c, 20.0);
 }
 
 /// SIM-28: a step of 1.5 wheel radii (0.15 m), above the axles: the wheel meets the face below
@@ -159,13 +165,5 @@ fn sim_28_right_side_climbs_a_step_of_one_radius() {
 fn sim_28_right_side_climbs_a_step_of_one_and_a_half_radii() {
     let c = climb(0.15, 90.0);
     println!("0.15 m step: {c:?}");
-    assert!(c.on_top, "{c:?}");
-    assert!(c.progress > 0.9, "{c:?}");
-    assert!(c.max_penetration_m < 2e-5, "{c:?}");
-    let stops = sim_host::vehicle::placement::JointLimits::rocky8();
-    assert!(c.max_rocker_rad <= stops.rocker_rad + 1e-9, "{c:?}");
-    assert!(c.max_bogie_rad <= stops.bogie_rad + 1e-9, "{c:?}");
-    assert!(c.max_gyro_rad_s < 0.5, "{c:?}");
-    assert!(c.max_accel_dev_m_s2 < 50.0, "{c:?}");
-    assert!(c.accel_events <= 20, "{c:?}");
+    assert_climbed(&c, 50.0);
 }
