@@ -13,6 +13,7 @@
 //!   the procedural albedo texture.
 //! - [`world`]: the truth state and its step; [`hal_devices`]: the HAL devices on it.
 //! - [`driver`]: the simulator's reference driver (not flight code).
+//! - [`hazards`]: the truth-side hazard check (collisions of the rover with rocks and blocks).
 //! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
 //! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
 //! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
@@ -27,6 +28,7 @@ pub mod detection;
 pub mod devices;
 pub mod driver;
 pub mod hal_devices;
+pub mod hazards;
 pub mod output;
 pub mod record;
 pub mod render;

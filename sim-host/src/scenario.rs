@@ -174,6 +174,18 @@ impl Default for SensorSpec {
     }
 }
 
+/// What the ground commands the rover to do with the waypoints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NavigationKind {
+    /// Follow the waypoints as a path (no hazard avoidance).
+    #[default]
+    Path,
+    /// "Go to (x, y)": the last waypoint is the goal; the flight software maps hazards from
+    /// the hazcams and plans round them with RoverBug (V99 sec. 4).
+    Roverbug,
+}
+
 /// How the simulator's reference driver steers (until the flight software commands the motors).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -214,6 +226,12 @@ pub struct Scenario {
     pub max_position_sigma_m: f64,
     /// Waypoints `[north, east]`, m; the rover starts at the first, facing the second.
     pub waypoints: Vec<[f64; 2]>,
+    /// What the ground commands: follow the waypoints as a path (`path`, the default), or go
+    /// to the last waypoint avoiding the hazards the rover sees (`roverbug`, V99 sec. 4: the
+    /// flight software's hazard map and RoverBug planner; the path of `path` is the special
+    /// case of a world without obstacles).
+    #[serde(default)]
+    pub navigation: NavigationKind,
     /// Reference driver mode (default: carrot on truth, i.e. with slip compensation).
     #[serde(default = "default_driver")]
     pub driver: DriverMode,
@@ -236,6 +254,15 @@ pub struct Scenario {
     /// Injected faults.
     #[serde(default)]
     pub faults: Vec<FaultSpec>,
+    /// Height from which a rock or placed obstacle is a hazard to the truth vehicle, m
+    /// (the simulator's own collision check, [`crate::hazards`]); default
+    /// [`crate::hazards::DEFAULT_HAZARD_HEIGHT_M`].
+    #[serde(default = "default_hazard_height")]
+    pub hazard_height_m: f64,
+}
+
+fn default_hazard_height() -> f64 {
+    crate::hazards::DEFAULT_HAZARD_HEIGHT_M
 }
 
 fn default_speed() -> f64 {
@@ -339,6 +366,9 @@ mod tests {
             "rock-crawl",
             "undulating",
             "flat-firm",
+            "rockfield-goal",
+            "cul-de-sac",
+            "unreachable",
         ] {
             assert!(names.iter().any(|n| n == required), "missing {required}");
         }

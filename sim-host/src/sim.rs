@@ -212,6 +212,15 @@ pub struct RunResult {
     pub vo_checks: Vec<VoCheck>,
     /// Rocks of the terrain `[north, east, radius]` for the top view.
     pub rocks: Vec<[f64; 3]>,
+    /// Truth-side hazard contacts ([`crate::hazards`]), in time order.
+    pub collisions: Vec<crate::hazards::Collision>,
+    /// Hazards in the terrain (features at least the scenario's hazard height).
+    pub hazards: usize,
+    /// Hazard height of the scenario, m.
+    pub hazard_height_m: f64,
+    /// Closest approach of the rover footprint to a hazard footprint, m (`None` without
+    /// hazards).
+    pub hazard_min_distance_m: Option<f64>,
     /// Wall-clock seconds of the run.
     pub wall_time_s: f64,
 }
@@ -303,6 +312,10 @@ pub fn run_with<H: RunHooks>(
     let mut vo_checks = Vec::new();
     // Truth poses of the last 10 s, to check VO relative poses against.
     let mut history: std::collections::VecDeque<(u64, BodyPose)> = Default::default();
+    let mut hazard_monitor = {
+        let w = world.borrow();
+        crate::hazards::HazardMonitor::new(&w.terrain, scenario.hazard_height_m)
+    };
     while steps < max_steps {
         {
             let mut w = world.borrow_mut();
@@ -352,6 +365,7 @@ pub fn run_with<H: RunHooks>(
             let w = world.borrow();
             if w.steps % 10 == 0 {
                 records.push(record(&w, &scenario.waypoints, &fsw));
+                hazard_monitor.check(w.truth.t_us as f64 * 1e-6, &w.truth.pose, &w.geometry);
             }
         }
         steps += 1;
@@ -421,6 +435,13 @@ pub fn run_with<H: RunHooks>(
             .iter()
             .map(|r| [r.x_m, r.y_m, r.radius_m])
             .collect(),
+        collisions: hazard_monitor.collisions.clone(),
+        hazards: hazard_monitor.hazards().len(),
+        hazard_height_m: hazard_monitor.hazard_height_m,
+        hazard_min_distance_m: hazard_monitor
+            .min_distance_m
+            .is_finite()
+            .then_some(hazard_monitor.min_distance_m),
         wall_time_s: start.elapsed().as_secs_f64(),
     })
 }

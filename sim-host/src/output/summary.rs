@@ -129,6 +129,11 @@ pub struct Summary {
     /// Truth steps that fell back from the quasi-static force model to the kinematic solve
     /// (an implausible twist after a placement that did not converge; 0 is expected).
     pub truth_force_fallbacks: u64,
+    /// Truth-side hazard contacts: new overlaps of the rover footprint with a hazard
+    /// footprint (`sim_host::hazards`).
+    pub collisions: u32,
+    /// The truth-side hazard check in detail.
+    pub hazards: HazardSummary,
     /// Slip.
     pub slip: SlipSummary,
     /// VO.
@@ -154,6 +159,29 @@ pub struct Summary {
     /// Wall-clock time of the run, s (the only field that differs between identical runs when
     /// the counter is simulated time).
     pub wall_time_s: f64,
+}
+
+/// The truth-side hazard check of a run (`sim_host::hazards`).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct HazardSummary {
+    /// Hazards in the terrain: rocks and placed obstacles at least `height_m` high.
+    pub count: usize,
+    /// Hazard height of the scenario, m.
+    pub height_m: f64,
+    /// Closest approach of the rover footprint to a hazard footprint, m (null without
+    /// hazards; 0 after a collision).
+    pub min_distance_m: Option<f64>,
+    /// Each collision: simulated time, s, and the hazard's centre (north, east), m.
+    pub contacts: Vec<HazardContact>,
+}
+
+/// One truth-side collision.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct HazardContact {
+    /// Simulated time, s.
+    pub t_s: f64,
+    /// Centre of the hazard (north, east), m.
+    pub at_m: [f64; 2],
 }
 
 /// What fault protection did in a run.
@@ -325,6 +353,20 @@ pub fn summarise(run: &RunResult) -> Summary {
         goal_miss_m: run.goal_miss_m,
         suspension: suspension(run),
         truth_force_fallbacks: run.truth_force_fallbacks,
+        collisions: u32::try_from(run.collisions.len()).unwrap_or(u32::MAX),
+        hazards: HazardSummary {
+            count: run.hazards,
+            height_m: run.hazard_height_m,
+            min_distance_m: run.hazard_min_distance_m,
+            contacts: run
+                .collisions
+                .iter()
+                .map(|c| HazardContact {
+                    t_s: c.t_s,
+                    at_m: c.at_m,
+                })
+                .collect(),
+        },
         slip: SlipSummary {
             gate_reject_fraction: (run.nav.kin_tested > 0)
                 .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
