@@ -190,6 +190,12 @@ pub struct RunResult {
     /// Truth steps whose quasi-static twist was implausible and fell back to the kinematic
     /// solve ([`crate::world::World::force_fallbacks`]; 0 on every shipped scenario).
     pub truth_force_fallbacks: u64,
+    /// Truth steps whose twist changed faster than gravity and friction can accelerate the body
+    /// and was limited ([`crate::world::World::inertia_limits`]).
+    pub truth_inertia_limits: u64,
+    /// Truth steps whose twist exceeded the quasi-static bounds and was scaled down
+    /// ([`crate::world::World::twist_caps`]).
+    pub truth_twist_caps: u64,
     /// Per-device health counters of the flight software: IMU, joints, camera, sun.
     pub device_health: [fsw::telemetry::DeviceHealth; 4],
     /// Stereo frames the flight software completed.
@@ -200,6 +206,8 @@ pub struct RunResult {
     pub nav_mode: NavMode,
     /// Why fault protection stopped the drive, if it did.
     pub fault_response: fsw::flight::nav::protection::FaultResponse,
+    /// The flight EKF's last error (`Debug` text), if it returned any.
+    pub last_ekf_error: Option<String>,
     /// Who drove: `"flight"` or `"reference"`.
     pub driver: String,
     /// Slip compensation on.
@@ -416,11 +424,14 @@ pub fn run_with<H: RunHooks>(
         timing,
         device_faults: state.health.iter().map(|h| h.faults()).sum(),
         truth_force_fallbacks: w.force_fallbacks,
+        truth_inertia_limits: w.inertia_limits,
+        truth_twist_caps: w.twist_caps,
         device_health: state.health,
         stereo_frames: state.stereo_frames,
         nav: *fsw.nav().counters(),
         nav_mode: fsw.nav().mode(),
         fault_response: fsw.nav().fault_response(),
+        last_ekf_error: fsw.nav().last_ekf_error().map(|e| format!("{e:?}")),
         driver: match source {
             CommandSource::Flight => "flight".to_string(),
             CommandSource::Reference(_) => "reference".to_string(),

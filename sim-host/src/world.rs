@@ -177,6 +177,8 @@ pub struct World {
     encoder_every: u64,
     sun_every: u64,
     prev_velocity_w: Vector3<f64>,
+    /// Linear and angular velocity of the body of the last step in `W` (the inertia bound).
+    prev_twist_w: Option<(Vector3<f64>, Vector3<f64>)>,
     jacobian: Option<PlacementJacobian>,
     contacts: [WheelContact; WHEELS],
     wheels: Option<[WheelPose; WHEELS]>,
@@ -194,6 +196,12 @@ pub struct World {
     /// rover) and that fell back to the kinematic least squares (diagnostics; 0 on every
     /// scenario but a dense rock field).
     pub force_fallbacks: u64,
+    /// Steps whose quasi-static twist changed the body's velocity faster than the contact
+    /// forces and gravity can accelerate it, and was limited to that (see `step`).
+    pub inertia_limits: u64,
+    /// Steps whose twist (after the kinematic fallback) exceeded the plausible bounds of a
+    /// quasi-static rover and was scaled down to them.
+    pub twist_caps: u64,
     /// Averaged wheel odometry, m: the mean increment of the six drive encoders (as read)
     /// times the nominal wheel radius (0.10 m, published: what the flight software knows, not
     /// the wheels' true radii) times the cosine of the true pitch;
@@ -351,6 +359,9 @@ impl World {
             steps: 0,
             placement_iterations: 0,
             force_fallbacks: 0,
+            inertia_limits: 0,
+            twist_caps: 0,
+            prev_twist_w: None,
             wheel_average_m: 0.0,
         };
         world.update_wheels();
@@ -592,6 +603,47 @@ impl World {
                 &slip_factor,
                 &lateral,
             )
+        };
+        // The quasi-static balance has no inertia: where it has no static solution (a wheel
+        // whose contact switches on a steep flank, a rover turning in place on 20 deg sand) it
+        // returned a twist of several m/s for a step or two (14 steps of `dunes-long`, up to
+        // 6 m/s and an IMU spike of 1,000 m/s^2). A body's acceleration is bounded by the
+        // forces that can act on it: gravity plus Coulomb friction at the contacts,
+        // `|a| <= g (1 + mu)`, and its angular acceleration by that over the half track. The
+        // twist's change per step is limited to those bounds (counted in `inertia_limits`).
+        let twist = {
+            let mut t = twist;
+            // The kinematic fallback has no bound of its own (it follows the contacts, which
+            // can be inconsistent after a placement that did not converge): the plausible
+            // bounds above cap it.
+            let (v_cap, w_cap) = (3.0 * max_rim + 0.05, 15.0 * max_rim + 0.25);
+            if t.v.norm() > v_cap || t.w.norm() > w_cap {
+                self.twist_caps += 1;
+                if t.v.norm() > v_cap {
+                    t.v *= v_cap / t.v.norm();
+                }
+                if t.w.norm() > w_cap {
+                    t.w *= w_cap / t.w.norm();
+                }
+            }
+            let a_max = MARS_GRAVITY_M_S2 * (1.0 + self.friction.mu.max(0.0));
+            let alpha_max = a_max / 0.31;
+            let v_w = rot * t.v;
+            let w_w = rot * t.w;
+            if let Some((v0, w0)) = self.prev_twist_w {
+                let (dv, dw) = (v_w - v0, w_w - w0);
+                let (kv, kw) = (
+                    (a_max * dt / dv.norm().max(1e-12)).min(1.0),
+                    (alpha_max * dt / dw.norm().max(1e-12)).min(1.0),
+                );
+                if kv < 1.0 || kw < 1.0 {
+                    self.inertia_limits += 1;
+                    t.v = rot.inverse() * (v0 + dv * kv);
+                    t.w = rot.inverse() * (w0 + dw * kw);
+                }
+            }
+            self.prev_twist_w = Some((rot * t.v, rot * t.w));
+            t
         };
         // A wheel the force balance carries on a step face or edge only (no contact near the
         // bottom of its rim carries load: it has been lifted off the ground below) climbs that

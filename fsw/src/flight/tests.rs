@@ -315,7 +315,9 @@ fn nav_2_rejection_streak_recovers_a_filter_tuned_too_tight() {
     use nav::{NavConfig, Navigator};
     let run = |recover: bool| {
         let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-        config.vo_enabled = false;
+        // VO built but never started (no images): no VO update ever arrives, and with an
+        // infinite timeout the VO-loss fallback never engages.
+        config.vo_enabled = true;
         config.vo_timeout_cycles = u32::MAX;
         config.align_sun_wait_samples = 0;
         if !recover {
@@ -389,6 +391,90 @@ fn nav_2_rejection_streak_recovers_a_filter_tuned_too_tight() {
         final_on < 1.0 && (final_on - at_30s).abs() < 0.05 && rejected < tested / 4,
         "with recovery the error stays bounded: {at_30s} m at 30 s, {final_on} m at 60 s, \
          {rejected}/{tested} rejected"
+    );
+}
+
+/// NAV-3 (issue 14, RB): a rover slipping 30 % without VO (below the 40 % slip limit). The
+/// wheels turn for 0.1 m/s while the rover moves at 0.07 m/s; the IMU measures the true accelerations. Without the
+/// stop-and-go drive the VO-loss fallback fuses every kinematic interval (with its slip
+/// allowance) and the filter follows the wheels; with it the rover stops every metre of wheel
+/// travel, the zero-velocity updates anchor the IMU velocity, the gate rejects the slipping
+/// intervals and the IMU carries the motion.
+#[test]
+fn nav_3_stop_and_go_without_vo_measures_slip_with_the_imu() {
+    use nav::{NavConfig, Navigator};
+    let run = |stop_and_go: bool| {
+        let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+        config.vo_enabled = false;
+        config.align_sun_wait_samples = 0;
+        if !stop_and_go {
+            config.blind_stop_interval_m = 0.0;
+        }
+        // The ground accepts the uncertainty of a drive without VO (as on `dunes-long`).
+        config.protection.max_position_sigma_m = 100.0;
+        let calib = crate::vo::rocky8_hazcam();
+        let mut nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calib) {
+            Ok(n) => n,
+            Err(e) => panic!("navigator refused: {e:?}"),
+        };
+        let r = config.geometry.wheel_radius_m;
+        let (g, slip, accel) = (3.711, 0.3, 0.2);
+        // Truth: ground speed `v`, wheel rim speed `u` (each follows the command with the same
+        // acceleration limit), wheel travel `w`.
+        let (mut x, mut v, mut u, mut w) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
+        let mut driving = false;
+        let dt = 0.005;
+        for k in 1..=90 * 200u64 {
+            let t_us = k * 5_000;
+            let target = if driving { 0.1 } else { 0.0 };
+            let du = (target - u).clamp(-accel * dt, accel * dt);
+            u += du;
+            let v_new = u * (1.0 - slip);
+            let a = (v_new - v) / dt;
+            v = v_new;
+            x += v * dt;
+            w += u * dt;
+            nav.propagate(Some(&ImuSample {
+                t_us,
+                gyro_rad_s: [0.0; 3],
+                accel_m_s2: [a, 0.0, -g],
+                valid: true,
+            }));
+            if k % 10 == 0 {
+                nav.kinematic_cycle(Some(&JointState {
+                    drive_angle_rad: [w / r; 6],
+                    drive_rate_rad_s: [u / r; 6],
+                    ..joints(t_us)
+                }));
+                driving = nav.guidance_cycle().is_some();
+            }
+        }
+        let c = *nav.counters();
+        (
+            (nav.pose().p_n.x - x).abs(),
+            x,
+            c.blind_stops,
+            c.kin_imu_carried,
+        )
+    };
+    let (err_off, x_off, stops_off, carried_off) = run(false);
+    let (err_on, x_on, stops_on, carried_on) = run(true);
+    std::eprintln!(
+        "NAV-3: without stop-and-go {err_off:.3} m error over {x_off:.2} m; with: {err_on:.3} m \
+         over {x_on:.2} m, {stops_on} stops, {carried_on} intervals carried by the IMU"
+    );
+    assert_eq!((stops_off, carried_off), (0, 0));
+    assert!(
+        err_off > 0.3 * x_off,
+        "the fallback follows the wheels: {err_off} m"
+    );
+    assert!(
+        stops_on >= 3 && carried_on > 100,
+        "{stops_on} stops, {carried_on} carried"
+    );
+    assert!(
+        err_on < 0.05 * x_on,
+        "the IMU measures the slip: {err_on} m over {x_on} m"
     );
 }
 

@@ -129,6 +129,11 @@ pub struct Summary {
     /// Truth steps that fell back from the quasi-static force model to the kinematic solve
     /// (an implausible twist after a placement that did not converge; 0 is expected).
     pub truth_force_fallbacks: u64,
+    /// Truth steps whose velocity change was limited to what gravity and friction can do
+    /// (the quasi-static balance had no static solution; `docs/simulator.md`).
+    pub truth_inertia_limits: u64,
+    /// Truth steps whose twist was scaled down to the quasi-static bounds.
+    pub truth_twist_caps: u64,
     /// Truth-side hazard contacts: new overlaps of the rover footprint with a hazard
     /// footprint (`sim_host::hazards`).
     pub collisions: u32,
@@ -191,6 +196,9 @@ pub struct FaultProtectionSummary {
     pub responses: u32,
     /// The stop's reason (`None` when the drive was not stopped).
     pub last_response: String,
+    /// The flight EKF's last error, if it returned any (the cause of `nav.ekf_errors`' last
+    /// count and, for a fault, of the `Safed` mode).
+    pub last_ekf_error: Option<String>,
     /// The rover ended stopped by fault protection (it reported why instead of driving on or
     /// claiming an arrival it cannot support).
     pub stopped_safe: bool,
@@ -353,6 +361,8 @@ pub fn summarise(run: &RunResult) -> Summary {
         goal_miss_m: run.goal_miss_m,
         suspension: suspension(run),
         truth_force_fallbacks: run.truth_force_fallbacks,
+        truth_inertia_limits: run.truth_inertia_limits,
+        truth_twist_caps: run.truth_twist_caps,
         collisions: u32::try_from(run.collisions.len()).unwrap_or(u32::MAX),
         hazards: HazardSummary {
             count: run.hazards,
@@ -402,6 +412,7 @@ pub fn summarise(run: &RunResult) -> Summary {
         fault_protection: FaultProtectionSummary {
             responses: run.nav.fault_stops,
             last_response: format!("{:?}", run.fault_response),
+            last_ekf_error: run.last_ekf_error.clone(),
             stopped_safe: run.nav_mode == fsw::flight::nav::NavMode::Stopped,
             final_position_sigma_m: run
                 .records

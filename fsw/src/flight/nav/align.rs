@@ -187,6 +187,9 @@ impl Navigator {
                 self.traj.aligned(pose, x0.b_g, s.t_us);
                 self.ekf_running = true;
                 self.mode = NavMode::Driving;
+                // The rover was at rest during the alignment: its velocity is anchored as after
+                // a zero-velocity update (the stop-and-go drive without VO starts anchored).
+                self.cycles_since_zupt = 0;
             }
             Err(e) => {
                 self.align = Alignment::default();

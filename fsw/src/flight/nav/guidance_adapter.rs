@@ -56,6 +56,9 @@ impl Navigator {
             self.vo_started = true;
             self.counters.vo_start_timeouts = self.counters.vo_start_timeouts.saturating_add(1);
         }
+        if self.blind_stop_due() {
+            return None;
+        }
         let (ekf, guidance, joints) = match (
             self.ekf_running.then_some(&self.ekf),
             self.guidance.as_mut(),
@@ -129,6 +132,52 @@ impl Navigator {
                 None
             }
         }
+    }
+
+    /// Stop-and-go without VO ([`NavConfig::blind_stop_interval_m`]): counts the wheels'
+    /// travel while VO is off or lost and returns `true` while the rover must stand
+    /// (a stop of [`NavConfig::blind_stop_cycles`] after each interval; zero-velocity updates
+    /// apply meanwhile, `kin_aiding`). With VO alive the count restarts.
+    fn blind_stop_due(&mut self) -> bool {
+        let c = &self.config;
+        let vo_lost = self.vo_lost();
+        if !(vo_lost && c.blind_stop_interval_m > 0.0) {
+            self.blind_travel_m = 0.0;
+            self.blind_hold_left = 0;
+            return false;
+        }
+        if self.blind_hold_left > 0 {
+            self.blind_hold_left -= 1;
+            return true;
+        }
+        // Wheel travel of the last RG2 period (mean measured wheel rate times the nominal
+        // radius): a rover spinning its wheels in place still stops on schedule.
+        if let Some(j) = &self.last_joints {
+            let mean_rate = j
+                .drive_rate_rad_s
+                .iter()
+                .map(|r| libm::fabs(*r))
+                .sum::<f64>()
+                / 6.0;
+            let d = mean_rate * c.geometry.wheel_radius_m * RG2_PERIOD_S;
+            if d.is_finite() {
+                self.blind_travel_m += d;
+            }
+        }
+        if self.blind_travel_m >= c.blind_stop_interval_m {
+            self.blind_travel_m = 0.0;
+            self.blind_hold_left = c.blind_stop_cycles;
+            self.counters.blind_stops = self.counters.blind_stops.saturating_add(1);
+            return true;
+        }
+        false
+    }
+
+    /// VO is off ([`NavConfig::vo_enabled`]) or has not been fused for
+    /// [`NavConfig::vo_timeout_cycles`]: the kinematic intervals fall back to the VO-loss
+    /// handling (stop-and-go, or fusion with the slip allowance).
+    pub(super) fn vo_lost(&self) -> bool {
+        !self.config.vo_enabled || self.cycles_since_vo > self.config.vo_timeout_cycles
     }
 
     /// Horizontal position 1-sigma of the EKF, m (`sqrt(P_nn + P_ee)`); 0 before alignment.

@@ -19,6 +19,12 @@ use super::*;
 /// without slip 7.8 % without, 8.4 % with it (10.3 % with a constant `tan 5 deg`).
 pub const KIN_CRAB_ALLOWANCE: f64 = 0.5;
 
+/// Stop-and-go without VO: the EKF's horizontal step over a kinematic interval may exceed
+/// the wheels' by this factor (downhill skid) before the IMU is judged wrong.
+pub const BLIND_SKID_FACTOR: f64 = 1.5;
+/// ... plus this floor, m (the odometry's noise over a short interval).
+pub const BLIND_SKID_FLOOR_M: f64 = 0.01;
+
 impl Navigator {
     /// Adds one IMU sample's bias-corrected rotation to the rotation since the last joint
     /// reading. A sample that does not follow the previous one by 0 to 50 ms (a gap, time going
@@ -117,11 +123,17 @@ impl Navigator {
             if let Ok((_, p0)) = ekf.clone_pose(start) {
                 let ekf_step = (ekf.state().p_n - p0).norm();
                 let vo_fused = core::mem::take(&mut self.vo_fused_since_interval);
+                // Without VO the EKF travel is measured too while the stop-and-go drive
+                // anchors the IMU velocity (its slip estimate is the IMU's, eq. 46).
+                let imu_anchored = self.config.blind_stop_interval_m > 0.0
+                    && (!self.config.vo_enabled
+                        || self.cycles_since_vo > self.config.vo_timeout_cycles)
+                    && self.cycles_since_zupt <= self.config.blind_anchor_cycles;
                 if let Some(r) = self.protection.travel(
                     &self.config.protection,
                     rp.trans_0_1_m.norm(),
                     ekf_step,
-                    vo_fused,
+                    vo_fused || imu_anchored,
                 ) {
                     // Latched like `fault_stop` (the filter is borrowed here).
                     if self.mode == NavMode::Driving {
@@ -133,7 +145,9 @@ impl Navigator {
             }
         }
         self.cycles_since_vo = self.cycles_since_vo.saturating_add(1);
-        let vo_lost = self.cycles_since_vo > self.config.vo_timeout_cycles;
+        // As `Navigator::vo_lost` (field by field: the filter is borrowed here).
+        let vo_lost =
+            !self.config.vo_enabled || self.cycles_since_vo > self.config.vo_timeout_cycles;
         let holding = self.cycles_since_reject < self.config.slip_hold_cycles;
         // The gate test (eq. 46) at the odometry's own covariance: the slip detector. With VO
         // alive an accepted interval is fused by the same call (unless holding); without VO the
@@ -219,7 +233,32 @@ impl Navigator {
                         phi_rad: -d.residual[2],
                     };
                 }
-                if vo_lost {
+                // The IMU may carry the motion only while a recent stop anchors its velocity
+                // and while its motion is one the wheels allow: a driving rover slips, so
+                // its ground travel is at most the wheels' (plus a skid margin); an EKF step
+                // longer than that is an IMU error (a shock, a dropped sample), and the
+                // kinematics is fused instead.
+                let kin_step = libm::sqrt(
+                    rp.trans_0_1_m.x * rp.trans_0_1_m.x + rp.trans_0_1_m.y * rp.trans_0_1_m.y,
+                );
+                let (ex, ey) = (
+                    rp.trans_0_1_m.x - d.residual[3],
+                    rp.trans_0_1_m.y - d.residual[4],
+                );
+                let ekf_step_h = libm::sqrt(ex * ex + ey * ey);
+                let plausible = ekf_step_h <= BLIND_SKID_FACTOR * kin_step + BLIND_SKID_FLOOR_M;
+                let anchored_by_zupt = self.config.blind_stop_interval_m > 0.0
+                    && self.cycles_since_zupt <= self.config.blind_anchor_cycles
+                    && plausible;
+                if vo_lost && anchored_by_zupt {
+                    // Stop-and-go without VO: the IMU velocity, anchored by the last stop,
+                    // carries the motion; the slip vector above measures the kinematics
+                    // against it. An interval the gate accepts is not fused either: a slip
+                    // below the gate's resolution (the first centimetres after a start) would
+                    // otherwise be learnt as an accelerometer bias, which the IMU then carries
+                    // into the whole segment.
+                    self.counters.kin_imu_carried = self.counters.kin_imu_carried.saturating_add(1);
+                } else if vo_lost {
                     self.fuse_without_vo(&mut rp, d.accepted);
                 } else if self.reject_streak >= self.config.reject_streak_cycles {
                     // The velocity error the last residual implies (translation residual over
@@ -241,10 +280,15 @@ impl Navigator {
                 let result = ekf.update_zero_velocity(t_us);
                 self.recorder.zero_velocity(t_us);
                 match result {
-                    Ok(()) => self.counters.zupts = self.counters.zupts.saturating_add(1),
+                    Ok(()) => {
+                        self.counters.zupts = self.counters.zupts.saturating_add(1);
+                        self.cycles_since_zupt = 0;
+                    }
                     Err(e) => self.ekf_error(e),
                 }
             }
+        } else {
+            self.cycles_since_zupt = self.cycles_since_zupt.saturating_add(1);
         }
         self.release(Some(start));
         self.interval = None;
@@ -366,8 +410,7 @@ impl Navigator {
             0.0
         };
         let v = crate::linalg::clamp(implied, c.streak_velocity_sigma_m_s, 1.0);
-        // RG2 period: 20 Hz.
-        let streak_s = f64::from(c.reject_streak_cycles.max(1)) * 0.05;
+        let streak_s = f64::from(c.reject_streak_cycles.max(1)) * RG2_PERIOD_S;
         let b = crate::linalg::clamp(v / streak_s, c.streak_accel_bias_sigma_m_s2, 0.5);
         self.reject_streak = 0;
         self.counters.kin_streaks = self.counters.kin_streaks.saturating_add(1);

@@ -181,6 +181,19 @@ pub struct NavConfig {
     /// Sun readings refused by the sun's gate in a row after which the heading covariance is
     /// inflated (see [`Navigator::sun`]).
     pub sun_streak: u32,
+    /// Stop-and-go without VO (RB sec. 5, H04 sec. 2): while VO is off or lost, the rover stops
+    /// after every `blind_stop_interval_m` of wheel travel for [`Self::blind_stop_cycles`], so
+    /// that zero-velocity updates re-anchor the IMU velocity; between stops a kinematic
+    /// interval the gate rejects is not fused and the IMU carries the motion (the slip is then
+    /// measured against the IMU, eq. 46). 0 disables it (the VO-loss fallback fuses every
+    /// interval with the slip allowance). m.
+    pub blind_stop_interval_m: f64,
+    /// RG2 cycles of each stop of the stop-and-go drive without VO.
+    pub blind_stop_cycles: u32,
+    /// RG2 cycles after the last zero-velocity update during which the IMU velocity counts as
+    /// anchored (a rejected kinematic interval is not fused; after that it is fused with the
+    /// slip allowance as before).
+    pub blind_anchor_cycles: u32,
     /// Gate rejections in a row, with no VO fused meanwhile, after which the filter's velocity
     /// covariance is inflated (RG2 cycles; see `kin_aiding`'s streak recovery).
     pub reject_streak_cycles: u32,
@@ -277,6 +290,9 @@ impl NavConfig {
             // 4 s of rejections with no VO fused: longer than the rover goes without a VO
             // update while slipping with VO alive (a capture every 0.1 m, 1-2 s).
             reject_streak_cycles: 80,
+            blind_stop_interval_m: 1.0,
+            blind_stop_cycles: 60,
+            blind_anchor_cycles: 300,
             sun_streak: 3,
             vo_start_timeout_cycles: 600,
             streak_velocity_sigma_m_s: 0.01,
@@ -326,6 +342,9 @@ impl PoseEstimate {
         }
     }
 }
+
+/// Period of the RG2 rate group that runs the kinematic and guidance cycles (20 Hz), s.
+pub const RG2_PERIOD_S: f64 = 0.05;
 
 /// Counters of the navigation functions (telemetry and the simulator's summary).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -402,6 +421,11 @@ pub struct NavCounters {
     pub command_errors: u32,
     /// Cycles the rover was held stopped because a sensor was lost.
     pub sensor_holds: u32,
+    /// Stops of the stop-and-go drive without VO ([`NavConfig::blind_stop_interval_m`]).
+    pub blind_stops: u32,
+    /// Kinematic intervals the gate rejected without VO while the IMU velocity was anchored
+    /// by a recent zero-velocity update: not fused, the IMU carried the motion.
+    pub kin_imu_carried: u32,
 }
 
 /// Result of the last kinematic interval.
@@ -479,6 +503,13 @@ pub struct Navigator {
     /// RG2 cycles the rover waited for VO's first keyframe.
     cycles_waiting_vo: u32,
     cycles_since_vo: u32,
+    /// Stop-and-go without VO: wheel travel since the last stop, m, RG2 cycles left in the
+    /// current stop, and RG2 cycles since the last zero-velocity update.
+    blind_travel_m: f64,
+    blind_hold_left: u32,
+    cycles_since_zupt: u32,
+    /// The last EKF error (telemetry: what the `ekf_errors` counter counted last).
+    last_ekf_error: Option<EstError>,
 }
 
 /// Why the navigator could not be built.
@@ -566,6 +597,10 @@ impl Navigator {
             last_wheel_rates: [0.0; 6],
             cycles_waiting_vo: 0,
             cycles_since_vo: 0,
+            blind_travel_m: 0.0,
+            blind_hold_left: 0,
+            cycles_since_zupt: u32::MAX,
+            last_ekf_error: None,
         })
     }
 
@@ -638,6 +673,13 @@ impl Navigator {
         &self.counters
     }
 
+    /// The last error the EKF returned (propagation, update, clone), if any, other than the
+    /// `Faulted` that every call returns after a fault: after [`NavMode::Safed`] it is the
+    /// cause of the fault.
+    pub fn last_ekf_error(&self) -> Option<EstError> {
+        self.last_ekf_error
+    }
+
     /// The slip vector of the last RG2 cycle (EKF minus kinematics, rover frame; zero when the
     /// gate accepted the kinematics).
     pub fn slip(&self) -> SlipVector {
@@ -691,6 +733,10 @@ impl Navigator {
 
     fn ekf_error(&mut self, e: EstError) {
         self.counters.ekf_errors = self.counters.ekf_errors.saturating_add(1);
+        // `Faulted` only repeats that an earlier error faulted the filter: keep the cause.
+        if e != EstError::Faulted || self.last_ekf_error.is_none() {
+            self.last_ekf_error = Some(e);
+        }
         if matches!(e, EstError::Faulted | EstError::CovarianceUnhealthy { .. }) {
             self.mode = NavMode::Safed;
         }
