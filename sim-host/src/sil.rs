@@ -369,7 +369,7 @@ pub const CASES: [Case; 23] = [
         title: "long sandy traverse without VO: EKF (IMU, sun, gated kinematics) against dead \
                 reckoning (wheel odometry with gyro attitude; RB, issue 14)",
         checks: &[
-            open(
+            req(
                 "EKF error / DR error",
                 |s| Some(s.error_pct.ekf? / s.error_pct.dr?.max(1e-9)),
                 Compare::AtMost,
@@ -856,14 +856,6 @@ fixed:
   the kinematic solve, World::force_fallbacks), the rover scrubbed about 30 % of its rim
   travel, VO delivered 11 poses in 39 s and fault protection stopped it `PositionUncertain`. It
   is not the SIL scenario until the flight software handles it.
-- **SIL-RB-1** (`dunes-long` without VO, EKF error at most 0.6 times dead reckoning's, RB's
-  'up to 40 %'): RB's gain came from a simulation whose errors were white sensor noise (20 %
-  of each velocity) and heading; on our dunes the error of both is the systematic slip of the
-  sand (the wheels turn more than the rover moves), which neither the IMU nor the sun observes,
-  so both are off along the track by about the same amount. The EKF keeps its heading on the
-  sun (refusal streaks inflate the heading covariance, the VO-loss fallback fuses only the
-  kinematic translation) and its cross-track error is smaller than dead reckoning's, but along
-  the track only VO (or a slip model) can help.
 - **SIL-GATE-1**, upper bound (false alarms on `flat-firm` without slip at most 8 %): 8.4 % on
   the SIL seed since accepted kinematic intervals are fused with a crab allowance on their
   lateral translation that scales with the cross slope (`docs/estimation.md`, section Crab
