@@ -13,7 +13,8 @@
 //!   the procedural albedo texture.
 //! - [`world`]: the truth state and its step; [`hal_devices`]: the HAL devices on it.
 //! - [`driver`]: the simulator's reference driver (not flight code).
-//! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
+//! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs;
+//!   [`plot`]: the report figures (plotters, SVG) and their geometry checks.
 //! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
 //! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
 //!   policy (`docs/slip-detection.md`).
@@ -28,6 +29,7 @@ pub mod devices;
 pub mod driver;
 pub mod hal_devices;
 pub mod output;
+pub mod plot;
 pub mod record;
 pub mod render;
 pub mod replay;

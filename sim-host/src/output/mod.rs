@@ -65,6 +65,9 @@ pub fn write_all(dir: &Path, run: &RunResult) -> anyhow::Result<summary::Summary
         dir.join("summary.json"),
         serde_json::to_string_pretty(&s)? + "\n",
     )?;
-    std::fs::write(dir.join("report.html"), crate::report::report_html(run, &s))?;
+    std::fs::write(
+        dir.join("report.html"),
+        crate::report::report_html(run, &s)?,
+    )?;
     Ok(s)
 }
