@@ -14,7 +14,8 @@
 //! - [`world`]: the truth state and its step; [`hal_devices`]: the HAL devices on it.
 //! - [`driver`]: the simulator's reference driver (not flight code).
 //! - [`hazards`]: the truth-side hazard check (collisions of the rover with rocks and blocks).
-//! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
+//! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs;
+//!   [`plot`]: the report figures (plotters, SVG) and their geometry checks.
 //! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
 //! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
 //!   policy (`docs/slip-detection.md`).
@@ -30,6 +31,7 @@ pub mod driver;
 pub mod hal_devices;
 pub mod hazards;
 pub mod output;
+pub mod plot;
 pub mod record;
 pub mod render;
 pub mod replay;

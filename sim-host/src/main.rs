@@ -257,7 +257,7 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
     let mut results = Vec::new();
     for (label, no_comp) in [("with compensation", false), ("without compensation", true)] {
         let dir = out.join(if no_comp { "no-comp" } else { "comp" });
-        let summary = run_scenario(RunRequest {
+        let (summary, result) = run_scenario(RunRequest {
             path: path.clone(),
             seed,
             out: Some(dir.clone()),
@@ -272,7 +272,7 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
             slip_model: None,
             quiet: true,
         })?;
-        results.push((label, dir, summary));
+        results.push((label, dir, summary, result));
     }
     println!();
     println!("  {:<30} {:>20} {:>22}", "", results[0].0, results[1].0);
@@ -317,13 +317,23 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
         );
     }
     println!();
-    for (label, dir, _) in &results {
+    for (label, dir, _, _) in &results {
         println!("  {label}: outputs and report.html in {}", dir.display());
     }
+    let figure = out.join("fig9-top-view.svg");
+    std::fs::write(
+        &figure,
+        sim_host::report::compare_figure(&results[0].3, &results[1].3)?,
+    )?;
+    println!(
+        "  H05 Fig. 9 figure (both runs on one equal-scale top view): {}",
+        figure.display()
+    );
     Ok(())
 }
 
-fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
+/// Run one scenario, write its outputs; returns the summary and the run.
+fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunResult)> {
     let RunRequest {
         path,
         seed,
@@ -404,10 +414,10 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
     let summary = sim_host::output::write_all(&out, &result)?;
     if json {
         println!("{}", serde_json::to_string_pretty(&summary)?);
-        return Ok(summary);
+        return Ok((summary, result));
     }
     if quiet {
-        return Ok(summary);
+        return Ok((summary, result));
     }
     let speedup = result.sim_time_s / result.wall_time_s.max(1e-9);
     println!(
@@ -518,7 +528,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<Summary> {
             g.name, g.runs, g.max_us, g.mean_us, g.overruns
         );
     }
-    Ok(summary)
+    Ok((summary, result))
 }
 
 fn sil(out: PathBuf, scenarios: PathBuf) -> anyhow::Result<()> {

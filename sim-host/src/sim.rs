@@ -126,6 +126,12 @@ pub struct Estimates {
     /// Kinematic intervals tested by the gate so far ([`NavCounters::kin_tested`]): a record
     /// whose count is larger than the previous record's carries a new gate decision.
     pub kin_tested: u32,
+    /// Mahalanobis squared distance (NIS) of the last kinematic interval, H04 eq. 46
+    /// (flight telemetry [`fsw::flight::nav::GateStatus::d2`]).
+    pub gate_d2: f64,
+    /// Degrees of freedom of that test; its threshold is
+    /// [`fsw::estimation::gate::chi2_95`] of it (0 before the first test).
+    pub gate_dof: u8,
 }
 
 /// One flight VO relative pose checked against the truth.
@@ -617,6 +623,8 @@ fn estimates<P: Platform>(fsw: &Fsw<P>) -> Option<Estimates> {
         slip: [slip.x_m, slip.y_m, slip.phi_rad],
         gate_accepted: nav.gate().accepted,
         kin_tested: nav.counters().kin_tested,
+        gate_d2: nav.gate().d2,
+        gate_dof: nav.gate().dof,
     })
 }
 

@@ -9,11 +9,16 @@
 //! - `cargo xtask fuzz --frames N [--seed S] [--no-vo]`: the seeded adversarial-HAL fuzzer of
 //!   the flight software (crate `fuzz-hal`, `docs/fault-protection.md` "Fuzzing"); a short run
 //!   ([`FUZZ_TEST_FRAMES`] frames) is a step of `test`.
+//! - `cargo xtask report`: the per-run output checks ([`report::report_checks`]): a real run of
+//!   `slope-10-cross`, `evo_ape`/`evo_rpe` with default options on every TUM output, and
+//!   headless-Chromium screenshots of its `report.html` and of the main command's H05 Fig. 9
+//!   figure (installs `chromium` and evo when missing). Also a step of `test`.
 //! - `cargo xtask timing`: timing analysis on the rover CPU model (instruction counts per task,
 //!   utilisation, response times, stack, memory, panic sites) and the bit-identical host/target
 //!   replay check; writes `docs/timing.md`. Also the last step of `test`.
 
 mod elf;
+mod report;
 mod timing;
 
 use anyhow::{bail, Context, Result};
@@ -42,17 +47,21 @@ fn main() -> Result<()> {
             qemu_run().map(|_| ())
         }
         Some("fuzz") => fuzz(&args[1..]),
+        Some("report") => report::report_checks(),
         Some("timing") => {
             setup()?;
             timing::timing()
         }
         _ => {
-            eprintln!("usage: cargo xtask <test|setup|qemu|fuzz|timing>");
+            eprintln!("usage: cargo xtask <test|setup|qemu|fuzz|report|timing>");
             eprintln!("  test   everything CI checks (does its own setup first)");
             eprintln!("  setup  add the {TARGET} target and install qemu-system-arm if missing");
             eprintln!("  qemu   build the rover-CPU image and run it in QEMU {QEMU_MACHINE}");
             eprintln!(
                 "  fuzz   --frames N [--seed S] [--no-vo]: adversarial-HAL fuzzer of the flight software"
+            );
+            eprintln!(
+                "  report evo on every TUM output of a run, headless-Chromium screenshots of the reports"
             );
             eprintln!("  timing timing analysis on the rover CPU model, writes docs/timing.md");
             bail!("unknown or missing command")
@@ -186,6 +195,10 @@ fn test() -> Result<()> {
 
     let t = step("host tests (unit, SIL, doc)");
     run(cargo().args(["test", "--workspace", "--release"]))?;
+    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    let t = step("per-run outputs: evo on every TUM file, headless-Chromium report screenshots");
+    report::report_checks()?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
 
     let t = step("adversarial-HAL fuzzer, short run");

@@ -12,10 +12,13 @@ pub fn write_all(dir: &Path, run: &RunResult) -> anyhow::Result<summary::Summary
     std::fs::create_dir_all(dir)?;
     std::fs::write(
         dir.join("truth.tum"),
-        tum::tum_text(
-            &format!("truth of {} seed {}", run.scenario, run.seed),
+        tum::truth_tum_text(
+            &format!(
+                "truth of {} seed {} at every estimate stamp (20 Hz records and VO captures)",
+                run.scenario, run.seed
+            ),
             &run.records,
-            tum::Trajectory::Truth,
+            &run.vo_checks,
         ),
     )?;
     for which in tum::Trajectory::ESTIMATES {
@@ -62,6 +65,9 @@ pub fn write_all(dir: &Path, run: &RunResult) -> anyhow::Result<summary::Summary
         dir.join("summary.json"),
         serde_json::to_string_pretty(&s)? + "\n",
     )?;
-    std::fs::write(dir.join("report.html"), crate::report::report_html(run, &s))?;
+    std::fs::write(
+        dir.join("report.html"),
+        crate::report::report_html(run, &s)?,
+    )?;
     Ok(s)
 }
