@@ -3,10 +3,11 @@
 //! in the slack of its minor frames like the visual odometry ([`crate::vo::pipeline`]).
 //!
 //! Work items ([`MapWork`]): image check (8: four row bands of each image), wedge (one per
-//! candidate half-angle, [`WEDGE_CANDIDATES`], [`Footprint::wedge_candidate`]), sample (one stereo match and triangulation, after
-//! skipping at most [`SKIP_PER_ITEM`] lattice points outside the images), classify (one grid
-//! row), obstacle (one connected component: flood fill, hull, growth), finish (1). The sequence of
-//! items depends only on the inputs.
+//! candidate half-angle, [`WEDGE_CANDIDATES`], [`Footprint::wedge_candidate`]), sample (one
+//! stereo match and triangulation, after skipping at most [`SKIP_PER_ITEM`] lattice points
+//! outside the images), classify (one grid row), obstacle (one connected component: flood fill,
+//! hull, growth), finish (1). The sequence of items depends only on the inputs, so a map is
+//! bit-identical for any work budget.
 
 use super::footprint::{Footprint, WEDGE_CANDIDATES};
 use super::grid::{cell_of, TerrainGrid};
@@ -26,7 +27,7 @@ use rover_hal::{StereoCalibration, StereoFrame};
 /// Lattice points outside the images skipped by one sample work item at most.
 pub const SKIP_PER_ITEM: u16 = 64;
 /// Occluded cells behind a hazard cell added to its obstacle (0.3 m: the hidden half of a rock
-/// as deep as the 0.6 m the rover's half-width is).
+/// 0.6 m deep; a rock is taken to be about as deep as it is wide).
 pub const SHADOW_CELLS: u8 = 3;
 
 /// The kinds of work item of a map, in pipeline order (index into
@@ -123,7 +124,7 @@ pub struct HazardMapper {
     phase: Phase,
     frame_t_us: u64,
     frame_sequence: u32,
-    /// Best wedge so far and its area (m^2 rad).
+    /// Best wedge so far and its area (m^2).
     wedge: (f64, Wedge),
     /// Range from the wedge's apex below which every kept obstacle lies (cut when an obstacle
     /// is dropped), m.

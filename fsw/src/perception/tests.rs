@@ -120,15 +120,33 @@ fn height_errors(run: &Run, scene: &Scene) -> Vec<(f64, usize, f64, f64)> {
     bands
 }
 
-/// PERC-1: textured level ground, rover level at two poses: no hazard, no obstacle, the wedge
-/// covered by points, cell heights within a few cm of the truth at every range.
+/// Adds Gaussian noise of `sigma` grey levels (rounded, clipped) to an image.
+fn add_noise(image: &mut [u8], sigma: f64, seed: u64) {
+    use rand_distr::{Distribution, Normal};
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, sigma).unwrap();
+    for p in image.iter_mut() {
+        *p = (f64::from(*p) + noise.sample(&mut rng))
+            .round()
+            .clamp(0.0, 255.0) as u8;
+    }
+}
+
+/// PERC-1: textured level ground, rover level at two poses (the second with 2 grey levels of
+/// image noise): no hazard, no obstacle, the wedge covered by points, cell heights within a few
+/// cm of the truth at every range.
 #[test]
 fn perc_1_flat_ground_has_no_hazards() {
-    for (yaw, x, y) in [(0.0, 0.0, 0.0), (37.0, 5.0, -3.0)] {
+    for (yaw, x, y, noise) in [(0.0, 0.0, 0.0, 0.0), (37.0, 5.0, -3.0, 2.0)] {
         let pose = level_rover(yaw, x, y);
         let scene = Scene::default();
-        let run = map_scene(&scene, &pose);
-        print_map("PERC-1 flat", &run);
+        let (mut left, mut right) = render(&scene, &pose, &crate::vo::rocky8_hazcam());
+        if noise > 0.0 {
+            add_noise(&mut left, noise, 1);
+            add_noise(&mut right, noise, 2);
+        }
+        let run = map_images(&left, &right, &pose, PerceptionConfig::default());
+        print_map(&format!("PERC-1 flat, noise {noise}"), &run);
         assert_eq!(run.result, Ok(()));
         let map = run.map();
         assert!(map.obstacles.is_empty());
@@ -851,5 +869,49 @@ fn perc_dump_scenes() {
         let (l, r) = render(&scene, &pose, &crate::vo::rocky8_hazcam());
         std::fs::write(format!("{dir}/{name}_left.raw"), &l).unwrap();
         std::fs::write(format!("{dir}/{name}_right.raw"), &r).unwrap();
+    }
+}
+
+/// PERC-12: the step threshold (0.10 m) in both directions, and an obstacle taller than the
+/// disparity window (0.45 m above the prior): 0.4 m wide boxes of 0.12 m and 0.6 m at 2 m are
+/// obstacles, a box of 0.07 m and a dome of 0.08 m are not.
+#[test]
+fn perc_12_detection_limits() {
+    let pose = level_rover(0.0, 0.0, 0.0);
+    let block = |height: f64| Solid::Block {
+        min: [1.8, 0.1],
+        max: [2.2, 0.5],
+        height,
+    };
+    let cases = [
+        ("box 0.12 m", block(0.12), true),
+        ("box 0.60 m", block(0.6), true),
+        ("box 0.07 m", block(0.07), false),
+        (
+            "dome 0.08 m",
+            Solid::Hemisphere {
+                centre: [2.0, 0.3],
+                radius: 0.08,
+            },
+            false,
+        ),
+    ];
+    for (name, solid, obstacle) in cases {
+        let scene = Scene {
+            ramp: None,
+            solids: vec![solid],
+        };
+        let run = map_scene(&scene, &pose);
+        assert_eq!(run.result, Ok(()));
+        let map = run.map();
+        println!(
+            "PERC-12 {name}: {} hazard cells, {} obstacles",
+            map.counts.cells_hazard,
+            map.obstacles.len()
+        );
+        assert_eq!(map.obstacles.len(), usize::from(obstacle), "{name}");
+        if obstacle {
+            assert!(map.obstacles[0].contains([2.0, 0.3]), "{name}");
+        }
     }
 }
