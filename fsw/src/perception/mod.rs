@@ -42,6 +42,8 @@ pub mod obstacles;
 mod render;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_obstacles;
 
 pub use footprint::Footprint;
 pub use grid::{CellClass, GridFrame, TerrainGrid};
