@@ -18,6 +18,9 @@
 //!   updates, Mahalanobis slip gate, sun sensor, zero-velocity updates; H04 sec. 4, RB).
 //! - [`flight`]: the top-level [`flight::Fsw`] that owns all state and runs one minor frame per
 //!   [`flight::Fsw::tick`].
+//! - [`perception`]: hazard map from the hazcam pair (V99 sec. 4): stereo ranging over a
+//!   ground lattice, terrain grid classified by step, slope and roughness, obstacles as grown
+//!   convex polygons and the visible wedge for the RoverBug planner.
 //! - [`kinematics`]: rocker-bogie kinematics of Rocky 8 (H04 sec. 3, App. A): D-H model,
 //!   contact points, wheel Jacobians, forward/inverse kinematics, vehicle odometry, planar model.
 //! - [`types`]: shared math types ([`types::RelativePose`]).
@@ -53,6 +56,7 @@ pub mod flight;
 pub mod guidance;
 pub mod kinematics;
 pub mod linalg;
+pub mod perception;
 pub mod telemetry;
 pub mod types;
 pub mod vo;

@@ -34,7 +34,7 @@ pub mod track;
 #[cfg(test)]
 mod middlebury_tests;
 #[cfg(test)]
-mod render;
+pub(crate) mod render;
 #[cfg(test)]
 mod tests;
 
