@@ -67,7 +67,7 @@ pub struct ObstacleMemory {
 impl ObstacleMemory {
     /// An empty memory whose polygons are inflated by `clearance_m` (m, finite, at least 0;
     /// other values are taken as 0).
-    pub fn new(clearance_m: f64) -> Self {
+    pub const fn new(clearance_m: f64) -> Self {
         let clearance_m = if clearance_m.is_finite() && clearance_m >= 0.0 {
             clearance_m
         } else {
@@ -79,7 +79,13 @@ impl ObstacleMemory {
             component: [0; MEMORY_CAPACITY],
             clearance_m,
             components_stale: false,
-            stats: MemoryStats::default(),
+            stats: MemoryStats {
+                added: 0,
+                merged: 0,
+                evicted: 0,
+                dropped: 0,
+                rejected: 0,
+            },
         }
     }
 

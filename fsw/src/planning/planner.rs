@@ -73,22 +73,28 @@ pub struct PlannerConfig {
 
 impl Default for PlannerConfig {
     fn default() -> Self {
-        Self {
-            goal_tolerance_m: 0.1,
-            clearance_m: 0.05,
-            progress_epsilon_m: 0.05,
-            gaze_margin_rad: 5.0 * PI / 180.0,
-            min_drive_m: 0.05,
-            max_consecutive_gazes: 8,
-            switch_margin_m: 0.5,
-            max_follow_m: 500.0,
-        }
+        Self::DEFAULT
     }
 }
 
 impl PlannerConfig {
-    fn valid(&self) -> bool {
-        let pos = |v: f64| v.is_finite() && v > 0.0;
+    /// The defaults: 0.1 m goal tolerance, 5 cm clearance and progress margin, 5 deg gaze
+    /// margin, 5 cm minimum drive, 8 gazes, 0.5 m switch margin, 500 m follow limit.
+    pub const DEFAULT: Self = Self {
+        goal_tolerance_m: 0.1,
+        clearance_m: 0.05,
+        progress_epsilon_m: 0.05,
+        gaze_margin_rad: 5.0 * PI / 180.0,
+        min_drive_m: 0.05,
+        max_consecutive_gazes: 8,
+        switch_margin_m: 0.5,
+        max_follow_m: 500.0,
+    };
+
+    const fn valid(&self) -> bool {
+        const fn pos(v: f64) -> bool {
+            v.is_finite() && v > 0.0
+        }
         pos(self.goal_tolerance_m)
             && self.clearance_m.is_finite()
             && self.clearance_m >= 0.0
@@ -207,6 +213,8 @@ pub struct PlannerCounters {
     pub ltg_solves: u32,
     /// Largest number of segment checks in one LTG solution.
     pub max_segment_checks: u32,
+    /// Largest number of node pairs examined in one LTG solution.
+    pub max_ltg_pairs: u32,
 }
 
 /// What the planner hands to the flight loop.
@@ -404,8 +412,10 @@ fn component_arc(memory: &ObstacleMemory, label: u8, p: Point2) -> Arc {
 }
 
 impl Planner {
-    /// A planner with an empty memory and no goal. Refuses an invalid configuration.
-    pub fn new(config: PlannerConfig) -> Result<Self, PlanError> {
+    /// A planner with an empty memory and no goal. Refuses an invalid configuration. `const`, so
+    /// that the flight image can place the 33 KiB state in a static without passing it through
+    /// the stack.
+    pub const fn new(config: PlannerConfig) -> Result<Self, PlanError> {
         if !config.valid() {
             return Err(PlanError::BadConfig);
         }
@@ -422,7 +432,20 @@ impl Planner {
             last_position: None,
             committed: Vec::new(),
             consecutive_gazes: 0,
-            counters: PlannerCounters::default(),
+            counters: PlannerCounters {
+                calls: 0,
+                replans: 0,
+                gazes: 0,
+                follow_entries: 0,
+                follow_resumes: 0,
+                follow_exits: 0,
+                follow_restarts: 0,
+                escapes: 0,
+                local_overflows: 0,
+                ltg_solves: 0,
+                max_segment_checks: 0,
+                max_ltg_pairs: 0,
+            },
         })
     }
 
@@ -712,10 +735,10 @@ impl Planner {
         let polys = local_refs(&self.memory, &self.local);
         self.ltg.solve(start, &polys, self.memory.inflated());
         self.counters.ltg_solves = self.counters.ltg_solves.saturating_add(1);
-        self.counters.max_segment_checks = self
-            .counters
-            .max_segment_checks
-            .max(self.ltg.stats().segment_checks);
+        let stats = self.ltg.stats();
+        self.counters.max_segment_checks =
+            self.counters.max_segment_checks.max(stats.segment_checks);
+        self.counters.max_ltg_pairs = self.counters.max_ltg_pairs.max(stats.pairs);
     }
 
     /// The LTG node of a followed-obstacle vertex, re-solving with its polygon included when

@@ -619,10 +619,14 @@ fn pln_6_step_defined_responses() {
     assert_eq!(last, PlanStatus::Blocked(BlockedReason::GazeLimit));
 }
 
+/// The planner can be built in a static (const constructor, no pass through the stack).
+static STATIC_PLANNER: Result<Planner, PlanError> = Planner::new(PlannerConfig::DEFAULT);
+
 /// PLN-6: `size_of` of the planner state and the worst-case loop counts are within the
 /// figures published in `docs/planning.md`.
 #[test]
 fn pln_6_memory_footprint() {
+    assert!(STATIC_PLANNER.is_ok());
     let planner = core::mem::size_of::<Planner>();
     let ltg = core::mem::size_of::<LocalTangentGraph>();
     let memory = core::mem::size_of::<ObstacleMemory>();
@@ -632,4 +636,41 @@ fn pln_6_memory_footprint() {
     );
     assert!(planner < 40_000, "{planner}");
     assert!(output < 512, "{output}");
+}
+
+/// PLN-6: a worst-case scene (32 remembered 12-gons within range, more than the LTG holds):
+/// one step stays within the analytic bounds of `docs/planning.md` (LTG node pairs at most
+/// MAX_NODES^2 / 2, at most two LTG solutions per step) and reports the local overflow.
+#[test]
+fn pln_6_worst_case_work() {
+    let mut p = Planner::new(PlannerConfig::DEFAULT).unwrap();
+    p.set_goal([30.0, 0.0]).unwrap();
+    let mut rocks = Vec::new();
+    for i in 0..8 {
+        for j in 0..4 {
+            let c = [
+                1.0 + 0.55 * i as f64,
+                -2.0 + 1.3 * j as f64 + 0.2 * (i % 2) as f64,
+            ];
+            rocks.push(regular(c, 0.25, 12, 0.1 * (i + j) as f64));
+        }
+    }
+    let w = wedge_at([0.0, 0.0], 0.0);
+    let out = p.plan([0.0, 0.0], 0.0, &w, &rocks).unwrap();
+    let c = p.counters();
+    println!(
+        "worst case: status {:?}, memory {}, LTG solves {}, pairs {}, segment checks {}, local overflows {}",
+        out.status,
+        p.memory().len(),
+        c.ltg_solves,
+        c.max_ltg_pairs,
+        c.max_segment_checks,
+        c.local_overflows
+    );
+    assert_eq!(p.memory().len(), MEMORY_CAPACITY);
+    assert!(c.local_overflows >= 1);
+    assert!(c.ltg_solves <= 2);
+    assert!(c.max_ltg_pairs as usize <= MAX_NODES * MAX_NODES / 2);
+    assert!(c.max_segment_checks <= c.max_ltg_pairs);
+    assert!(matches!(out.status, PlanStatus::Driving | PlanStatus::Gaze));
 }

@@ -47,6 +47,32 @@ fn sense(world: &World, wedge: &Wedge) -> Vec<ConvexPolygon> {
         .collect()
 }
 
+/// One line per planning call (`PLANNING_TRACE=<world name>`), for diagnosis.
+fn trace_line(pos: Point2, heading: f64, out: &PlannerOutput) -> String {
+    let r = |p: Point2| {
+        [
+            (p[0] * 100.0).round() / 100.0,
+            (p[1] * 100.0).round() / 100.0,
+        ]
+    };
+    format!(
+        "pos {:?} hdg {:.0} -> {:?} {:?} sub {:?} gaze {:?} h {:.2} reach {:.2} dmin {:.2} \
+         path {:?}",
+        r(pos),
+        heading.to_degrees(),
+        out.status,
+        out.mode,
+        out.subgoal.map(r),
+        out.gaze_heading_rad.map(|g| g.to_degrees().round()),
+        out.heuristic_m,
+        out.d_reach_m,
+        out.d_min_m,
+        out.path
+            .as_ref()
+            .map(|p| p.waypoints().iter().map(|w| r(*w)).collect::<Vec<_>>())
+    )
+}
+
 /// Drives the kinematic rover in `world` until the planner gives a verdict or `max_plans`
 /// planning calls have been made.
 pub(super) fn run(world: &World, replan_m: f64, max_plans: usize) -> Run {
@@ -71,38 +97,7 @@ pub(super) fn run(world: &World, replan_m: f64, max_plans: usize) -> Run {
         let seen = sense(world, &wedge);
         let out = planner.plan(pos, heading, &wedge, &seen).unwrap();
         if std::env::var("PLANNING_TRACE").is_ok_and(|v| v == world.name) {
-            println!(
-                "pos [{:.2}, {:.2}] hdg {:.0} -> {:?} {:?} sub {:?} gaze {:?} h {:.2} reach {:.2} dmin {:.2} path {:?}",
-                pos[0], pos[1], heading.to_degrees(), out.status, out.mode,
-                out.subgoal.map(|p| [(p[0] * 100.0).round() / 100.0, (p[1] * 100.0).round() / 100.0]),
-                out.gaze_heading_rad.map(|g| g.to_degrees().round()),
-                out.heuristic_m, out.d_reach_m, out.d_min_m,
-                out.path.as_ref().map(|p| p.waypoints().iter().map(|w| [(w[0] * 100.0).round() / 100.0, (w[1] * 100.0).round() / 100.0]).collect::<Vec<_>>())
-            );
-            if std::env::var("PLANNING_MEMORY").is_ok() {
-                if std::env::var("PLANNING_FULL").is_ok() {
-                    for (i, g) in planner.memory().inflated().iter().enumerate() {
-                        if dist(g.center(), pos) < 2.0 {
-                            println!("  infl {i} {:?}", g.vertices());
-                            println!("  grown {i} {:?}", planner.memory().grown()[i].vertices());
-                        }
-                    }
-                    println!("  exact pos {:?}", pos);
-                }
-                for (i, g) in planner.memory().grown().iter().enumerate() {
-                    let v: Vec<_> = g
-                        .vertices()
-                        .iter()
-                        .map(|w| {
-                            [
-                                (w[0] * 100.0).round() / 100.0,
-                                (w[1] * 100.0).round() / 100.0,
-                            ]
-                        })
-                        .collect();
-                    println!("  mem {i} c{} {:?}", planner.memory().component(i), v);
-                }
-            }
+            println!("{}", trace_line(pos, heading, &out));
         }
         status = out.status;
         overflows = out.memory_overflows;
@@ -194,15 +189,18 @@ fn svg(world: &World, run: &Run) -> String {
 
 fn report(world: &World, run: &Run) {
     let straight = dist(world.start, world.goal);
+    let optimal = full_knowledge_shortest(world);
     println!(
-        "{}: {:?} after {:.2} m (straight line {:.2} m, ratio {:.2}), min clearance {:.3} m, \
-         collisions {}, plans {}, replans {}, gazes {}, follow entries {} resumes {} exits {}, \
-         memory {} polygons, overflows {}, max segment checks {}, final {:?}",
+        "{}: {:?} after {:.2} m (straight line {:.2} m, ratio {:.2}; full-knowledge shortest \
+         {:.2} m), min clearance {:.3} m, collisions {}, plans {}, replans {}, gazes {}, follow \
+         entries {} resumes {} exits {}, memory {} polygons, overflows {}, max LTG pairs {}, \
+         max segment checks {}, final {:?}",
         world.name,
         run.status,
         run.length_m,
         straight,
         run.length_m / straight,
+        optimal,
         run.min_clearance_m,
         run.collisions,
         run.counters.calls,
@@ -213,6 +211,7 @@ fn report(world: &World, run: &Run) {
         run.counters.follow_exits,
         run.memory_len,
         run.overflows,
+        run.counters.max_ltg_pairs,
         run.counters.max_segment_checks,
         run.final_position,
     );
