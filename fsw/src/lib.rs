@@ -23,6 +23,8 @@
 //!   convex polygons and the visible wedge for the RoverBug planner.
 //! - [`kinematics`]: rocker-bogie kinematics of Rocky 8 (H04 sec. 3, App. A): D-H model,
 //!   contact points, wheel Jacobians, forward/inverse kinematics, vehicle odometry, planar model.
+//! - [`planning`]: RoverBug path planning (V99 sec. 4): local tangent graph over convex obstacle
+//!   polygons, motion-to-goal and boundary following with virtual sliding and gaze control.
 //! - [`types`]: shared math types ([`types::RelativePose`]).
 //! - [`guidance`]: carrot heading and slip-compensation loops (H04 sec. 5, H05 sec. V).
 //! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
@@ -57,6 +59,7 @@ pub mod guidance;
 pub mod kinematics;
 pub mod linalg;
 pub mod perception;
+pub mod planning;
 pub mod telemetry;
 pub mod types;
 pub mod vo;
