@@ -235,8 +235,23 @@ pub struct RunResult {
     /// Closest approach of the rover footprint to a hazard footprint, m (`None` without
     /// hazards).
     pub hazard_min_distance_m: Option<f64>,
+    /// The goal-directed drive (hazard maps and RoverBug), when the scenario asked for it.
+    pub planner: Option<PlannerRun>,
     /// Wall-clock seconds of the run.
     pub wall_time_s: f64,
+}
+
+/// What the flight software's hazard maps and RoverBug planner did in a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannerRun {
+    /// The planner's verdict at the end.
+    pub verdict: fsw::flight::nav::hazard_nav::PlannerVerdict,
+    /// Hazard-navigation counters (maps, paths, gazes, holds).
+    pub hazard: fsw::flight::nav::hazard_nav::HazardCounters,
+    /// Planner counters (replans, boundary following).
+    pub planner: Option<fsw::planning::PlannerCounters>,
+    /// Straight-line distance from the start to the goal, m.
+    pub straight_line_m: f64,
 }
 
 /// Hooks into a run (used by `record`): wrap the simulated devices before the flight software
@@ -459,6 +474,15 @@ pub fn run_with<H: RunHooks>(
             .min_distance_m
             .is_finite()
             .then_some(hazard_monitor.min_distance_m),
+        planner: (scenario.navigation == crate::scenario::NavigationKind::Roverbug).then(|| {
+            let (a, b) = (scenario.waypoints[0], end);
+            PlannerRun {
+                verdict: fsw.nav().planner_verdict(),
+                hazard: fsw.nav().hazard_counters(),
+                planner: fsw.nav().planner_counters(),
+                straight_line_m: (b[0] - a[0]).hypot(b[1] - a[1]),
+            }
+        }),
         wall_time_s: start.elapsed().as_secs_f64(),
     })
 }
@@ -502,6 +526,9 @@ pub struct Mission {
     pub slip_limit: f64,
     /// Largest horizontal position sigma the ground accepts for the drive (fault protection), m.
     pub max_position_sigma_m: f64,
+    /// "Go to the last waypoint, avoiding hazards" (RoverBug, V99 sec. 4) instead of "follow
+    /// the waypoints".
+    pub goal_directed: bool,
 }
 
 impl Mission {
@@ -538,6 +565,7 @@ impl Mission {
             goal_tolerance_m: scenario.goal_tolerance_m,
             slip_limit: scenario.slip_limit,
             max_position_sigma_m: scenario.max_position_sigma_m,
+            goal_directed: scenario.navigation == crate::scenario::NavigationKind::Roverbug,
         }
     }
 }
@@ -560,6 +588,7 @@ pub fn flight_config(scenario: &Scenario, options: DriveOptions) -> FswConfig {
     nav.protection.arrival_tolerance_m = mission.goal_tolerance_m;
     nav.protection.slip_limit = mission.slip_limit;
     nav.protection.max_position_sigma_m = mission.max_position_sigma_m;
+    nav.hazard_avoidance = mission.goal_directed;
     config
 }
 

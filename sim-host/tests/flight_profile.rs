@@ -46,6 +46,8 @@ fn flight_configuration_is_the_nominal_profile_plus_the_plan() {
         expected.nav.protection.arrival_tolerance_m = scenario.goal_tolerance_m;
         expected.nav.protection.slip_limit = scenario.slip_limit;
         expected.nav.protection.max_position_sigma_m = scenario.max_position_sigma_m;
+        expected.nav.hazard_avoidance =
+            scenario.navigation == sim_host::scenario::NavigationKind::Roverbug;
         expected.nav.guidance.cruise_speed_m_s = scenario
             .speed_m_s
             .min(expected.nav.guidance.max_wheel_speed_m_s);

@@ -139,6 +139,8 @@ pub struct Summary {
     pub collisions: u32,
     /// The truth-side hazard check in detail.
     pub hazards: HazardSummary,
+    /// The goal-directed drive (hazard maps and RoverBug; null for a path drive).
+    pub planner: Option<PlannerSummary>,
     /// Slip.
     pub slip: SlipSummary,
     /// VO.
@@ -178,6 +180,31 @@ pub struct HazardSummary {
     pub min_distance_m: Option<f64>,
     /// Each collision: simulated time, s, and the hazard's centre (north, east), m.
     pub contacts: Vec<HazardContact>,
+}
+
+/// The goal-directed drive of a run (issue 16).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PlannerSummary {
+    /// `reached`, `unreachable`, `blocked` or `driving` (the planner's verdict at the end).
+    pub status: String,
+    /// Planner replans (changes of route).
+    pub replans: u32,
+    /// Planner steps (one per hazard map).
+    pub steps: u32,
+    /// Boundary-following episodes.
+    pub boundary_following: u32,
+    /// True path length of the rover, m.
+    pub path_length_m: f64,
+    /// Straight line from start to goal, m.
+    pub straight_line_m: f64,
+    /// Hazard maps made, and failed.
+    pub maps: u32,
+    /// Hazard maps that failed (perception errors).
+    pub map_errors: u32,
+    /// Gaze turns.
+    pub gazes: u32,
+    /// RG2 cycles held still waiting for a map.
+    pub hold_cycles: u32,
 }
 
 /// One truth-side collision.
@@ -377,6 +404,24 @@ pub fn summarise(run: &RunResult) -> Summary {
                 })
                 .collect(),
         },
+        planner: run.planner.as_ref().map(|p| PlannerSummary {
+            status: match p.verdict {
+                fsw::flight::nav::hazard_nav::PlannerVerdict::Driving => "driving",
+                fsw::flight::nav::hazard_nav::PlannerVerdict::Reached => "reached",
+                fsw::flight::nav::hazard_nav::PlannerVerdict::Unreachable => "unreachable",
+                fsw::flight::nav::hazard_nav::PlannerVerdict::Blocked => "blocked",
+            }
+            .to_string(),
+            replans: p.planner.map_or(0, |c| c.replans),
+            steps: p.planner.map_or(0, |c| c.calls),
+            boundary_following: p.planner.map_or(0, |c| c.follow_entries),
+            path_length_m: run.distance_m,
+            straight_line_m: p.straight_line_m,
+            maps: p.hazard.maps,
+            map_errors: p.hazard.map_errors,
+            gazes: p.hazard.gazes,
+            hold_cycles: p.hazard.holds,
+        }),
         slip: SlipSummary {
             gate_reject_fraction: (run.nav.kin_tested > 0)
                 .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),

@@ -59,6 +59,19 @@ impl Navigator {
         if self.blind_stop_due() {
             return None;
         }
+        // Goal-directed driving: hold for a map, or turn in place for a gaze (V99 sec. 4).
+        if self.config.hazard_avoidance && !self.hazard_on() {
+            self.counters.command_errors = self.counters.command_errors.saturating_add(1);
+            return None;
+        }
+        match self.hazard_command() {
+            Some(None) => return None,
+            Some(Some(turn)) => {
+                let joints = self.last_joints?;
+                return self.motor_command(turn, &joints);
+            }
+            None => {}
+        }
         let (ekf, guidance, joints) = match (
             self.ekf_running.then_some(&self.ekf),
             self.guidance.as_mut(),
@@ -93,6 +106,10 @@ impl Navigator {
         };
         self.last_guidance = Some(out);
         if out.goal_reached {
+            // The end of a planned path short of the goal: hold and map again.
+            if self.hazard_subgoal_reached() {
+                return None;
+            }
             let p = &self.config.protection;
             if out.goal_distance_m + p.arrival_sigmas * sigma_h <= p.arrival_tolerance_m {
                 self.mode = NavMode::Arrived;
@@ -101,13 +118,24 @@ impl Navigator {
             }
             return None;
         }
-        let mut cmd = VehicleCommand {
+        let cmd = VehicleCommand {
             x_dot_m_s: out.x_dot_m_s,
             y_dot_m_s: out.y_dot_m_s,
             yaw_rate_rad_s: out.phi_dot_rad_s,
         };
+        self.motor_command(cmd, &joints)
+    }
+
+    /// The body command `cmd` (rover frame) scaled to the wheel-rate limit and turned into
+    /// wheel commands by inverse kinematics (eq. 16-25) at the suspension state of `joints`;
+    /// `None` (counted) when the kinematics fails.
+    fn motor_command(
+        &mut self,
+        mut cmd: VehicleCommand,
+        joints: &JointState,
+    ) -> Option<MobilityCommand> {
         let geometry = &self.config.geometry;
-        let state = SuspensionState::from_joints(&joints);
+        let state = SuspensionState::from_joints(joints);
         let limit = geometry.limits.wheel_rate_rad_s;
         match max_speed_scale(geometry, &state, &cmd, limit) {
             Ok(k) if k < 1.0 => {

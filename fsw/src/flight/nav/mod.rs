@@ -40,6 +40,7 @@
 mod align;
 mod diagnostics;
 mod guidance_adapter;
+pub mod hazard_nav;
 mod kin_aiding;
 pub mod protection;
 mod radius;
@@ -181,6 +182,17 @@ pub struct NavConfig {
     /// Sun readings refused by the sun's gate in a row after which the heading covariance is
     /// inflated (see [`Navigator::sun`]).
     pub sun_streak: u32,
+    /// Goal-directed driving with hazard avoidance (V99 sec. 4, [`hazard_nav`]): the last
+    /// waypoint is the goal; hazard maps from the hazcams feed the RoverBug planner, whose paths
+    /// replace the guidance path. Off: the waypoints are followed as a path.
+    pub hazard_avoidance: bool,
+    /// Hazard mapping from the hazcam pair ([`crate::perception`]).
+    pub perception: crate::perception::PerceptionConfig,
+    /// RoverBug planner ([`crate::planning`]).
+    pub planner: crate::planning::PlannerConfig,
+    /// EKF travel between hazard maps while driving a planned path, m (the hazcams see about
+    /// 0.3-2.8 m ahead, so a map each metre keeps the next obstacle in view twice).
+    pub map_interval_m: f64,
     /// Stop-and-go without VO (RB sec. 5, H04 sec. 2): while VO is off or lost, the rover stops
     /// after every `blind_stop_interval_m` of wheel travel for [`Self::blind_stop_cycles`], so
     /// that zero-velocity updates re-anchor the IMU velocity; between stops a kinematic
@@ -290,6 +302,22 @@ impl NavConfig {
             // 4 s of rejections with no VO fused: longer than the rover goes without a VO
             // update while slipping with VO alive (a capture every 0.1 m, 1-2 s).
             reject_streak_cycles: 80,
+            hazard_avoidance: false,
+            // The hazard cells of a rock end where its flank is still below the step and slope
+            // limits; its skirt reaches about 0.1 m further (the simulator's smooth caps:
+            // SIL-HAZ-1's truth contact with the default 0.1 m margin), so the margin over the
+            // half-width is 0.2 m.
+            perception: crate::perception::PerceptionConfig {
+                grow_margin_m: 0.3,
+                ..crate::perception::PerceptionConfig::default()
+            },
+            // Guidance follows the planner's polyline with a carrot, which cuts the corners of
+            // a path round an obstacle: the clearance over the grown obstacles covers it.
+            planner: crate::planning::PlannerConfig {
+                clearance_m: 0.15,
+                ..crate::planning::PlannerConfig::default()
+            },
+            map_interval_m: 1.0,
             blind_stop_interval_m: 1.0,
             blind_stop_cycles: 60,
             blind_anchor_cycles: 300,
@@ -510,6 +538,8 @@ pub struct Navigator {
     cycles_since_zupt: u32,
     /// The last EKF error (telemetry: what the `ekf_errors` counter counted last).
     last_ekf_error: Option<EstError>,
+    /// Goal-directed driving with hazard avoidance (built in place by [`Self::start_vo`]).
+    hazard: Option<hazard_nav::HazardNav>,
 }
 
 /// Why the navigator could not be built.
@@ -601,6 +631,7 @@ impl Navigator {
             blind_hold_left: 0,
             cycles_since_zupt: u32::MAX,
             last_ekf_error: None,
+            hazard: None,
         })
     }
 

@@ -33,6 +33,11 @@ pub enum FaultResponse {
     ArrivedUncertain,
     /// A sensor stayed lost for too long.
     SensorLoss,
+    /// The RoverBug planner found the goal unreachable (V99 sec. 4: it went round the
+    /// obstacle that blocks it).
+    GoalUnreachable,
+    /// The RoverBug planner stopped without a verdict (no way on within its limits).
+    PlannerBlocked,
 }
 
 /// Fault-protection limits (constant during a drive).

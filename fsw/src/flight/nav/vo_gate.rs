@@ -176,6 +176,10 @@ impl Navigator {
         let Some(last) = self.last_capture else {
             return Some(CaptureReason::Time);
         };
+        // The rover stands waiting for a hazard map (hazard navigation): at once.
+        if self.map_wanted_now() {
+            return Some(CaptureReason::Time);
+        }
         let elapsed = x.t_us.saturating_sub(last.t_us);
         // VO lost its keyframe (failure, outage): the next VO pose needs a keyframe first, so
         // the next capture is due after the retry interval, whatever the motion.

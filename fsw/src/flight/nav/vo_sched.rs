@@ -17,6 +17,8 @@ pub(super) enum StereoStage {
         clone: Option<CloneHandle>,
         items: u32,
     },
+    /// A hazard map running on the held frame ([`super::hazard_nav`]); `items` work items done.
+    Mapping { items: u32 },
 }
 
 impl Navigator {
@@ -24,7 +26,9 @@ impl Navigator {
     /// Call once after the navigator has reached its final location (a static on the rover
     /// CPU), so that the large state is not copied through the stack by the constructors.
     /// A calibration VO refuses leaves VO off (counted in [`NavCounters::vo_failures`]).
+    /// Also builds the hazard navigation ([`NavConfig::hazard_avoidance`], about 68 KB).
     pub fn start_vo(&mut self) {
+        self.start_hazard_nav();
         if !self.config.vo_enabled || self.vo.is_some() {
             return;
         }
@@ -34,9 +38,12 @@ impl Navigator {
         }
     }
 
-    /// True when VO is running on a frame (the camera frame must stay held).
+    /// True when VO or a hazard map is running on a frame (the camera frame must stay held).
     pub fn vo_busy(&self) -> bool {
-        matches!(self.stereo, StereoStage::Processing { .. })
+        matches!(
+            self.stereo,
+            StereoStage::Processing { .. } | StereoStage::Mapping { .. }
+        )
     }
 
     /// True while a VO result is being replayed from its capture time in background slices
@@ -67,7 +74,7 @@ impl Navigator {
     /// True when a capture may be triggered (VO enabled and idle, no replay in progress,
     /// estimator running).
     pub fn wants_capture(&self) -> bool {
-        self.vo.is_some()
+        (self.vo.is_some() || self.hazard_on())
             && self.ekf_running
             && matches!(self.stereo, StereoStage::Idle)
             && !self.recorder.replaying()
@@ -116,7 +123,7 @@ impl Navigator {
         }
         let clone = match self.stereo {
             StereoStage::Capturing { clone } | StereoStage::Processing { clone, .. } => clone,
-            StereoStage::Idle => None,
+            StereoStage::Idle | StereoStage::Mapping { .. } => None,
         };
         self.release(clone);
         if let Some(vo) = self.vo.as_mut() {
@@ -138,8 +145,14 @@ impl Navigator {
         };
         let prior = self.ekf_relative_pose(self.key_clone, clone);
         let Some(vo) = self.vo.as_mut() else {
-            self.capture_lost();
-            return false;
+            // VO off: the frame serves the hazard map alone (if one is due).
+            let pose = self.clone_pose_of(clone);
+            self.release(clone);
+            self.stereo = StereoStage::Idle;
+            if !self.recorder.replaying() {
+                self.recorder.end();
+            }
+            return self.start_map(frame, pose);
         };
         match vo.start(frame, prior.as_ref()) {
             Ok(()) => {
@@ -153,6 +166,12 @@ impl Navigator {
                 false
             }
         }
+    }
+
+    /// The EKF pose (rotation `R -> N`, position in `N`) of `clone`, if it is live.
+    pub(super) fn clone_pose_of(&self, clone: Option<CloneHandle>) -> Option<(Quat, Vec3)> {
+        let ekf = self.ekf_running.then_some(&self.ekf)?;
+        ekf.clone_pose(clone?).ok()
     }
 
     pub(super) fn vo_keyframe_lost(&mut self) {
@@ -186,6 +205,9 @@ impl Navigator {
     /// Background: advance VO on `frame` by at most `quantum` work items. Returns the items
     /// used and whether the update finished (the caller then releases the frame).
     pub fn vo_step(&mut self, frame: &StereoFrame, quantum: u32) -> (u32, bool) {
+        if let StereoStage::Mapping { items } = self.stereo {
+            return self.map_step(frame, items, quantum);
+        }
         let StereoStage::Processing { clone, items } = self.stereo else {
             return (0, true);
         };
@@ -202,7 +224,13 @@ impl Navigator {
                 (total.saturating_sub(items), false)
             }
             Progress::Finished(result) => {
+                // The capture's pose, for a hazard map of the same frame (before VO's
+                // bookkeeping releases the clone).
+                let pose = self.clone_pose_of(clone);
                 self.vo_finished(clone, result);
+                if self.start_map(frame, pose) {
+                    return (quantum.max(1), false);
+                }
                 (quantum.max(1), true)
             }
         }

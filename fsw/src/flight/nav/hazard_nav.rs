@@ -1,0 +1,379 @@
+//! Goal-directed driving with hazard avoidance (V99 sec. 4): hazard maps from the hazcam pair
+//! ([`crate::perception`]) feed the RoverBug planner ([`crate::planning`]), whose paths replace
+//! the guidance path; guidance keeps its slip compensation (H05).
+//!
+//! - **When a map is made**: on the frame of a stereo capture that VO has just finished with
+//!   (or at once when VO is off), when [`NavConfig::map_interval_m`] of EKF travel has passed
+//!   since the last map, when the rover holds at the end of a planned path, after a gaze turn,
+//!   and before the first drive. The map runs in background work items like VO (the frame
+//!   stays held), with the camera pose of the capture clone.
+//! - **Planning**: each finished map is one RoverBug step at the current EKF pose: `Driving`
+//!   sets a new guidance path (the planner's, from the rover's position), `Gaze` turns the
+//!   rover in place towards the requested heading and maps again, `Reached` ends the drive
+//!   through the arrival check of fault protection, `Unreachable` and `Blocked` stop the rover
+//!   ([`FaultResponse::GoalUnreachable`], [`FaultResponse::PlannerBlocked`]).
+//! - **Holding**: before the first plan and at the end of a planned path short of the goal the
+//!   rover stands and waits for the next map (counted); a map that fails (blank images, too
+//!   few points) is counted and retried at the next capture.
+
+use super::*;
+use crate::perception::{CameraPose, HazardMap, HazardMapper, MapProgress};
+use crate::planning::{ConvexPolygon, PlanStatus, Planner, PlannerOutput, Wedge};
+
+/// Counters of the hazard navigation (telemetry and the simulator's summary).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub struct HazardCounters {
+    /// Hazard maps started.
+    pub maps_started: u32,
+    /// Hazard maps finished with a map.
+    pub maps: u32,
+    /// Hazard maps that failed (perception error: blank or textureless images, too few
+    /// points, bad pose) or could not start.
+    pub map_errors: u32,
+    /// Obstacles of the last map.
+    pub last_obstacles: u32,
+    /// Obstacle polygons of a map the planner refused (degenerate after conversion).
+    pub polygons_refused: u32,
+    /// Planner steps.
+    pub plans: u32,
+    /// Planner steps refused (non-finite pose, invalid wedge).
+    pub plan_errors: u32,
+    /// Paths handed to guidance.
+    pub paths: u32,
+    /// Gaze turns.
+    pub gazes: u32,
+    /// RG2 cycles the rover held still waiting for a map.
+    pub holds: u32,
+}
+
+/// The planner's verdict as the ground sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum PlannerVerdict {
+    /// Driving (or waiting for a map).
+    #[default]
+    Driving,
+    /// Goal reached (planner's tolerance).
+    Reached,
+    /// The goal cannot be reached (RoverBug completed a loop round the blocking obstacle).
+    Unreachable,
+    /// The planner stopped without a verdict.
+    Blocked,
+}
+
+/// State of the goal-directed drive.
+pub(super) struct HazardNav {
+    mapper: HazardMapper,
+    planner: Planner,
+    /// EKF position `[x, y]` (`N`, m) where the last map was started.
+    last_map_xy: Option<[f64; 2]>,
+    /// A map is wanted at the next capture (start, end of a planned path, after a gaze).
+    map_wanted: bool,
+    /// Heading to turn to in place (`Gaze`), rad from north.
+    gaze_rad: Option<f64>,
+    /// At least one path came from the planner.
+    planned: bool,
+    verdict: PlannerVerdict,
+    last_output: Option<PlannerOutput>,
+    counters: HazardCounters,
+}
+
+/// Largest heading error of a gaze turn before the rover maps again, rad.
+const GAZE_TOLERANCE_RAD: f64 = 0.05;
+/// Yaw rate of a gaze turn, rad/s.
+const GAZE_RATE_RAD_S: f64 = 0.1;
+
+impl Navigator {
+    /// Build the hazard mapper and the planner in place (about 68 KB) when
+    /// [`NavConfig::hazard_avoidance`] is on; the goal is the last waypoint of the plan. A
+    /// configuration the mapper refuses leaves the drive held (counted in
+    /// [`NavCounters::command_errors`]) rather than driving blind.
+    pub(super) fn start_hazard_nav(&mut self) {
+        if !self.config.hazard_avoidance || self.hazard.is_some() {
+            return;
+        }
+        let Some(goal) = self.guidance.as_ref().map(|g| g.path().goal()) else {
+            return;
+        };
+        let planner = Planner::new(self.config.planner).and_then(|mut p| {
+            p.set_goal(goal)?;
+            Ok(p)
+        });
+        match (HazardMapper::new(self.config.perception, &self.calibration), planner) {
+            (Ok(mapper), Ok(planner)) => {
+                self.hazard = Some(HazardNav {
+                    mapper,
+                    planner,
+                    last_map_xy: None,
+                    map_wanted: true,
+                    gaze_rad: None,
+                    planned: false,
+                    verdict: PlannerVerdict::Driving,
+                    last_output: None,
+                    counters: HazardCounters::default(),
+                });
+            }
+            // The drive holds without a hazard navigation (`guidance_cycle`).
+            _ => self.counters.command_errors = self.counters.command_errors.saturating_add(1),
+        }
+    }
+
+    /// Counters of the hazard navigation (zero when it is off).
+    pub fn hazard_counters(&self) -> HazardCounters {
+        self.hazard.as_ref().map(|h| h.counters).unwrap_or_default()
+    }
+
+    /// The planner's verdict (`Driving` when hazard avoidance is off).
+    pub fn planner_verdict(&self) -> PlannerVerdict {
+        self.hazard.as_ref().map(|h| h.verdict).unwrap_or_default()
+    }
+
+    /// The planner's counters (replans, gazes, boundary following), if hazard avoidance is on.
+    pub fn planner_counters(&self) -> Option<crate::planning::PlannerCounters> {
+        self.hazard.as_ref().map(|h| h.planner.counters())
+    }
+
+    /// The last planner output, if any.
+    pub fn planner_output(&self) -> Option<&PlannerOutput> {
+        self.hazard.as_ref().and_then(|h| h.last_output.as_ref())
+    }
+
+    /// The last finished hazard map, if any.
+    pub fn hazard_map(&self) -> Option<&HazardMap> {
+        self.hazard.as_ref().and_then(|h| h.mapper.map())
+    }
+
+    /// True when hazard avoidance is on (the mapper and planner were built).
+    pub(super) fn hazard_on(&self) -> bool {
+        self.hazard.is_some()
+    }
+
+    /// True when a hazard map should be made from the next frame.
+    pub(super) fn map_due(&self) -> bool {
+        let Some(h) = self.hazard.as_ref() else {
+            return false;
+        };
+        if !self.ekf_running || h.verdict != PlannerVerdict::Driving {
+            return false;
+        }
+        if h.map_wanted || !h.planned {
+            return true;
+        }
+        let p = self.ekf.state().p_n;
+        match h.last_map_xy {
+            None => true,
+            Some(q) => {
+                let d = libm::sqrt((p.x - q[0]) * (p.x - q[0]) + (p.y - q[1]) * (p.y - q[1]));
+                !(d < self.config.map_interval_m)
+            }
+        }
+    }
+
+    /// True when the rover stands waiting for a map: a capture is due at once.
+    pub(super) fn map_wanted_now(&self) -> bool {
+        self.hazard.as_ref().is_some_and(|h| {
+            h.verdict == PlannerVerdict::Driving && (h.map_wanted || !h.planned) && h.gaze_rad.is_none()
+        })
+    }
+
+    /// Background: start a hazard map on `frame`, taken with the rover at `pose` (rotation
+    /// `R -> N`, position in `N`, from the capture clone). Returns true when the map runs (the
+    /// frame stays held); false when no map is due or it could not start (counted).
+    pub(super) fn start_map(&mut self, frame: &StereoFrame, pose: Option<(Quat, Vec3)>) -> bool {
+        if !self.map_due() {
+            return false;
+        }
+        let xy = {
+            let p = self.ekf.state().p_n;
+            [p.x, p.y]
+        };
+        let calibration = self.calibration;
+        let Some(h) = self.hazard.as_mut() else {
+            return false;
+        };
+        let started = pose
+            .and_then(|(q, p)| {
+                let rot = q.to_rotation_matrix().into_inner();
+                CameraPose::from_rover(&rot, &p, &calibration).ok()
+            })
+            .is_some_and(|camera| h.mapper.start(frame, &camera).is_ok());
+        if started {
+            h.counters.maps_started = h.counters.maps_started.saturating_add(1);
+            h.last_map_xy = Some(xy);
+            h.map_wanted = false;
+            self.stereo = StereoStage::Mapping { items: 0 };
+        } else {
+            h.counters.map_errors = h.counters.map_errors.saturating_add(1);
+        }
+        started
+    }
+
+    /// Background: advance the hazard map on `frame` by at most `quantum` cost units. Returns
+    /// the units used and whether the map (and the planning step after it) finished.
+    pub(super) fn map_step(&mut self, frame: &StereoFrame, items: u32, quantum: u32) -> (u32, bool) {
+        let Some(h) = self.hazard.as_mut() else {
+            self.stereo = StereoStage::Idle;
+            return (0, true);
+        };
+        match h.mapper.step(frame, quantum) {
+            MapProgress::Working { items: total } => {
+                self.stereo = StereoStage::Mapping { items: total };
+                (total.saturating_sub(items).max(1), false)
+            }
+            MapProgress::Finished(result) => {
+                self.stereo = StereoStage::Idle;
+                match result {
+                    Ok(()) => {
+                        h.counters.maps = h.counters.maps.saturating_add(1);
+                        self.plan_step();
+                    }
+                    Err(_) => {
+                        h.counters.map_errors = h.counters.map_errors.saturating_add(1);
+                        h.map_wanted = true;
+                    }
+                }
+                (quantum.max(1), true)
+            }
+        }
+    }
+
+    /// One RoverBug step on the map just finished, at the current EKF pose.
+    fn plan_step(&mut self) {
+        let x = *self.ekf.state();
+        let position = [x.p_n.x, x.p_n.y];
+        let heading = yaw_of(&x.q_nr);
+        let Some(h) = self.hazard.as_mut() else {
+            return;
+        };
+        let Some(map) = h.mapper.map() else {
+            return;
+        };
+        let mut polygons: heapless::Vec<ConvexPolygon, { crate::perception::MAX_OBSTACLES }> =
+            heapless::Vec::new();
+        for o in &map.obstacles {
+            match ConvexPolygon::from_points(&o.vertices) {
+                Ok(p) => {
+                    // Capacity equals the map's: cannot overflow.
+                    let _ = polygons.push(p);
+                }
+                Err(_) => h.counters.polygons_refused = h.counters.polygons_refused.saturating_add(1),
+            }
+        }
+        h.counters.last_obstacles = u32::try_from(map.obstacles.len()).unwrap_or(u32::MAX);
+        let w = map.wedge;
+        let wedge = Wedge {
+            apex: w.apex_m,
+            heading_rad: w.heading_rad,
+            half_angle_rad: w.half_angle_rad,
+            min_range_m: w.min_range_m,
+            max_range_m: w.max_range_m,
+        };
+        h.counters.plans = h.counters.plans.saturating_add(1);
+        let out = match h.planner.plan(position, heading, &wedge, &polygons) {
+            Ok(o) => o,
+            Err(_) => {
+                h.counters.plan_errors = h.counters.plan_errors.saturating_add(1);
+                h.map_wanted = true;
+                return;
+            }
+        };
+        let status = out.status;
+        let gaze = out.gaze_heading_rad;
+        let path = out.path;
+        h.last_output = Some(out);
+        h.gaze_rad = None;
+        match status {
+            PlanStatus::Driving => {
+                let guidance = path
+                    .as_ref()
+                    .map(|p| p.waypoints())
+                    .and_then(|w| Path::<MAX_WAYPOINTS>::new(w).ok())
+                    .and_then(|p| Guidance::new(p, self.config.guidance).ok());
+                match guidance {
+                    Some(g) => {
+                        h.counters.paths = h.counters.paths.saturating_add(1);
+                        h.planned = true;
+                        self.guidance = Some(g);
+                    }
+                    None => {
+                        // A path guidance refuses (too short): look again.
+                        h.counters.plan_errors = h.counters.plan_errors.saturating_add(1);
+                        h.map_wanted = true;
+                    }
+                }
+            }
+            PlanStatus::Gaze => {
+                h.counters.gazes = h.counters.gazes.saturating_add(1);
+                h.gaze_rad = gaze;
+                if h.gaze_rad.is_none() {
+                    h.map_wanted = true;
+                }
+            }
+            PlanStatus::Reached => {
+                h.verdict = PlannerVerdict::Reached;
+                // Guidance finishes on the straight line to the goal and fault protection
+                // checks the arrival as for a path.
+                let goal = h.planner.goal().unwrap_or(position);
+                let line = Path::<MAX_WAYPOINTS>::new(&[position, goal])
+                    .ok()
+                    .and_then(|p| Guidance::new(p, self.config.guidance).ok());
+                match line {
+                    Some(g) => self.guidance = Some(g),
+                    None => self.mode = NavMode::Arrived,
+                }
+            }
+            PlanStatus::Unreachable(_) => {
+                h.verdict = PlannerVerdict::Unreachable;
+                self.fault_stop(FaultResponse::GoalUnreachable);
+            }
+            PlanStatus::Blocked(_) => {
+                h.verdict = PlannerVerdict::Blocked;
+                self.fault_stop(FaultResponse::PlannerBlocked);
+            }
+        }
+    }
+
+    /// RG2, from [`Self::guidance_cycle`] before guidance: the hazard navigation's say in the
+    /// motor command. `Some(None)`: hold still (waiting for a map); `Some(Some(c))`: turn in
+    /// place with body command `c` (gaze); `None`: drive the guidance path.
+    pub(super) fn hazard_command(&mut self) -> Option<Option<VehicleCommand>> {
+        let heading = self.ekf_running.then(|| yaw_of(&self.ekf.state().q_nr));
+        let h = self.hazard.as_mut()?;
+        if h.verdict != PlannerVerdict::Driving {
+            return None;
+        }
+        if let (Some(target), Some(yaw)) = (h.gaze_rad, heading) {
+            let e = crate::guidance::carrot::wrap_pi(target - yaw);
+            if libm::fabs(e) <= GAZE_TOLERANCE_RAD || !e.is_finite() {
+                h.gaze_rad = None;
+                h.map_wanted = true;
+                h.counters.holds = h.counters.holds.saturating_add(1);
+                return Some(None);
+            }
+            let rate = if e > 0.0 { GAZE_RATE_RAD_S } else { -GAZE_RATE_RAD_S };
+            return Some(Some(VehicleCommand {
+                x_dot_m_s: 0.0,
+                y_dot_m_s: 0.0,
+                yaw_rate_rad_s: rate,
+            }));
+        }
+        if !h.planned || h.map_wanted {
+            h.counters.holds = h.counters.holds.saturating_add(1);
+            return Some(None);
+        }
+        None
+    }
+
+    /// RG2: guidance reached the end of its path. With hazard avoidance on and the path ending
+    /// short of the goal (a planner subgoal), the rover holds and maps again instead of
+    /// arriving. Returns true when the end was such a subgoal.
+    pub(super) fn hazard_subgoal_reached(&mut self) -> bool {
+        let Some(h) = self.hazard.as_mut() else {
+            return false;
+        };
+        if h.verdict != PlannerVerdict::Driving {
+            return false;
+        }
+        h.map_wanted = true;
+        true
+    }
+}
