@@ -15,6 +15,8 @@
 //! - [`driver`]: the simulator's reference driver (not flight code).
 //! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs.
 //! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
+//! - [`campaign`]: Monte Carlo campaigns (spec, plan, runs, statistics, report, Slurm;
+//!   `docs/campaigns.md`).
 //! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
 //!   policy (`docs/slip-detection.md`).
 //! - [`devices`], [`run`]: the standing-still devices of the `still` command.
@@ -23,6 +25,7 @@
 //!   host/target comparison (`docs/timing.md`).
 
 pub mod camera;
+pub mod campaign;
 pub mod detection;
 pub mod devices;
 pub mod driver;

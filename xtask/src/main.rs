@@ -9,10 +9,14 @@
 //! - `cargo xtask fuzz --frames N [--seed S] [--no-vo]`: the seeded adversarial-HAL fuzzer of
 //!   the flight software (crate `fuzz-hal`, `docs/fault-protection.md` "Fuzzing"); a short run
 //!   ([`FUZZ_TEST_FRAMES`] frames) is a step of `test`.
+//! - `cargo xtask campaign`: the CI smoke campaign (`campaigns/ci-smoke.toml`) through `sbatch`
+//!   on a single-node Slurm cluster started on this machine and locally; the two `stats.json`
+//!   must be identical (installs `slurm-wlm` and `munge` when missing). A step of `test`.
 //! - `cargo xtask timing`: timing analysis on the rover CPU model (instruction counts per task,
 //!   utilisation, response times, stack, memory, panic sites) and the bit-identical host/target
 //!   replay check; writes `docs/timing.md`. Also the last step of `test`.
 
+mod campaign;
 mod elf;
 mod timing;
 
@@ -42,17 +46,21 @@ fn main() -> Result<()> {
             qemu_run().map(|_| ())
         }
         Some("fuzz") => fuzz(&args[1..]),
+        Some("campaign") => campaign::slurm_smoke(),
         Some("timing") => {
             setup()?;
             timing::timing()
         }
         _ => {
-            eprintln!("usage: cargo xtask <test|setup|qemu|fuzz|timing>");
+            eprintln!("usage: cargo xtask <test|setup|qemu|fuzz|campaign|timing>");
             eprintln!("  test   everything CI checks (does its own setup first)");
             eprintln!("  setup  add the {TARGET} target and install qemu-system-arm if missing");
             eprintln!("  qemu   build the rover-CPU image and run it in QEMU {QEMU_MACHINE}");
             eprintln!(
                 "  fuzz   --frames N [--seed S] [--no-vo]: adversarial-HAL fuzzer of the flight software"
+            );
+            eprintln!(
+                "  campaign  the smoke campaign through a single-node Slurm cluster and locally"
             );
             eprintln!("  timing timing analysis on the rover CPU model, writes docs/timing.md");
             bail!("unknown or missing command")
@@ -196,6 +204,9 @@ fn test() -> Result<()> {
         "1".to_string(),
     ])?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    // Its own steps: Slurm and munge setup, the cluster, the two campaigns, the comparison.
+    campaign::slurm_smoke()?;
 
     let t = step("cross build of the flight crates (no_std, no alloc)");
     run(cargo().args([
