@@ -17,10 +17,14 @@ const CLUSTER: &str = "tools/slurm-single-node.sh";
 /// Install `slurm-wlm` and `munge` with apt-get when `sbatch`, `slurmctld` or `munged` is
 /// missing; say exactly what to do when that fails.
 pub fn ensure_slurm() -> Result<()> {
-    let present = have("sbatch", "--version")
-        && have("slurmctld", "-V")
-        && Path::new("/usr/sbin/munged").exists();
-    if present {
+    // `sbatch --version` needs a configuration; the daemons print their version without one.
+    let present = || {
+        have("slurmctld", "-V")
+            && have("slurmd", "-V")
+            && have("munged", "--version")
+            && on_path("sbatch")
+    };
+    if present() {
         println!("slurm-wlm and munge: present");
         return Ok(());
     }
@@ -30,7 +34,7 @@ pub fn ensure_slurm() -> Result<()> {
             .args(["install", "-y", "-qq", "slurm-wlm", "munge"])
             .env("DEBIAN_FRONTEND", "noninteractive"))
     });
-    if apt.is_err() || !have("sbatch", "--version") {
+    if apt.is_err() || !present() {
         bail!(
             "slurm-wlm and munge are required for the campaign step and could not be installed \
              automatically: install them with `sudo apt-get install -y slurm-wlm munge` \
@@ -38,6 +42,12 @@ pub fn ensure_slurm() -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Whether `program` is an executable file in a folder of `PATH`.
+fn on_path(program: &str) -> bool {
+    std::env::var_os("PATH")
+        .is_some_and(|paths| std::env::split_paths(&paths).any(|d| d.join(program).is_file()))
 }
 
 /// Stops the cluster when dropped.

@@ -98,7 +98,7 @@ pub enum CampaignCommand {
         #[arg(long, default_value_t = 1)]
         cpus_per_task: u32,
         /// Memory per task.
-        #[arg(long, default_value = "2G")]
+        #[arg(long, default_value = "1G")]
         mem: String,
         /// Start the gather after every task succeeded (ok) or after every task ended (any).
         #[arg(long, value_enum, default_value_t = After::Ok)]

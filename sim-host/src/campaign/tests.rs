@@ -669,3 +669,38 @@ fn campaign_example_specs_plan() {
     assert!(names.contains(&"slope-10-cross".to_string()), "{names:?}");
     assert!(names.contains(&"ci-smoke".to_string()), "{names:?}");
 }
+
+/// The committed report of the 200-run campaign: every figure without overlapping labels or
+/// labels outside its canvas, and a criteria table that matches its `stats.json`.
+#[test]
+fn campaign_committed_report_labels_do_not_overlap() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/campaigns/slope-10-cross");
+    let page = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("stats.json")).unwrap()).unwrap();
+    let criteria = stats["criteria"].as_array().unwrap();
+    let figures: Vec<&str> = page.split("<svg").skip(1).collect();
+    assert_eq!(figures.len(), criteria.len());
+    let (w, h) = (
+        f64::from(html::FIGURE_SIZE.0),
+        f64::from(html::FIGURE_SIZE.1),
+    );
+    for f in figures {
+        let svg = format!("<svg{}", &f[..f.find("</svg>").unwrap() + 6]);
+        assert!(svg_labels::overlapping(&svg).unwrap().is_empty());
+        assert!(svg_labels::outside(&svg, w, h).unwrap().is_empty());
+    }
+    for c in criteria {
+        let verdict = if c["pass"].as_bool().unwrap() {
+            "PASS"
+        } else {
+            "FAIL"
+        };
+        let name = c["name"].as_str().unwrap();
+        let row = page
+            .lines()
+            .find(|l| l.contains(&format!("<td class=\"l\">{name}</td>")))
+            .unwrap_or_else(|| panic!("no row for {name}"));
+        assert!(row.contains(verdict), "{name}: {row}");
+    }
+}
