@@ -17,6 +17,8 @@
 //! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs;
 //!   [`plot`]: the report figures (plotters, SVG) and their geometry checks.
 //! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
+//! - [`campaign`]: Monte Carlo campaigns (spec, plan, runs, statistics, report, Slurm;
+//!   `docs/campaigns.md`).
 //! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
 //!   policy (`docs/slip-detection.md`).
 //! - [`devices`], [`run`]: the standing-still devices of the `still` command.
@@ -25,6 +27,7 @@
 //!   host/target comparison (`docs/timing.md`).
 
 pub mod camera;
+pub mod campaign;
 pub mod detection;
 pub mod devices;
 pub mod driver;

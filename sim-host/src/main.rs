@@ -126,6 +126,8 @@ enum Command {
         #[arg(long)]
         no_render: bool,
     },
+    /// Monte Carlo campaigns: plan, run, gather, local, slurm (docs/campaigns.md).
+    Campaign(sim_host::campaign::cli::CampaignArgs),
     /// Replay a call tape through the flight software and print per-frame digest lines;
     /// fails unless every frame matches the recording.
     Replay {
@@ -629,5 +631,11 @@ fn main() -> anyhow::Result<()> {
             no_render,
         }) => record(scenario, seconds, seed, out, no_render),
         Some(Command::Replay { tape, digests }) => replay(tape, digests),
+        Some(Command::Campaign(args)) => {
+            if !sim_host::campaign::cli::main(args)? {
+                std::process::exit(sim_host::campaign::cli::EXIT_NOT_PASSED);
+            }
+            Ok(())
+        }
     }
 }

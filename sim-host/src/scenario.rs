@@ -208,6 +208,20 @@ pub struct Scenario {
     /// Random seed (terrain, slip, sensor noise, dimension errors).
     #[serde(default)]
     pub seed: u64,
+    /// Seed of the terrain (roughness, rock field) when it differs from [`Scenario::seed`]
+    /// (campaigns that keep one terrain while the other draws vary). Default: `seed`.
+    #[serde(default)]
+    pub terrain_seed: Option<u64>,
+    /// Seed of the per-unit calibration and manufacturing errors (vehicle dimensions, wheel
+    /// radii, hazcam head, IMU scale factors and misalignments: `world::Streams` 5-8) when it
+    /// differs from [`Scenario::seed`]: one rover unit over many drives. Default: `seed`.
+    #[serde(default)]
+    pub calibration_seed: Option<u64>,
+    /// Offset of the true start pose from the planned one (the first waypoint, facing the
+    /// second): the rover's localisation error before the drive. The flight software is given
+    /// the planned pose ([`crate::sim::Mission::plan`]); the truth starts offset. Default 0.
+    #[serde(default)]
+    pub start_offset: StartOffset,
     /// Longest simulated time, s.
     pub duration_s: f64,
     /// Driving speed, m/s.
@@ -265,6 +279,18 @@ fn default_hazard_height() -> f64 {
     crate::hazards::DEFAULT_HAZARD_HEIGHT_M
 }
 
+/// Offset of the true start pose from the planned one, in `W` (x north, y east, z down).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct StartOffset {
+    /// North offset, m.
+    pub north_m: f64,
+    /// East offset, m.
+    pub east_m: f64,
+    /// Heading offset, degrees (clockwise from north, as the heading).
+    pub yaw_deg: f64,
+}
+
 fn default_speed() -> f64 {
     0.1
 }
@@ -299,7 +325,9 @@ impl Scenario {
         Self::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
     }
 
-    fn check(&self) -> anyhow::Result<()> {
+    /// Check the values (done by [`Scenario::from_toml`]; call it again after editing a
+    /// scenario in code).
+    pub fn check(&self) -> anyhow::Result<()> {
         anyhow::ensure!(self.waypoints.len() >= 2, "need at least two waypoints");
         anyhow::ensure!(
             self.duration_s > 0.0 && self.duration_s.is_finite(),
@@ -315,6 +343,11 @@ impl Scenario {
                 && site.solar_longitude_deg.is_finite()
                 && site.local_solar_time_h.is_finite(),
             "site: latitude_deg in [-90, 90], finite solar_longitude_deg and local_solar_time_h"
+        );
+        let o = &self.start_offset;
+        anyhow::ensure!(
+            o.north_m.is_finite() && o.east_m.is_finite() && o.yaw_deg.is_finite(),
+            "start_offset must be finite"
         );
         for hz in [self.sensors.encoder_hz, self.sensors.sun_hz] {
             anyhow::ensure!(hz > 0 && 200 % hz == 0, "sensor rates must divide 200 Hz");

@@ -262,7 +262,19 @@ impl World {
     /// Build the world of `scenario` for `seed`.
     pub fn new(scenario: &Scenario, seed: u64) -> anyhow::Result<Self> {
         let mut streams = Streams::new(seed);
-        let terrain = Terrain::new(scenario.terrain.clone(), seed, &scenario.waypoints);
+        if let Some(unit) = scenario.calibration_seed {
+            // One rover unit: its calibration and manufacturing errors from their own seed.
+            let cal = Streams::new(unit);
+            streams.geometry = cal.geometry;
+            streams.camera = cal.camera;
+            streams.imu_calibration = cal.imu_calibration;
+            streams.wheel_radius = cal.wheel_radius;
+        }
+        let terrain = Terrain::new(
+            scenario.terrain.clone(),
+            scenario.terrain_seed.unwrap_or(seed),
+            &scenario.waypoints,
+        );
         let sigma = scenario.sensors.dimension_error_m;
         let sigma_wheel = scenario.sensors.wheel_radius_error_m;
         let geometry = rocky8()
@@ -297,8 +309,11 @@ impl World {
             &scenario.sensors.camera_tolerances,
             &mut streams.camera,
         );
-        let [start, next] = [scenario.waypoints[0], scenario.waypoints[1]];
-        let yaw = (next[1] - start[1]).atan2(next[0] - start[0]);
+        let [planned, next] = [scenario.waypoints[0], scenario.waypoints[1]];
+        // The true start: the planned one plus the scenario's start offset (0 by default).
+        let offset = scenario.start_offset;
+        let start = [planned[0] + offset.north_m, planned[1] + offset.east_m];
+        let yaw = (next[1] - planned[1]).atan2(next[0] - planned[0]) + offset.yaw_deg.to_radians();
         // Start height for the placement, which then sets each wheel on the ground.
         let r = geometry.mean_wheel_radius_m();
         let pose = BodyPose {

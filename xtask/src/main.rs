@@ -13,10 +13,14 @@
 //!   `slope-10-cross`, `evo_ape`/`evo_rpe` with default options on every TUM output, and
 //!   headless-Chromium screenshots of its `report.html` and of the main command's H05 Fig. 9
 //!   figure (installs `chromium` and evo when missing). Also a step of `test`.
+//! - `cargo xtask campaign`: the CI smoke campaign (`campaigns/ci-smoke.toml`) through `sbatch`
+//!   on a single-node Slurm cluster started on this machine and locally; the two `stats.json`
+//!   must be identical (installs `slurm-wlm` and `munge` when missing). A step of `test`.
 //! - `cargo xtask timing`: timing analysis on the rover CPU model (instruction counts per task,
 //!   utilisation, response times, stack, memory, panic sites) and the bit-identical host/target
 //!   replay check; writes `docs/timing.md`. Also the last step of `test`.
 
+mod campaign;
 mod elf;
 mod report;
 mod timing;
@@ -48,12 +52,13 @@ fn main() -> Result<()> {
         }
         Some("fuzz") => fuzz(&args[1..]),
         Some("report") => report::report_checks(),
+        Some("campaign") => campaign::slurm_smoke(),
         Some("timing") => {
             setup()?;
             timing::timing()
         }
         _ => {
-            eprintln!("usage: cargo xtask <test|setup|qemu|fuzz|report|timing>");
+            eprintln!("usage: cargo xtask <test|setup|qemu|fuzz|report|campaign|timing>");
             eprintln!("  test   everything CI checks (does its own setup first)");
             eprintln!("  setup  add the {TARGET} target and install qemu-system-arm if missing");
             eprintln!("  qemu   build the rover-CPU image and run it in QEMU {QEMU_MACHINE}");
@@ -62,6 +67,9 @@ fn main() -> Result<()> {
             );
             eprintln!(
                 "  report evo on every TUM output of a run, headless-Chromium screenshots of the reports"
+            );
+            eprintln!(
+                "  campaign  the smoke campaign through a single-node Slurm cluster and locally"
             );
             eprintln!("  timing timing analysis on the rover CPU model, writes docs/timing.md");
             bail!("unknown or missing command")
@@ -209,6 +217,9 @@ fn test() -> Result<()> {
         "1".to_string(),
     ])?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+
+    // Its own steps: Slurm and munge setup, the cluster, the two campaigns, the comparison.
+    campaign::slurm_smoke()?;
 
     let t = step("cross build of the flight crates (no_std, no alloc)");
     run(cargo().args([
