@@ -77,6 +77,9 @@ pub(super) struct HazardNav {
     counters: HazardCounters,
 }
 
+/// Margin over the rover half-width by which the visible wedge is eroded for the planner, m.
+pub const WEDGE_EROSION_MARGIN_M: f64 = 0.1;
+
 /// Largest heading error of a gaze turn before the rover maps again, rad.
 const GAZE_TOLERANCE_RAD: f64 = 0.05;
 /// Yaw rate of a gaze turn, rad/s.
@@ -98,7 +101,10 @@ impl Navigator {
             p.set_goal(goal)?;
             Ok(p)
         });
-        match (HazardMapper::new(self.config.perception, &self.calibration), planner) {
+        match (
+            HazardMapper::new(self.config.perception, &self.calibration),
+            planner,
+        ) {
             (Ok(mapper), Ok(planner)) => {
                 self.hazard = Some(HazardNav {
                     mapper,
@@ -171,7 +177,9 @@ impl Navigator {
     /// True when the rover stands waiting for a map: a capture is due at once.
     pub(super) fn map_wanted_now(&self) -> bool {
         self.hazard.as_ref().is_some_and(|h| {
-            h.verdict == PlannerVerdict::Driving && (h.map_wanted || !h.planned) && h.gaze_rad.is_none()
+            h.verdict == PlannerVerdict::Driving
+                && (h.map_wanted || !h.planned)
+                && h.gaze_rad.is_none()
         })
     }
 
@@ -209,7 +217,12 @@ impl Navigator {
 
     /// Background: advance the hazard map on `frame` by at most `quantum` cost units. Returns
     /// the units used and whether the map (and the planning step after it) finished.
-    pub(super) fn map_step(&mut self, frame: &StereoFrame, items: u32, quantum: u32) -> (u32, bool) {
+    pub(super) fn map_step(
+        &mut self,
+        frame: &StereoFrame,
+        items: u32,
+        quantum: u32,
+    ) -> (u32, bool) {
         let Some(h) = self.hazard.as_mut() else {
             self.stereo = StereoStage::Idle;
             return (0, true);
@@ -255,17 +268,29 @@ impl Navigator {
                     // Capacity equals the map's: cannot overflow.
                     let _ = polygons.push(p);
                 }
-                Err(_) => h.counters.polygons_refused = h.counters.polygons_refused.saturating_add(1),
+                Err(_) => {
+                    h.counters.polygons_refused = h.counters.polygons_refused.saturating_add(1)
+                }
             }
         }
         h.counters.last_obstacles = u32::try_from(map.obstacles.len()).unwrap_or(u32::MAX);
+        // The planner keeps its path inside the wedge it is given; the rover's body sweeps half
+        // its width to each side of the path, where a narrow hazcam wedge has not looked (a
+        // rock of the ring in `unreachable` approached at 45 deg off the axis was never in
+        // view and was hit). So the planner gets the wedge eroded by the half-width plus a
+        // margin: the sector whose points are at least `d` inside both edges (apex moved
+        // forward by `d / sin(alpha)`) and `d` short of the far range.
         let w = map.wedge;
+        let d = crate::perception::ROVER_HALF_WIDTH_M + WEDGE_EROSION_MARGIN_M;
+        let s = libm::sin(w.half_angle_rad);
+        let shift = if s > 1e-3 { d / s } else { f64::INFINITY };
+        let (sh, ch) = libm::sincos(w.heading_rad);
         let wedge = Wedge {
-            apex: w.apex_m,
+            apex: [w.apex_m[0] + shift * ch, w.apex_m[1] + shift * sh],
             heading_rad: w.heading_rad,
             half_angle_rad: w.half_angle_rad,
-            min_range_m: w.min_range_m,
-            max_range_m: w.max_range_m,
+            min_range_m: (w.min_range_m - shift).max(0.0),
+            max_range_m: w.max_range_m - shift - d,
         };
         h.counters.plans = h.counters.plans.saturating_add(1);
         let out = match h.planner.plan(position, heading, &wedge, &polygons) {
@@ -349,7 +374,11 @@ impl Navigator {
                 h.counters.holds = h.counters.holds.saturating_add(1);
                 return Some(None);
             }
-            let rate = if e > 0.0 { GAZE_RATE_RAD_S } else { -GAZE_RATE_RAD_S };
+            let rate = if e > 0.0 {
+                GAZE_RATE_RAD_S
+            } else {
+                -GAZE_RATE_RAD_S
+            };
             return Some(Some(VehicleCommand {
                 x_dot_m_s: 0.0,
                 y_dot_m_s: 0.0,
