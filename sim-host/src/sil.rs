@@ -224,6 +224,15 @@ fn flag(b: bool) -> Option<f64> {
     Some(if b { 1.0 } else { 0.0 })
 }
 
+/// Requirement: no truth-side collision with a hazard (`sim_host::hazards`).
+const NO_COLLISION: Check = req(
+    "truth-side collisions",
+    |s| Some(f64::from(s.collisions)),
+    Compare::AtMost,
+    0.0,
+    "",
+);
+
 /// Requirement: the rover reached the goal within the scenario's tolerance.
 const GOAL_REACHED: Check = req(
     "goal reached",
@@ -281,7 +290,7 @@ const EKF_HALF_PERCENT: Check = goal(
 );
 
 /// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
-pub const CASES: [Case; 23] = [
+pub const CASES: [Case; 26] = [
     Case {
         id: "SIL-GNC-1",
         scenario: "slope-10-cross",
@@ -772,6 +781,91 @@ pub const CASES: [Case; 23] = [
                 1.0,
                 "",
             ),
+        ],
+    },
+    Case {
+        id: "SIL-HAZ-1",
+        scenario: "rockfield-goal",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "go to a goal 20 m away behind hazard rocks: hazard maps and RoverBug (issue 16, V99 \
+                sec. 4)",
+        checks: &[
+            GOAL_REACHED,
+            req(
+                "planner status reached",
+                |s| flag(s.planner.as_ref()?.status == "reached"),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            NO_COLLISION,
+            req(
+                "path length / straight line",
+                |s| {
+                    let p = s.planner.as_ref()?;
+                    Some(p.path_length_m / p.straight_line_m.max(1e-9))
+                },
+                Compare::AtMost,
+                1.5,
+                "x",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-HAZ-2",
+        scenario: "cul-de-sac",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "a concave obstacle across the straight line: boundary following takes the rover round \
+                it to the goal (issue 16)",
+        checks: &[
+            GOAL_REACHED,
+            req(
+                "planner status reached",
+                |s| flag(s.planner.as_ref()?.status == "reached"),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            NO_COLLISION,
+            req(
+                "boundary-following episodes",
+                |s| Some(f64::from(s.planner.as_ref()?.boundary_following)),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+        ],
+    },
+    Case {
+        id: "SIL-HAZ-3",
+        scenario: "unreachable",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "goal inside a closed ring of rocks: the rover goes round it, halts and reports the goal \
+                unreachable (issue 16)",
+        checks: &[
+            req(
+                "planner status unreachable",
+                |s| flag(s.planner.as_ref()?.status == "unreachable"),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            req(
+                "stopped safe (GoalUnreachable)",
+                |s| {
+                    flag(
+                        s.fault_protection.stopped_safe
+                            && s.fault_protection.last_response == "GoalUnreachable",
+                    )
+                },
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            NO_COLLISION,
         ],
     },
 ];

@@ -1,4 +1,4 @@
-//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7: closed-loop scenario runs of the flight software on the
+//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7, SIL-HAZ-1..3: closed-loop scenario runs of the flight software on the
 //! simulator with rendered stereo, against the thresholds of `sim_host::sil::CASES` (the same
 //! table `sim-host sil` writes to `docs/sil-results.md`).
 
@@ -151,4 +151,19 @@ fn sil_fp_6_full_slip() {
 #[test]
 fn sil_fp_7_motor_stall() {
     check("SIL-FP-7");
+}
+
+#[test]
+fn sil_haz_1_rockfield_goal_reached_without_collision() {
+    check("SIL-HAZ-1");
+}
+
+#[test]
+fn sil_haz_2_cul_de_sac_boundary_following() {
+    check("SIL-HAZ-2");
+}
+
+#[test]
+fn sil_haz_3_unreachable_goal_reported() {
+    check("SIL-HAZ-3");
 }

@@ -20,6 +20,8 @@ use fsw::kinematics::{
     forward_kinematics_from_joints, inverse_kinematics, wheel_contact_points, KinematicOdometry,
     OdometryConfig, SuspensionRates, SuspensionState, VehicleCommand, ROCKY8,
 };
+use fsw::perception::{CameraPose, HazardMapper, MapProgress};
+use fsw::planning::{ConvexPolygon, Planner, Wedge};
 use fsw::types::{Quat, Vec3};
 use fsw::vo::{Progress, VisualOdometry, WorkKind};
 use rover_hal::{ImuSample, JointState, StereoFrame};
@@ -33,7 +35,7 @@ const MAX_VO_ITEMS: usize = 8192;
 pub const VO_FEATURES: usize = 150;
 
 /// Names of the measured tasks, in report order.
-const TASKS: [&str; 9] = [
+const TASKS: [&str; 11] = [
     "ekf_propagate",
     "ekf_gate_relative_pose",
     "ekf_update_relative_pose",
@@ -43,6 +45,8 @@ const TASKS: [&str; 9] = [
     "inverse_kinematics",
     "guidance_step",
     "vo_update",
+    "hazard_map",
+    "roverbug_plan",
 ];
 const PROPAGATE: usize = 0;
 const GATE: usize = 1;
@@ -53,6 +57,11 @@ const ODOMETRY: usize = 5;
 const IK: usize = 6;
 const GUIDANCE: usize = 7;
 const VO: usize = 8;
+const HAZARD_MAP: usize = 9;
+const PLAN: usize = 10;
+
+/// Largest number of work items of one hazard map (far above the mapper's bound).
+const MAX_MAP_ITEMS: usize = 4096;
 
 /// Visual-odometry outcomes over the tape.
 #[derive(Clone, Copy, Default)]
@@ -77,6 +86,16 @@ fn vo_static(vo: VisualOdometry<VO_FEATURES>) -> Option<&'static mut VisualOdome
 }
 
 /// The bench's own static.
+/// The hazard mapper's static (extram like the VO's: it is the size of a VO state's third).
+fn mapper_static(m: HazardMapper) -> Option<&'static mut HazardMapper> {
+    super::take_static!(extram, HazardMapper, m)
+}
+
+/// The RoverBug planner's static.
+fn planner_static(p: Planner) -> Option<&'static mut Planner> {
+    super::take_static!(extram, Planner, p)
+}
+
 fn bench_static(bench: Bench) -> Option<&'static mut Bench> {
     super::take_static!(Bench, bench)
 }
@@ -85,6 +104,9 @@ fn bench_static(bench: Bench) -> Option<&'static mut Bench> {
 pub struct Bench {
     ekf: &'static mut Ekf,
     vo: &'static mut VisualOdometry<VO_FEATURES>,
+    mapper: &'static mut HazardMapper,
+    planner: &'static mut Planner,
+    calibration: rover_hal::StereoCalibration,
     guidance: Guidance<MAX_WAYPOINTS>,
     images: [&'static mut ImageBuffer; 2],
     loaded: Option<u32>,
@@ -122,6 +144,13 @@ impl Bench {
         let vo_config = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0).vo;
         let vo = VisualOdometry::<VO_FEATURES>::new(vo_config, &header.calibration).ok()?;
         let vo = vo_static(vo)?;
+        // The flight software's hazard-navigation settings (obstacle growth margin, clearance).
+        let nav = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0);
+        let mapper = mapper_static(HazardMapper::new(nav.perception, &header.calibration).ok()?)?;
+        let mut planner = Planner::new(nav.planner).ok()?;
+        let goal = header.waypoints().last().copied()?;
+        planner.set_goal(goal).ok()?;
+        let planner = planner_static(planner)?;
         let contacts = wheel_contact_points(&ROCKY8, &SuspensionState::default()).ok()?;
         let wheel_xy = contacts.map(|c| [c.x, c.y]);
         let path = Path::new(header.waypoints()).ok()?;
@@ -129,6 +158,9 @@ impl Bench {
         let bench = Self {
             ekf,
             vo,
+            mapper,
+            planner,
+            calibration: header.calibration,
             guidance,
             images,
             loaded: None,
@@ -391,6 +423,9 @@ impl Bench {
         // The VO pose between the previous and this capture, applied between their clones.
         let pose = r.ok().and_then(|o| o.pose);
         let capture = self.capture.take();
+        if let Some(c) = capture {
+            self.hazard_map_and_plan(meter, f, c);
+        }
         if let (Some(m), Some(c0), Some(c1)) = (pose, self.prev_capture, capture) {
             if m.t0_us == c0.t_us() && m.t1_us == c1.t_us() {
                 let ekf = &*self.ekf;
@@ -405,5 +440,80 @@ impl Bench {
             let _ = self.ekf.release(old);
         }
         self.prev_capture = capture;
+    }
+
+    /// A hazard map of `frame` at the EKF pose of its capture clone (work item by work item,
+    /// the sum is the map's cost) and the RoverBug step on it (issue 16).
+    fn hazard_map_and_plan(&mut self, meter: &mut Meter, f: &FrameInfo, capture: CloneHandle) {
+        let Self {
+            ekf,
+            mapper,
+            planner,
+            calibration,
+            images,
+            stats,
+            ..
+        } = self;
+        let [left, right] = images;
+        let (Some(left), Some(right)) = (
+            left.get(..f.left_len as usize),
+            right.get(..f.right_len as usize),
+        ) else {
+            return;
+        };
+        let frame = StereoFrame {
+            left,
+            right,
+            capture_t_us: f.capture_t_us,
+            sequence: f.sequence,
+        };
+        let frame = &frame;
+        let mut add = |task: usize, insns: u64, ok: bool| {
+            if let Some(s) = stats.get_mut(task) {
+                s.add(insns, ok);
+            }
+        };
+        let Ok((q, p)) = ekf.clone_pose(capture) else {
+            return;
+        };
+        let rot = q.to_rotation_matrix().into_inner();
+        let Ok(camera) = CameraPose::from_rover(&rot, &p, calibration) else {
+            return;
+        };
+        let (started, mut n) = meter.measure(|| mapper.start(frame, &camera));
+        let mut ok = started.is_ok();
+        if ok {
+            ok = false;
+            for _ in 0..MAX_MAP_ITEMS {
+                let (progress, k) = meter.measure(|| mapper.step(frame, 1));
+                n += k;
+                if let MapProgress::Finished(r) = progress {
+                    ok = r.is_ok();
+                    break;
+                }
+            }
+        }
+        add(HAZARD_MAP, n, ok);
+        let Some(map) = mapper.map() else {
+            return;
+        };
+        let mut polygons: heapless::Vec<ConvexPolygon, { fsw::perception::MAX_OBSTACLES }> =
+            heapless::Vec::new();
+        for o in &map.obstacles {
+            if let Ok(poly) = ConvexPolygon::from_points(&o.vertices) {
+                let _ = polygons.push(poly);
+            }
+        }
+        let w = map.wedge;
+        let wedge = Wedge {
+            apex: w.apex_m,
+            heading_rad: w.heading_rad,
+            half_angle_rad: w.half_angle_rad,
+            min_range_m: w.min_range_m,
+            max_range_m: w.max_range_m,
+        };
+        let (_, _, yaw) = q.euler_angles();
+        let (r, n) = meter.measure(|| planner.plan([p.x, p.y], yaw, &wedge, &polygons));
+        add(PLAN, n, r.is_ok());
     }
 }
