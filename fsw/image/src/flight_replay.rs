@@ -126,6 +126,7 @@ pub fn flight_config(setup: &FlightSetup) -> FswConfig {
 /// Build the flight software around `devices`: the one place the rover-CPU image and the host
 /// replay construct it. A setup without a path gets a 1 m path north (a still rover: guidance
 /// commands, the still devices do not move).
+#[inline(always)]
 pub fn build_fsw<P: Platform>(
     devices: Devices<P>,
     setup: &FlightSetup,

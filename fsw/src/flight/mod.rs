@@ -316,6 +316,8 @@ struct DevicesNoClock<P: Platform> {
 impl<P: Platform> Fsw<P> {
     /// Build the flight software around its devices with the default schedule, to follow
     /// `path` (waypoints north, east in `N`, m).
+    /// Inlined so that the (large) flight software is built where its caller puts it.
+    #[inline(always)]
     pub fn new(devices: Devices<P>, config: &FswConfig, path: &[Point2]) -> Result<Self, FswError> {
         let exec = Executive::new(config.exec, SCHEDULE_GROUPS, SCHEDULE_TASKS)
             .map_err(FswError::Schedule)?;

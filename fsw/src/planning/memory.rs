@@ -9,6 +9,25 @@ use super::geometry::{dist, ConvexPolygon, MAX_INPUT_POINTS, MAX_VERTICES};
 use crate::guidance::Point2;
 use heapless::Vec;
 
+/// Removes element `i` of `v`, keeping the order of the others (`heapless::Vec::remove`
+/// without its panic: an index out of range removes nothing and returns false).
+fn remove_at<T, const N: usize>(v: &mut Vec<T, N>, i: usize) -> bool {
+    let n = v.len();
+    if i >= n {
+        return false;
+    }
+    let s = v.as_mut_slice();
+    // Bounded: at most N - 1 swaps move element i to the end.
+    for k in i..n - 1 {
+        if let Some(pair) = s.get_mut(k..k + 2) {
+            if let Ok([a, b]) = <&mut [T; 2]>::try_from(pair) {
+                core::mem::swap(a, b);
+            }
+        }
+    }
+    v.pop().is_some()
+}
+
 /// Most remembered polygons.
 pub const MEMORY_CAPACITY: usize = 32;
 
@@ -266,9 +285,11 @@ impl ObstacleMemory {
                 .vertices()
                 .iter()
                 .all(|v| big.locate(*v) != super::geometry::PointLocation::Outside);
+            // Both lists have the same length (they are pushed and removed together);
+            // `remove_at` has no out-of-bounds panic path.
             if inside {
-                self.grown.remove(i);
-                self.inflated.remove(i);
+                remove_at(&mut self.grown, i);
+                remove_at(&mut self.inflated, i);
                 if i < keep {
                     index -= 1;
                 }

@@ -86,13 +86,25 @@ fn vo_static(vo: VisualOdometry<VO_FEATURES>) -> Option<&'static mut VisualOdome
 }
 
 /// The bench's own static.
-/// The hazard mapper's static (extram like the VO's: it is the size of a VO state's third).
-fn mapper_static(m: HazardMapper) -> Option<&'static mut HazardMapper> {
+/// The hazard mapper, built in its own frame (not inlined: its 34 KB temporary does not add to
+/// the VO's in `Bench::install`) and moved into its static in `.extram`.
+#[inline(never)]
+fn install_mapper(
+    config: fsw::perception::PerceptionConfig,
+    calibration: &rover_hal::StereoCalibration,
+) -> Option<&'static mut HazardMapper> {
+    let m = HazardMapper::new(config, calibration).ok()?;
     super::take_static!(extram, HazardMapper, m)
 }
 
-/// The RoverBug planner's static.
-fn planner_static(p: Planner) -> Option<&'static mut Planner> {
+/// The RoverBug planner with its goal, built in its own frame and moved into its static.
+#[inline(never)]
+fn install_planner(
+    config: fsw::planning::PlannerConfig,
+    goal: [f64; 2],
+) -> Option<&'static mut Planner> {
+    let mut p = Planner::new(config).ok()?;
+    p.set_goal(goal).ok()?;
     super::take_static!(extram, Planner, p)
 }
 
@@ -146,11 +158,9 @@ impl Bench {
         let vo = vo_static(vo)?;
         // The flight software's hazard-navigation settings (obstacle growth margin, clearance).
         let nav = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0);
-        let mapper = mapper_static(HazardMapper::new(nav.perception, &header.calibration).ok()?)?;
-        let mut planner = Planner::new(nav.planner).ok()?;
+        let mapper = install_mapper(nav.perception, &header.calibration)?;
         let goal = header.waypoints().last().copied()?;
-        planner.set_goal(goal).ok()?;
-        let planner = planner_static(planner)?;
+        let planner = install_planner(nav.planner, goal)?;
         let contacts = wheel_contact_points(&ROCKY8, &SuspensionState::default()).ok()?;
         let wheel_xy = contacts.map(|c| [c.x, c.y]);
         let path = Path::new(header.waypoints()).ok()?;

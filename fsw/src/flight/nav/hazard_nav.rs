@@ -169,7 +169,8 @@ impl Navigator {
             None => true,
             Some(q) => {
                 let d = libm::sqrt((p.x - q[0]) * (p.x - q[0]) + (p.y - q[1]) * (p.y - q[1]));
-                !(d < self.config.map_interval_m)
+                // A non-finite distance (a diverged estimate) asks for a map too.
+                d >= self.config.map_interval_m || !d.is_finite()
             }
         }
     }

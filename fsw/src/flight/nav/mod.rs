@@ -561,7 +561,9 @@ pub(super) fn yaw_of(q: &Quat) -> f64 {
 
 impl Navigator {
     /// A navigator for `path` (waypoints north, east in `N`, m) with `config` and the camera
-    /// `calibration`. VO is not built here (see [`Self::start_vo`]).
+    /// `calibration`. VO is not built here (see [`Self::start_vo`]). Inlined so that the
+    /// (large) navigator is built where its caller puts it, not copied through the stack.
+    #[inline(always)]
     pub fn new(
         config: NavConfig,
         path: &[Point2],
