@@ -224,6 +224,15 @@ fn flag(b: bool) -> Option<f64> {
     Some(if b { 1.0 } else { 0.0 })
 }
 
+/// Requirement: the RoverBug planner's verdict is `reached`.
+const PLANNER_REACHED: Check = req(
+    "planner status reached",
+    |s| flag(s.planner.as_ref()?.status == "reached"),
+    Compare::AtLeast,
+    1.0,
+    "",
+);
+
 /// Requirement: no truth-side collision with a hazard (`sim_host::hazards`).
 const NO_COLLISION: Check = req(
     "truth-side collisions",
@@ -792,13 +801,7 @@ pub const CASES: [Case; 26] = [
                 sec. 4)",
         checks: &[
             GOAL_REACHED,
-            req(
-                "planner status reached",
-                |s| flag(s.planner.as_ref()?.status == "reached"),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
+            PLANNER_REACHED,
             NO_COLLISION,
             req(
                 "path length / straight line",
@@ -821,13 +824,7 @@ pub const CASES: [Case; 26] = [
                 it to the goal (issue 16)",
         checks: &[
             GOAL_REACHED,
-            req(
-                "planner status reached",
-                |s| flag(s.planner.as_ref()?.status == "reached"),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
+            PLANNER_REACHED,
             NO_COLLISION,
             req(
                 "boundary-following episodes",

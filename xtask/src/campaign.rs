@@ -133,8 +133,11 @@ pub fn slurm_smoke() -> Result<()> {
     // The campaign report renders in headless Chromium with its CDF figures drawn (issue 19).
     let t = step("campaign report: headless-Chromium screenshot");
     let png = work.join("campaign-report.png");
-    crate::report::screenshot(&local_dir.join("report.html"), &png, (1280, 4000))?
-        .check("campaign report.html", 0.05, 0.001)?;
+    crate::report::screenshot(&local_dir.join("report.html"), &png, (1280, 4000))?.check(
+        "campaign report.html",
+        0.05,
+        0.001,
+    )?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
     let _ = std::fs::remove_dir_all(&work);
     Ok(())

@@ -108,6 +108,21 @@ fn install_planner(
     super::take_static!(extram, Planner, p)
 }
 
+/// The stereo frame `f` names, borrowed from the loaded image buffers (`None` when a length
+/// exceeds a buffer).
+fn frame_of<'a>(
+    images: &'a [&'static mut ImageBuffer; 2],
+    f: &FrameInfo,
+) -> Option<StereoFrame<'a>> {
+    let [left, right] = images;
+    Some(StereoFrame {
+        left: left.get(..f.left_len as usize)?,
+        right: right.get(..f.right_len as usize)?,
+        capture_t_us: f.capture_t_us,
+        sequence: f.sequence,
+    })
+}
+
 fn bench_static(bench: Bench) -> Option<&'static mut Bench> {
     super::take_static!(Bench, bench)
 }
@@ -377,18 +392,8 @@ impl Bench {
             return;
         }
         self.last_vo_capture_us = Some(f.capture_t_us);
-        let [left, right] = &self.images;
-        let (Some(left), Some(right)) = (
-            left.get(..f.left_len as usize),
-            right.get(..f.right_len as usize),
-        ) else {
+        let Some(frame) = frame_of(&self.images, f) else {
             return;
-        };
-        let frame = StereoFrame {
-            left,
-            right,
-            capture_t_us: f.capture_t_us,
-            sequence: f.sequence,
         };
         let prior = self.vo_prior.take().ok();
         // Item by item (one work item per `step`), so that each item is measured and
@@ -464,18 +469,8 @@ impl Bench {
             stats,
             ..
         } = self;
-        let [left, right] = images;
-        let (Some(left), Some(right)) = (
-            left.get(..f.left_len as usize),
-            right.get(..f.right_len as usize),
-        ) else {
+        let Some(frame) = frame_of(images, f) else {
             return;
-        };
-        let frame = StereoFrame {
-            left,
-            right,
-            capture_t_us: f.capture_t_us,
-            sequence: f.sequence,
         };
         let frame = &frame;
         let mut add = |task: usize, insns: u64, ok: bool| {
