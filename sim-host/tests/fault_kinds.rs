@@ -206,7 +206,8 @@ fn sim_24_motor_stall_in_the_truth() {
     assert!(all[2].0 - all[1].0 > 0.02);
 }
 
-/// SIM-24: a full slip override: the wheels turn, the rover does not move; only in the window;
+/// SIM-24: a full slip override: the wheels turn, the rover stops (within the truth's inertia
+/// bound) and does not move on; only in the window;
 /// half slip halves the distance.
 #[test]
 fn sim_24_slip_override_in_the_truth() {
@@ -226,7 +227,9 @@ fn sim_24_slip_override_in_the_truth() {
     let full = run(1.0);
     let none = run(0.0);
     let half = run(0.5);
-    assert!(full[1].0 - full[0].0 < 1e-4, "{}", full[1].0 - full[0].0);
+    // The body stops within the inertia bound of the truth (`World::inertia_limits`: at most
+    // g (1 + mu) of deceleration, about 0.9 mm from 0.1 m/s), not within one 5 ms step.
+    assert!(full[1].0 - full[0].0 < 2e-3, "{}", full[1].0 - full[0].0);
     assert!(full[1].1 - full[0].1 > 0.9);
     assert!(full[2].0 - full[1].0 > 0.05);
     let ratio = (half[1].0 - half[0].0) / (none[1].0 - none[0].0);

@@ -133,7 +133,7 @@ fn assert_climbed(c: &Climb, accel_limit_m_s2: f64) {
     assert!(c.max_bogie_rad <= stops.bogie_rad + 1e-9, "{c:?}");
     assert!(c.max_gyro_rad_s < 0.5, "{c:?}");
     assert!(c.max_accel_dev_m_s2 < accel_limit_m_s2, "{c:?}");
-    assert!(c.accel_events <= 20, "{c:?}");
+    assert!(c.accel_events <= 40, "{c:?}");
 }
 
 /// SIM-28: a step of one wheel radius (0.10 m) under the right wheels: every right wheel ends
@@ -145,10 +145,12 @@ fn assert_climbed(c: &Climb, accel_limit_m_s2: f64) {
 /// confirms 1 um on smooth ground; a wheel between face and ground is settled to about 10 um);
 /// the joints stay within their stops; and the simulated IMU shows no spike beyond the contact
 /// events: gyro below 0.5 rad/s, and the specific force within 20 m/s^2 of rest, with at most
-/// 20 frames (0.1 s in all) beyond 2 m/s^2. The model has no inertia, so where a wheel meets the
-/// face the body's velocity changes within one 5 ms frame (0.05 m/s in a frame reads
-/// 10 m/s^2); the kinematic model before the force model showed 116 m/s^2 and 10192 such
-/// frames in this run without climbing.
+/// 40 frames (0.2 s in all) beyond 2 m/s^2. The balance has no inertia; the truth's inertia
+/// bound (SIM-29: velocity changes at most g (1 + mu) per second) spreads a contact event's
+/// velocity change over a few frames (22 frames here, 20 before the bound, with a lower peak:
+/// 16.5 m/s^2, from the placement's vertical motion, which the bound does not limit); the
+/// kinematic model before the force model showed 116 m/s^2 and 10192 such frames in this run
+/// without climbing.
 #[test]
 fn sim_28_right_side_climbs_a_step_of_one_radius() {
     let c = climb(0.10, 75.0);
@@ -160,7 +162,7 @@ fn sim_28_right_side_climbs_a_step_of_one_radius() {
 /// its axle height and must climb it on friction before it rolls over the corner. With the
 /// seed's firm soil (`mu` = tan of the drawn friction angle, 0.58 for seed 1) the right side
 /// climbs it too. Same checks as for 0.10 m except the contact events: the face met below the
-/// axle gives up to 50 m/s^2 in single frames (at most 20 frames beyond 2 m/s^2).
+/// axle gives up to 50 m/s^2 in single frames (at most 40 frames beyond 2 m/s^2).
 #[test]
 fn sim_28_right_side_climbs_a_step_of_one_and_a_half_radii() {
     let c = climb(0.15, 90.0);
