@@ -32,6 +32,24 @@ const GOAL_IK: u64 = 10_000;
 const GOAL_RG2_FRAME: u64 = 100_000;
 const GOAL_VO: u64 = 60_000_000;
 const GOAL_STACK: u64 = 32 * 1024;
+/// Least stack-region headroom every measured phase must leave (enforced): a peak that reaches
+/// the bottom of the painted region may have overflowed into the statics unseen.
+const MIN_STACK_HEADROOM: u64 = 4 * 1024;
+
+/// The deepest measured stack phase (initialisation, flight, navigation tasks), bytes.
+fn stack_peak(m: &Measured) -> u64 {
+    ["init", "flight", "bench"]
+        .iter()
+        .filter_map(|k| m.stack.get(*k).copied())
+        .max()
+        .unwrap_or(0)
+}
+
+/// True when the deepest phase leaves at least [`MIN_STACK_HEADROOM`] of the stack region.
+fn stack_headroom_ok(m: &Measured) -> bool {
+    let region = m.stack.get("region").copied().unwrap_or(0);
+    stack_peak(m) + MIN_STACK_HEADROOM <= region
+}
 const GOAL_STATIC_RAM: u64 = 256 * 1024;
 
 /// Statistics of one measured item, instructions.
@@ -343,6 +361,15 @@ pub fn timing() -> Result<()> {
         bail!(
             "the image has panic sites outside its number formatting (issue 18: the flight code \
              has no panic path); enclosing functions: {flight_panics:?}"
+        );
+    }
+    if !stack_headroom_ok(&m) {
+        bail!(
+            "the deepest stack phase ({} B) leaves less than {} B of the {} B stack region: the \
+             stack may have overflowed into the statics (docs/timing.md, Stack)",
+            stack_peak(&m),
+            MIN_STACK_HEADROOM,
+            m.stack.get("region").copied().unwrap_or(0)
         );
     }
     println!(
@@ -1080,6 +1107,13 @@ fn document(
         "| stack <= 32 KiB including initialisation | {} B | {} |",
         thousands(stack("init")),
         pass(stack("init") <= GOAL_STACK)
+    )?;
+    writeln!(
+        d,
+        "| deepest stack phase leaves >= 4 KiB of the stack region (enforced) | {} B of {} B | {} |",
+        thousands(stack_peak(m)),
+        thousands(stack("region")),
+        pass(stack_headroom_ok(m))
     )?;
     writeln!(
         d,
