@@ -31,6 +31,25 @@ mod stats;
 use rover_hal::Clock;
 pub use stats::TimingStats;
 
+/// Background work in a quantum (ARCHITECTURE sec. 4: long work is a resumable pipeline
+/// advanced by a fixed work quantum per frame): calls `item` until the costs it reports reach
+/// `quantum` units (at least one call; the last item may go past the quantum by its own cost)
+/// or an item returns a result, which is returned. `item` gives the cost of the work item it
+/// runs (units of about 10 000 rover-CPU instructions; 0 counts as 1, so at most `quantum`
+/// items run) and the pipeline's result when that item finished it. Used by the visual
+/// odometry and the hazard mapper.
+pub fn spend_quantum<R>(quantum: u32, mut item: impl FnMut() -> (u16, Option<R>)) -> Option<R> {
+    let mut spent = 0u32;
+    while spent < quantum.max(1) {
+        let (cost, done) = item();
+        spent = spent.saturating_add(u32::from(cost.max(1)));
+        if done.is_some() {
+            return done;
+        }
+    }
+    None
+}
+
 /// One rate group: it fires in every minor frame whose tick satisfies
 /// `tick % divisor == offset` (F Prime `RateGroupDriver` style).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

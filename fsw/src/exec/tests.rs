@@ -298,3 +298,37 @@ fn exec_6_statistics() {
     );
     assert_eq!(elapsed_us(Some(0), Some(1), 0), None);
 }
+
+/// EXEC-7: `spend_quantum` runs items until their costs reach the quantum (at least one item,
+/// zero costs count as one, so at most `quantum` items) and stops at the first result.
+#[test]
+fn exec_7_spend_quantum_bounds_and_results() {
+    let mut calls = 0u32;
+    let r: Option<()> = super::spend_quantum(10, || {
+        calls += 1;
+        (3, None)
+    });
+    assert_eq!(
+        (r, calls),
+        (None, 4),
+        "3 + 3 + 3 < 10, the fourth reaches 12"
+    );
+    calls = 0;
+    let r: Option<()> = super::spend_quantum(0, || {
+        calls += 1;
+        (5, None)
+    });
+    assert_eq!((r, calls), (None, 1), "at least one item");
+    calls = 0;
+    let r: Option<()> = super::spend_quantum(7, || {
+        calls += 1;
+        (0, None)
+    });
+    assert_eq!((r, calls), (None, 7), "zero costs count as one");
+    calls = 0;
+    let r = super::spend_quantum(100, || {
+        calls += 1;
+        (1, (calls == 3).then_some(42))
+    });
+    assert_eq!((r, calls), (Some(42), 3), "stops at the first result");
+}

@@ -354,20 +354,17 @@ impl<const N: usize> VisualOdometry<N> {
             self.phase = Phase::Idle;
             return Progress::Finished(Err(VoError::FrameChanged));
         }
-        // Every item costs at least one unit, so this runs at most `quantum` items.
-        let mut spent = 0u32;
-        while spent < quantum.max(1) {
+        let done = crate::exec::spend_quantum(quantum, || {
             let cost = self
                 .next_work()
                 .and_then(|k| self.config.work_cost.get(k as usize).copied())
-                .unwrap_or(1)
-                .max(1);
-            spent = spent.saturating_add(u32::from(cost));
+                .unwrap_or(1);
             self.quality.work_items = self.quality.work_items.saturating_add(1);
-            if let Some(result) = self.work_item(&left, &right) {
-                self.phase = Phase::Idle;
-                return Progress::Finished(result);
-            }
+            (cost, self.work_item(&left, &right))
+        });
+        if let Some(result) = done {
+            self.phase = Phase::Idle;
+            return Progress::Finished(result);
         }
         Progress::Working {
             items: self.quality.work_items,
