@@ -657,8 +657,9 @@ pub fn markdown(study: &Study, reading: &str) -> String {
     let _ = writeln!(s, "## Slip hold\n");
     let _ = writeln!(
         s,
-        "`NavConfig::slip_hold_cycles`: after a rejected interval the next accepted intervals are \
-         not fused for that many RG2 cycles (flight default 20). Set through the run's experiment \
+        "`NavConfig::slip_hold_cycles`: while at least `slip_hold_rejections` (flight default 3) \
+         of the last `slip_hold_cycles` (flight default 20) tested intervals were rejected, the \
+         accepted intervals are not fused (hold 0: never). Set through the run's experiment \
          hook `RunOptions::configure` (never used by `run`, `compare` or `sil`). Cross-slope \
          plane, seeds {} and {}; EKF error = final horizontal position error over the distance.\n",
         SEEDS[0], SEEDS[1]

@@ -209,7 +209,8 @@ impl KinematicOdometry {
 
     /// Current contact-angle estimates `delta_i`, rad, index `wheel - 1` (in each wheel plane,
     /// positive = contact ahead of the axle; V99 sec. 6). All zero unless
-    /// [`OdometryConfig::contact_angles`] is set. They persist across intervals ([`Self::start`]).
+    /// [`OdometryConfig::contact_angles`] or [`OdometryConfig::contact_translation`] is set. They
+    /// persist across intervals ([`Self::start`]).
     pub fn contact_angles_rad(&self) -> [f64; WHEEL_COUNT] {
         self.contact_rad
     }

@@ -25,6 +25,20 @@ pub const BLIND_SKID_FACTOR: f64 = 1.5;
 /// ... plus this floor, m (the odometry's noise over a short interval).
 pub const BLIND_SKID_FLOOR_M: f64 = 0.01;
 
+/// The slip hold (`NavConfig::slip_hold_cycles`, `slip_hold_rejections`): at least
+/// `slip_hold_rejections` (and at least one) of the last `slip_hold_cycles` (at most 32)
+/// tested intervals were rejected.
+pub(super) fn slip_holding(config: &NavConfig, reject_history: u32) -> bool {
+    let window = config.slip_hold_cycles.min(32);
+    let mask = if window >= 32 {
+        u32::MAX
+    } else {
+        (1u32 << window).wrapping_sub(1)
+    };
+    let rejected = (reject_history & mask).count_ones();
+    window > 0 && rejected >= config.slip_hold_rejections.max(1)
+}
+
 impl Navigator {
     /// Adds one IMU sample's bias-corrected rotation to the rotation since the last joint
     /// reading. A sample that does not follow the previous one by 0 to 50 ms (a gap, time going
@@ -148,7 +162,7 @@ impl Navigator {
         // As `Navigator::vo_lost` (field by field: the filter is borrowed here).
         let vo_lost =
             !self.config.vo_enabled || self.cycles_since_vo > self.config.vo_timeout_cycles;
-        let holding = self.cycles_since_reject < self.config.slip_hold_cycles;
+        let holding = slip_holding(&self.config, self.reject_history);
         // The gate test (eq. 46) at the odometry's own covariance: the slip detector. With VO
         // alive an accepted interval is fused by the same call (unless holding); without VO the
         // interval is tested here and then fused with the slip allowance below.
@@ -214,8 +228,8 @@ impl Navigator {
                         d.accepted && anchored,
                     );
                 }
+                self.reject_history = (self.reject_history << 1) | u32::from(!d.accepted);
                 if d.accepted {
-                    self.cycles_since_reject = self.cycles_since_reject.saturating_add(1);
                     self.reject_streak = 0;
                     // H04: no slip when the kinematics agrees with the estimate.
                     self.slip = SlipVector::default();
@@ -224,7 +238,6 @@ impl Navigator {
                     }
                 } else {
                     self.counters.kin_rejected = self.counters.kin_rejected.saturating_add(1);
-                    self.cycles_since_reject = 0;
                     self.reject_streak = self.reject_streak.saturating_add(1);
                     // Slip = EKF minus kinematics = -(measured - predicted), rover frame R0.
                     self.slip = SlipVector {
@@ -419,5 +432,45 @@ impl Navigator {
         if let Err(e) = result {
             self.ekf_error(e);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slip_hold_needs_repeated_rejections_in_the_window() {
+        let flight = NavConfig::rocky8([0.0; 3], 0.0);
+        assert_eq!(flight.slip_hold_cycles, 20);
+        assert_eq!(flight.slip_hold_rejections, 1);
+        let config = NavConfig {
+            slip_hold_rejections: 3,
+            ..flight
+        };
+        // One or two false alarms in the last 20 tests: no hold.
+        assert!(!slip_holding(&config, 0));
+        assert!(!slip_holding(&config, 0b1));
+        assert!(!slip_holding(&config, 0b1000_0000_0000_0000_0001));
+        // Three in the window: hold; the oldest leaves the window after 20 tests.
+        assert!(slip_holding(&config, 0b1000_0000_0000_0000_0011));
+        assert!(!slip_holding(&config, 0b1_0000_0000_0000_0000_0011));
+        // With one rejection as the trigger (the flight default) every rejection holds.
+        let old = flight;
+        assert!(slip_holding(&old, 0b1000_0000_0000_0000_0000));
+        assert!(!slip_holding(&old, 0b1_0000_0000_0000_0000_0000));
+        // A window of 0 never holds; a window over 32 is the whole history.
+        assert!(!slip_holding(
+            &NavConfig {
+                slip_hold_cycles: 0,
+                ..old
+            },
+            u32::MAX
+        ));
+        let wide = NavConfig {
+            slip_hold_cycles: 100,
+            ..config
+        };
+        assert!(slip_holding(&wide, 0b111 << 29));
     }
 }
