@@ -162,9 +162,9 @@ pub struct NavConfig {
     /// the last [`NavConfig::slip_hold_cycles`] tested intervals (at most 32) were rejected.
     /// Flight default 1: any rejection holds. The gate (eq. 46, chi-square 95 %) rejects about
     /// 5 % of the intervals of a rover that does not slip, and each such false alarm stops the
-    /// kinematic fusion for a second, so the false alarms cluster (8.4 % on `flat-firm
-    /// --no-slip`, seed 1). With 3 (of 20) they fall to 3.2 % (mean of seeds 1-10, 4.1 % with
-    /// 1) but the EKF's final error on the same runs grows from 0.52 % to 0.79 % (worse on all
+    /// kinematic fusion for a second, so the false alarms cluster (8.4 % on `flat-firm`
+    /// without slip, seed 1). With 3 (of 20) they fall to 3.2 % (mean of seeds 1-10; 4.1 %
+    /// with one), but the EKF's final error on the same runs grows from 0.52 % to 0.79 % (worse on all
     /// ten seeds): the extra kinematic fusion speeds up a gyro-bias error of the heading
     /// (`docs/estimation.md`, "Statistical trigger of the hold"), so the default stays 1.
     pub slip_hold_rejections: u32,
