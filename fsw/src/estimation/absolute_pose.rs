@@ -94,7 +94,7 @@ impl Ekf {
         let c = rot(&q_nr);
         let a: Vec3 = c * Vec3::x();
         let h2 = a.x * a.x + a.y * a.y;
-        if !(h2 >= MIN_HORIZONTAL * MIN_HORIZONTAL) {
+        if h2.is_nan() || h2 < MIN_HORIZONTAL * MIN_HORIZONTAL {
             return Err(EstError::InvalidMeasurement);
         }
         let yaw_hat = libm::atan2(a.y, a.x);
