@@ -9,7 +9,7 @@
 
 use super::{LocalizationError, MAX_POINTS};
 use crate::perception::grid::cell_centre;
-use crate::perception::{CellClass, TerrainGrid, GRID_COLS, GRID_ROWS};
+use crate::perception::{CellClass, GridFrame, TerrainGrid, GRID_COLS, GRID_ROWS};
 
 /// Largest distance of a scan point from the grid origin, m.
 const MAX_POINT_M: f64 = 100.0;
@@ -67,20 +67,54 @@ impl LocalScan {
     /// blocks are thinned by an even stride in row order.
     pub fn from_grid(grid: &TerrainGrid) -> Self {
         let mut scan = Self::new();
+        scan.append_blocks(grid, MAX_POINTS, |p| p);
+        scan
+    }
+
+    /// Appends the hazard blocks of another grid placed at `frame` to this scan, expressed in
+    /// the grid frame `reference` (a local map from several captures, V99 sec. 5: "six stereo
+    /// pairs were used to build an elevation map"; the frames' relative placement comes from
+    /// the estimator, e.g. the captures of a turn in place). At most `max_new` points are
+    /// added (an even stride over the grid's blocks) and never beyond [`MAX_POINTS`]. Returns
+    /// the points added.
+    pub fn append_grid(
+        &mut self,
+        grid: &TerrainGrid,
+        frame: &GridFrame,
+        reference: &GridFrame,
+        max_new: usize,
+    ) -> usize {
+        let before = self.len();
+        let room = MAX_POINTS.saturating_sub(before).min(max_new);
+        self.append_blocks(grid, room, |p| {
+            let w = frame.to_world_xy(p);
+            let g = reference.to_grid(&crate::types::Vec3::new(w[0], w[1], 0.0));
+            [g[0], g[1]]
+        });
+        self.len() - before
+    }
+
+    /// Appends the hazard blocks of `grid`, taken through `to_scan`, thinned to `keep` by an
+    /// even stride in row order.
+    fn append_blocks(
+        &mut self,
+        grid: &TerrainGrid,
+        keep: usize,
+        to_scan: impl Fn([f64; 2]) -> [f64; 2],
+    ) {
         let total = Self::blocks(grid, |_, _| {});
-        let keep = total.min(MAX_POINTS);
+        let keep = total.min(keep);
         let mut index = 0usize;
         Self::blocks(grid, |_, p| {
             // Bresenham stride: block `index` is kept when floor((index + 1) keep / total)
             // steps up.
             if total > 0 && ((index + 1) * keep) / total > (index * keep) / total {
-                // Cell centres are finite and inside the grid: push cannot fail but a full
-                // scan simply stops growing.
-                let _ = scan.push(p);
+                // A point that is not finite or beyond 100 m (a frame far off) is refused,
+                // and a full scan simply stops growing.
+                let _ = self.push(to_scan(p));
             }
             index += 1;
         });
-        scan
     }
 
     /// Calls `visit(block_index, point)` for every block with a hazard cell, in row order, and

@@ -524,6 +524,17 @@ fn scan_subsampling_is_deterministic() {
     let xs: Vec<f64> = a.points().iter().map(|p| p[0]).collect();
     assert!(xs.iter().cloned().fold(f64::INFINITY, f64::min) < 0.3);
     assert!(xs.iter().cloned().fold(0.0, f64::max) > 3.5);
+    // A second grid turned 90 deg right in place lands rotated in the first one's frame.
+    let reference = GridFrame::new([1.0, 2.0, 0.0], 0.3);
+    let right = GridFrame::new([1.0, 2.0, 0.0], 0.3 + core::f64::consts::FRAC_PI_2);
+    let mut one = TerrainGrid::new();
+    one.set_class(20, 24, CellClass::Hazard);
+    let mut s = LocalScan::new();
+    assert_eq!(s.append_grid(&one, &right, &reference, 10), 1);
+    let c = cell_centre(20, 24);
+    assert!((s.points()[0][0] + c[1]).abs() < 1e-9 && (s.points()[0][1] - c[0]).abs() < 1e-9);
+    assert_eq!(s.append_grid(&grid, &reference, &reference, 5), 5);
+    assert_eq!(s.len(), 6);
     // One hazard cell gives one point at its centre.
     let mut one = TerrainGrid::new();
     one.set_class(5, 7, CellClass::Hazard);
