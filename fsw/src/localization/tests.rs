@@ -613,3 +613,65 @@ fn nees_survey() {
         );
     }
 }
+
+/// Node counts against the prior's size (run by hand with `--ignored --nocapture`; figures in
+/// `docs/localization.md`).
+#[test]
+#[ignore]
+fn node_survey() {
+    for (sxy, syaw) in [
+        (0.1, 0.01),
+        (0.3, 0.03),
+        (0.6, 0.05),
+        (1.0, 0.1),
+        (2.0, 0.2),
+    ] {
+        let mut nodes = Vec::new();
+        let mut evals = Vec::new();
+        let mut queue = 0;
+        let mut poses = 0;
+        let mut fails = 0;
+        for k in 0..60u64 {
+            let mut rng = ChaCha8Rng::seed_from_u64(300 + k);
+            let rocks = random_rocks(&mut rng, 14.0, 0.5);
+            let map = build_map(&rock_points(&rocks, &mut rng, 0.05));
+            let truth = GridFrame::new([0.5, -0.5, 0.0], rng.random_range(-3.1..3.1));
+            let grid = hazard_grid(&rocks, &truth, &mut rng, 0.1, 2);
+            let n = Normal::new(0.0, 1.0).unwrap();
+            let prior = GridFrame::new(
+                [
+                    0.5 + sxy * n.sample(&mut rng),
+                    -0.5 + sxy * n.sample(&mut rng),
+                    0.0,
+                ],
+                truth.heading_rad + syaw * n.sample(&mut rng),
+            );
+            let mut loc = Localizer::new(LocalizerConfig::default()).unwrap();
+            match loc.localize(&map, &grid, &prior, diag(sxy, sxy, syaw)) {
+                Ok(fix) => {
+                    nodes.push(fix.nodes);
+                    evals.push(fix.point_evaluations);
+                    queue = queue.max(fix.queue_peak);
+                    let h = fix.window;
+                    poses = poses.max((2 * h[0] + 1) * (2 * h[1] + 1) * (2 * h[2] + 1));
+                }
+                Err(e) => {
+                    if fails == 0 {
+                        std::eprintln!("prior {sxy} m: first failure {e:?}");
+                    }
+                    fails += 1;
+                }
+            }
+        }
+        nodes.sort_unstable();
+        evals.sort_unstable();
+        if nodes.is_empty() {
+            std::eprintln!("prior {sxy} m {syaw} rad: no fix ({fails} failures)");
+            continue;
+        }
+        std::eprintln!(
+            "prior {sxy} m {syaw} rad: fixes {} fails {fails}; nodes median {} max {}; point evaluations max {}; queue peak {queue}; poses in window max {poses}",
+            nodes.len(), nodes[nodes.len() / 2], nodes[nodes.len() - 1], evals[evals.len() - 1]
+        );
+    }
+}
