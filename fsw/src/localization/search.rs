@@ -404,6 +404,8 @@ impl Localizer {
         };
         self.nodes = 1;
         self.phase = Phase::Search;
+        let root = self.root();
+        self.dive(global, root);
         self.push_root(global)
     }
 
@@ -495,13 +497,13 @@ impl Localizer {
         }
     }
 
-    /// The root box over the whole window, queued if its bound passes.
-    fn push_root(&mut self, global: &GlobalMap) -> Result<(), LocalizationError> {
+    /// The root box over the whole window (sides padded to powers of two).
+    fn root(&self) -> Node {
         let log2 = |h: i32| {
             let w = (2 * h + 1) as u32;
             (u32::BITS - (w - 1).leading_zeros()) as u8
         };
-        let root = Node {
+        Node {
             bound: 0,
             x0: -self.half[0] as i16,
             y0: -self.half[1] as i16,
@@ -509,13 +511,17 @@ impl Localizer {
             lx: log2(self.half[0]),
             ly: log2(self.half[1]),
             lt: log2(self.half[2]),
-        };
+        }
+    }
+
+    /// The root box, queued if its bound passes.
+    fn push_root(&mut self, global: &GlobalMap) -> Result<(), LocalizationError> {
+        let root = self.root();
         self.consider(global, root)
     }
 
-    /// Splits `node` in two along every dimension wider than one pose and considers each
-    /// child.
-    fn expand(&mut self, global: &GlobalMap, node: &Node) -> Result<(), LocalizationError> {
+    /// The up to 8 children of `node`: halves along every dimension wider than one pose.
+    fn children(node: &Node) -> heapless::Vec<Node, 8> {
         let halves = |start: i16, l: u8| -> [(i16, u8, bool); 2] {
             if l == 0 {
                 [(start, 0, true), (start, 0, false)]
@@ -524,11 +530,13 @@ impl Localizer {
                 [(start, l - 1, true), (start.saturating_add(h), l - 1, true)]
             }
         };
+        let mut out = heapless::Vec::new();
         for (x0, lx, ux) in halves(node.x0, node.lx) {
             for (y0, ly, uy) in halves(node.y0, node.ly) {
                 for (t0, lt, ut) in halves(node.t0, node.lt) {
                     if ux && uy && ut {
-                        let child = Node {
+                        // At most 2 x 2 x 2 children: the push cannot fail.
+                        let _ = out.push(Node {
                             bound: 0,
                             x0,
                             y0,
@@ -536,13 +544,56 @@ impl Localizer {
                             lx,
                             ly,
                             lt,
-                        };
-                        self.consider(global, child)?;
+                        });
                     }
                 }
             }
         }
+        out
+    }
+
+    /// Splits `node` and considers each child.
+    fn expand(&mut self, global: &GlobalMap, node: &Node) -> Result<(), LocalizationError> {
+        for child in Self::children(node) {
+            self.consider(global, child)?;
+        }
         Ok(())
+    }
+
+    /// A greedy dive from `node` to a pose along the child of the highest bound, recording
+    /// the poses it meets: a good incumbent early keeps the best-first frontier (the queue)
+    /// small. It changes only the incumbent, never the optimum.
+    fn dive(&mut self, global: &GlobalMap, mut node: Node) {
+        // Each level halves a dimension: at most 3 x 7 levels for the largest window.
+        for _ in 0..32 {
+            let mut next: Option<Node> = None;
+            for mut child in Self::children(&node) {
+                let Some(range) = self.clip(&child) else {
+                    continue;
+                };
+                self.nodes = self.nodes.saturating_add(1);
+                if child.lx == 0 && child.ly == 0 && child.lt == 0 {
+                    let leaf = Leaf {
+                        score: self.score(global, range[0], range[2], range[4]),
+                        x: range[0],
+                        y: range[2],
+                        t: range[4],
+                    };
+                    if leaf.better_than(&self.best) {
+                        self.best = leaf;
+                    }
+                    continue;
+                }
+                child.bound = self.bound(global, &range);
+                if next.is_none_or(|n| child.bound > n.bound) {
+                    next = Some(child);
+                }
+            }
+            match next {
+                Some(n) if n.bound > self.best.score => node = n,
+                _ => break,
+            }
+        }
     }
 
     /// Evaluates a box (its bound) or a single pose (its likelihood) and queues or records
