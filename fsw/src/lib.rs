@@ -58,6 +58,7 @@ pub mod flight;
 pub mod guidance;
 pub mod kinematics;
 pub mod linalg;
+pub mod localization;
 pub mod perception;
 pub mod planning;
 pub mod telemetry;

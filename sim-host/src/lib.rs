@@ -21,6 +21,8 @@
 //!   `docs/campaigns.md`).
 //! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
 //!   policy (`docs/slip-detection.md`).
+//! - [`descent_map`]: the uplinked global map of terrain-map localization (descent or
+//!   orbital image of the truth rocks, with its resolution and errors).
 //! - [`devices`], [`run`]: the standing-still devices of the `still` command.
 //! - [`record`], [`replay`]: call tapes of the HAL inputs (`record`) and their replay through
 //!   the flight software with per-frame output digests (`replay`), for bit-identical
@@ -28,6 +30,7 @@
 
 pub mod camera;
 pub mod campaign;
+pub mod descent_map;
 pub mod detection;
 pub mod devices;
 pub mod driver;

@@ -35,6 +35,7 @@
 //! See `docs/estimation.md` for the discretization, cloning, gate and the equation-to-function
 //! map.
 
+pub mod absolute_pose;
 mod clone;
 pub mod ephemeris;
 mod fusion;
