@@ -472,6 +472,14 @@ fn groups(m: &Measured) -> Vec<Group> {
                       the SIL-HAZ runs made one every 7-10 s, 5 s is taken as the bound"
                 .into(),
         },
+        Group {
+            name: "LOC",
+            period_s: 5.0,
+            insns: m.task("localize").max,
+            content: "terrain-map localization (issue 17; budgeted, not yet scheduled by the \
+                      flight software): at most one per hazard map, the HAZ bound"
+                .into(),
+        },
     ]
 }
 
@@ -497,7 +505,7 @@ fn summary(m: &Measured, r: &ElfReport) -> String {
     )
 }
 
-const TASK_DOC: [(&str, &str, &str); 11] = [
+const TASK_DOC: [(&str, &str, &str); 13] = [
     (
         "ekf_propagate",
         "`Ekf::propagate`",
@@ -552,6 +560,19 @@ const TASK_DOC: [(&str, &str, &str); 11] = [
         "roverbug_plan",
         "`Planner::plan`",
         "background, after a hazard map: one RoverBug step (the tape's scene: few obstacles)",
+    ),
+    (
+        "localization_map",
+        "`GlobalMap::reset_centred`, `insert_point` per point, `finish`",
+        "once per uplinked map (issue 17): a 38.4 m global map of a synthetic field of 392 rocks \
+         (`fsw/image/src/target/loc_bench.rs`), with its distance transform",
+    ),
+    (
+        "localize",
+        "`Localizer::localize`",
+        "background, after a hazard map (issue 17, not yet scheduled by the flight software): \
+         one branch-and-bound localization of a hazard grid against that map, prior 0.3 m / \
+         0.03 rad, 8 synthetic trials",
     ),
 ];
 

@@ -555,8 +555,10 @@ impl Localizer {
 
     /// Splits `node` and considers each child.
     fn expand(&mut self, global: &GlobalMap, node: &Node) -> Result<(), LocalizationError> {
-        for child in Self::children(node) {
-            self.consider(global, child)?;
+        // By reference: a `heapless::Vec` consumed by value drops its iterator through a
+        // checked slice index (a panic path in the image, issue 18).
+        for child in Self::children(node).iter() {
+            self.consider(global, *child)?;
         }
         Ok(())
     }
@@ -568,7 +570,8 @@ impl Localizer {
         // Each level halves a dimension: at most 3 x 7 levels for the largest window.
         for _ in 0..32 {
             let mut next: Option<Node> = None;
-            for mut child in Self::children(&node) {
+            for c in Self::children(&node).iter() {
+                let mut child = *c;
                 let Some(range) = self.clip(&child) else {
                     continue;
                 };

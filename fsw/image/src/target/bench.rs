@@ -11,6 +11,7 @@
 //! every update is measured whole.
 
 use super::devices::ImageBuffer;
+use super::loc_bench::LocBench;
 use super::measure::{Meter, Stats};
 use super::report;
 use super::semihost::HostFile;
@@ -35,7 +36,7 @@ const MAX_VO_ITEMS: usize = 8192;
 pub const VO_FEATURES: usize = 150;
 
 /// Names of the measured tasks, in report order.
-const TASKS: [&str; 11] = [
+const TASKS: [&str; 13] = [
     "ekf_propagate",
     "ekf_gate_relative_pose",
     "ekf_update_relative_pose",
@@ -47,6 +48,8 @@ const TASKS: [&str; 11] = [
     "vo_update",
     "hazard_map",
     "roverbug_plan",
+    "localization_map",
+    "localize",
 ];
 const PROPAGATE: usize = 0;
 const GATE: usize = 1;
@@ -133,6 +136,7 @@ pub struct Bench {
     vo: &'static mut VisualOdometry<VO_FEATURES>,
     mapper: &'static mut HazardMapper,
     planner: &'static mut Planner,
+    loc: LocBench,
     calibration: rover_hal::StereoCalibration,
     guidance: Guidance<MAX_WAYPOINTS>,
     images: [&'static mut ImageBuffer; 2],
@@ -176,6 +180,7 @@ impl Bench {
         let mapper = install_mapper(nav.perception, &header.calibration)?;
         let goal = header.waypoints().last().copied()?;
         let planner = install_planner(nav.planner, goal)?;
+        let loc = LocBench::install()?;
         let contacts = wheel_contact_points(&ROCKY8, &SuspensionState::default()).ok()?;
         let wheel_xy = contacts.map(|c| [c.x, c.y]);
         let path = Path::new(header.waypoints()).ok()?;
@@ -185,6 +190,7 @@ impl Bench {
             vo,
             mapper,
             planner,
+            loc,
             calibration: header.calibration,
             guidance,
             images,
@@ -219,7 +225,10 @@ impl Bench {
             * (rover_replay::player::MAX_RECORDS_PER_FRAME as u64 + 1);
         for _ in 0..records {
             match reader.next_record()? {
-                Record::End => return Ok(()),
+                Record::End => {
+                    self.localization(meter);
+                    return Ok(());
+                }
                 Record::Call(Call::ImuRead(Ok(s))) => self.imu(meter, &s),
                 Record::Call(Call::JointsRead(Ok(j))) => self.joints(meter, &j),
                 Record::Call(Call::CameraTrigger(Ok(t))) => self.trigger(meter, t),
@@ -229,6 +238,12 @@ impl Bench {
             }
         }
         Err(TapeError::FrameTooLong)
+    }
+
+    /// The terrain-map localization on its synthetic field ([`LocBench`]).
+    fn localization(&mut self, meter: &mut Meter) {
+        let [.., map, loc] = &mut self.stats;
+        self.loc.run(meter, map, loc);
     }
 
     /// The task statistics, by name.

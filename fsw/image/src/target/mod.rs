@@ -9,6 +9,7 @@
 
 mod bench;
 mod devices;
+mod loc_bench;
 mod measure;
 mod semihost;
 mod still;
