@@ -61,6 +61,7 @@ pub mod linalg;
 pub mod localization;
 pub mod perception;
 pub mod planning;
+pub mod sequencer;
 pub mod telemetry;
 pub mod types;
 pub mod vo;

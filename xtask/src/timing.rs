@@ -480,6 +480,14 @@ fn groups(m: &Measured) -> Vec<Group> {
                       flight software): at most one per hazard map, the HAZ bound"
                 .into(),
         },
+        Group {
+            name: "SEQ",
+            period_s: 10.0,
+            insns: m.task("sequencer_replan").max,
+            content: "on-board sequencer (issue 17; budgeted, not yet scheduled by the flight \
+                      software): at most one replan per 10 s (arrivals and triggers)"
+                .into(),
+        },
     ]
 }
 
@@ -505,7 +513,7 @@ fn summary(m: &Measured, r: &ElfReport) -> String {
     )
 }
 
-const TASK_DOC: [(&str, &str, &str); 13] = [
+const TASK_DOC: [(&str, &str, &str); 14] = [
     (
         "ekf_propagate",
         "`Ekf::propagate`",
@@ -573,6 +581,12 @@ const TASK_DOC: [(&str, &str, &str); 13] = [
         "background, after a hazard map (issue 17, not yet scheduled by the flight software): \
          one branch-and-bound localization of a hazard grid against that map, prior 0.3 m / \
          0.03 rad, 8 synthetic trials",
+    ),
+    (
+        "sequencer_replan",
+        "`Sequencer::replan`",
+        "on arrival or a trigger (issue 17, not yet scheduled by the flight software): one \
+         replan of 8 targets with windows, energy and a leg penalty, 8 random problems",
     ),
 ];
 

@@ -36,7 +36,7 @@ const MAX_VO_ITEMS: usize = 8192;
 pub const VO_FEATURES: usize = 150;
 
 /// Names of the measured tasks, in report order.
-const TASKS: [&str; 13] = [
+const TASKS: [&str; 14] = [
     "ekf_propagate",
     "ekf_gate_relative_pose",
     "ekf_update_relative_pose",
@@ -50,6 +50,7 @@ const TASKS: [&str; 13] = [
     "roverbug_plan",
     "localization_map",
     "localize",
+    "sequencer_replan",
 ];
 const PROPAGATE: usize = 0;
 const GATE: usize = 1;
@@ -242,8 +243,9 @@ impl Bench {
 
     /// The terrain-map localization on its synthetic field ([`LocBench`]).
     fn localization(&mut self, meter: &mut Meter) {
-        let [.., map, loc] = &mut self.stats;
+        let [.., map, loc, seq] = &mut self.stats;
         self.loc.run(meter, map, loc);
+        self.loc.sequencer(meter, seq);
     }
 
     /// The task statistics, by name.

@@ -15,6 +15,7 @@ use super::measure::{Meter, Stats};
 use fsw::localization::{GlobalMap, Localizer, LocalizerConfig};
 use fsw::perception::grid::{cell_centre, CellClass, GridFrame, TerrainGrid};
 use fsw::perception::{GRID_COLS, GRID_ROWS};
+use fsw::sequencer::{ResourceModel, Sequencer, Situation, Target, MAX_TARGETS};
 
 /// Rocks of the synthetic field.
 const ROCKS: usize = 392;
@@ -74,6 +75,51 @@ impl LocBench {
             grid,
             rocks,
         })
+    }
+
+    /// [`TRIALS`] replans of the on-board sequencer (issue 17, V99 sec. 3) on random problems
+    /// of [`MAX_TARGETS`] targets over 30 m with random priorities, windows, dwells and energy
+    /// (the largest plans it takes), each after a leg penalty and, every other one, a
+    /// localization request (into `stats`; a replan error counts as an error).
+    pub fn sequencer(&mut self, meter: &mut Meter, stats: &mut Stats) {
+        let mut rng = Rng(0x5851_F42D_4C95_7F2D);
+        for trial in 0..TRIALS {
+            let mut targets = [Target {
+                position_m: [0.0; 2],
+                priority: 0,
+                window_open_s: 0.0,
+                window_close_s: 0.0,
+                dwell_s: 0.0,
+                dwell_energy_j: 0.0,
+            }; MAX_TARGETS];
+            for t in targets.iter_mut() {
+                let open = rng.range(0.0, 3000.0);
+                *t = Target {
+                    position_m: [rng.range(-15.0, 15.0), rng.range(-15.0, 15.0)],
+                    priority: (rng.range(0.0, 5.0)) as u8,
+                    window_open_s: open,
+                    window_close_s: open + rng.range(100.0, 5000.0),
+                    dwell_s: rng.range(0.0, 600.0),
+                    dwell_energy_j: rng.range(0.0, 5000.0),
+                };
+            }
+            let Ok(mut seq) = Sequencer::new(&targets, ResourceModel::rocky8()) else {
+                stats.add(0, false);
+                continue;
+            };
+            let situation = Situation {
+                now_s: 0.0,
+                position_m: [0.0, 0.0],
+                energy_available_j: rng.range(5e4, 1.5e5),
+                end_s: rng.range(4000.0, 8000.0),
+            };
+            let _ = seq.set_leg_penalty(trial % MAX_TARGETS, rng.range(0.0, 20.0));
+            if trial % 2 == 1 {
+                seq.request_localization();
+            }
+            let (r, n) = meter.measure(|| seq.replan(&situation));
+            stats.add(n, r.is_ok());
+        }
     }
 
     /// Build the field's map (into `map_stats`) and run the trials (into `loc_stats`; a trial
