@@ -197,6 +197,9 @@ impl<D: StereoCamera> StereoCamera for Rec<D> {
     fn calibration(&self) -> StereoCalibration {
         self.inner.calibration()
     }
+    fn lens_calibration(&self) -> Option<rover_hal::LensCalibration> {
+        self.inner.lens_calibration()
+    }
     fn trigger(&mut self) -> Result<u64, ErrorKind> {
         let r = kind(self.inner.trigger());
         self.rec.borrow_mut().call(Call::CameraTrigger(r));
