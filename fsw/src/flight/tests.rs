@@ -109,6 +109,7 @@ impl Platform for TestPlatform {
     type Camera = StuckCamera;
     type Sun = TestSun;
     type Telemetry = RefusingTelemetry;
+    type ImageMemory = crate::rectify::ImageMemory<Vec<crate::rectify::MapNode>, Vec<u8>>;
 }
 
 fn imu(t_us: u64) -> ImuSample {
@@ -175,6 +176,11 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
         camera: StuckCamera,
         sun: TestSun(sun_script),
         telemetry: RefusingTelemetry,
+        image_memory: crate::rectify::ImageMemory {
+            map: Vec::new(),
+            left: Vec::new(),
+            right: Vec::new(),
+        },
     };
     let config = FswConfig::rocky8([0.0; 3], 0.0);
     let mut fsw = match Fsw::new(devices, &config, &[[0.0, 0.0], [1.0, 0.0]]) {
@@ -502,6 +508,11 @@ fn fp_3_implausible_values_and_time_leaps() {
         camera: StuckCamera,
         sun: TestSun(Script::new([Err(ErrorKind::NotReady); 3])),
         telemetry: RefusingTelemetry,
+        image_memory: crate::rectify::ImageMemory {
+            map: Vec::new(),
+            left: Vec::new(),
+            right: Vec::new(),
+        },
     };
     let config = FswConfig::rocky8([0.0; 3], 0.0);
     let mut fsw = match Fsw::new(devices, &config, &[[0.0, 0.0], [1.0, 0.0]]) {
