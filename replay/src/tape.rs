@@ -14,8 +14,8 @@
 //! Every decoder checks lengths and codes and returns a [`TapeError`] instead of panicking.
 
 use rover_hal::{
-    CaptureStatus, ErrorKind, ImuSample, JointState, LensCalibration, RawCamera,
-    StereoCalibration, SunReading, WHEEL_COUNT,
+    CaptureStatus, ErrorKind, ImuSample, JointState, LensCalibration, RawCamera, StereoCalibration,
+    SunReading, WHEEL_COUNT,
 };
 
 /// Magic bytes at the start of a tape (the last byte is the format version).
@@ -27,9 +27,17 @@ pub const NAV_PARAMS: usize = 16;
 /// Bytes of the scenario name field (UTF-8, NUL padded).
 pub const NAME_BYTES: usize = 32;
 /// Size of the encoded header, bytes.
-pub const HEADER_BYTES: usize =
-    8 + 4 + 4 + 8 + 17 * 8 + LENS_BYTES + 6 * 8 + NAV_PARAMS * 8 + 1 + MAX_WAYPOINTS * 16
-        + NAME_BYTES;
+pub const HEADER_BYTES: usize = 8
+    + 4
+    + 4
+    + 8
+    + 17 * 8
+    + LENS_BYTES
+    + 6 * 8
+    + NAV_PARAMS * 8
+    + 1
+    + MAX_WAYPOINTS * 16
+    + NAME_BYTES;
 /// Bytes of the lens calibration field: a presence byte and two raw cameras of 18 `f64`.
 const LENS_BYTES: usize = 1 + 2 * 18 * 8;
 /// Largest encoded record (tag, length and body), bytes.
@@ -540,7 +548,9 @@ fn put_lens(w: &mut Writer<'_>, lens: Option<&LensCalibration>) -> Result<(), Ta
     };
     let (left, right) = lens.map_or((zero, zero), |l| (l.left, l.right));
     for c in [left, right] {
-        w.f64s(&[c.fx_px, c.fy_px, c.cx_px, c.cy_px, c.k1, c.k2, c.k3, c.p1, c.p2])?;
+        w.f64s(&[
+            c.fx_px, c.fy_px, c.cx_px, c.cy_px, c.k1, c.k2, c.k3, c.p1, c.p2,
+        ])?;
         for row in &c.rot_raw_from_rect {
             w.f64s(row)?;
         }

@@ -22,10 +22,10 @@ use crate::exec::{
     ExecConfig, ExecError, Executive, FrameReport, GroupConfig, TaskConfig, TaskSet,
 };
 use crate::guidance::Point2;
+use crate::rectify::{Rectifier, RectifyConfig, RectifyMemory, RectifyProgress};
 use crate::telemetry::{
     self, DeviceHealth, FrameStatus, NavTelemetry, RecordKind, MAX_RECORD_BYTES,
 };
-use crate::rectify::{RectifyConfig, RectifyMemory, RectifyProgress, Rectifier};
 use nav::{NavConfig, NavError, Navigator};
 use rover_hal::{
     CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, StereoCamera,
@@ -720,11 +720,10 @@ impl<P: Platform> Work<'_, P> {
     /// (or the hazard mapper) starts on the rectified pair. Returns the units used.
     fn rectify_step(&mut self, quantum: u32) -> u32 {
         let progress = match self.devices.camera.frame() {
-            Ok(frame) => {
-                self.rect
-                    .rectifier
-                    .step(&frame, &mut self.devices.image_memory, quantum)
-            }
+            Ok(frame) => self
+                .rect
+                .rectifier
+                .step(&frame, &mut self.devices.image_memory, quantum),
             Err(e) => {
                 let health = &mut self.state.health[DeviceId::Camera as usize];
                 count_error(health, rover_hal::Error::kind(&e));

@@ -426,7 +426,7 @@ fn check_camera(c: &RawCamera) -> Result<(), RectifyError> {
 fn map_node(c: &RawCamera, ray: [f64; 3], stats: &mut MapStats) -> Result<MapNode, RectifyError> {
     let r = &c.rot_raw_from_rect;
     let a = [0, 1, 2].map(|i| r[i][0] * ray[0] + r[i][1] * ray[1] + r[i][2] * ray[2]);
-    if !(a[2] > 1e-6) {
+    if a[2].is_nan() || a[2] <= 1e-6 {
         return Err(RectifyError::BadRay);
     }
     let (x, y) = (a[0] / a[2], a[1] / a[2]);
@@ -435,13 +435,13 @@ fn map_node(c: &RawCamera, ray: [f64; 3], stats: &mut MapStats) -> Result<MapNod
         return Err(RectifyError::BadRay);
     }
     let det = jacobian_det(c, x, y);
-    if !(det >= MIN_JACOBIAN_DET) {
+    if det.is_nan() || det < MIN_JACOBIAN_DET {
         return Err(RectifyError::Folded);
     }
     stats.min_jacobian_det = stats.min_jacobian_det.min(det);
     let (back, iterations) = undistort(c, xd, yd).ok_or(RectifyError::NotConverged)?;
     let round_trip = libm::hypot((back[0] - x) * c.fx_px, (back[1] - y) * c.fy_px);
-    if !(round_trip <= ROUND_TRIP_TOL_PX) {
+    if round_trip.is_nan() || round_trip > ROUND_TRIP_TOL_PX {
         return Err(RectifyError::NotConverged);
     }
     stats.max_round_trip_px = stats.max_round_trip_px.max(round_trip);
@@ -450,7 +450,7 @@ fn map_node(c: &RawCamera, ray: [f64; 3], stats: &mut MapStats) -> Result<MapNod
     let v = c.cy_px + c.fy_px * yd;
     // Room for the bilinear neighbourhood: 0 <= u < W - 1, 0 <= v < H - 1.
     let margin = u.min((W - 1) as f64 - u).min(v).min((H - 1) as f64 - v);
-    if !(margin > 1.0 / 256.0) {
+    if margin.is_nan() || margin <= 1.0 / 256.0 {
         return Err(RectifyError::FieldNotCovered);
     }
     stats.min_margin_px = stats.min_margin_px.min(margin);
@@ -516,7 +516,7 @@ pub fn undistort(c: &RawCamera, xd: f64, yd: f64) -> Option<([f64; 2], u32)> {
         }
         let j = jacobian(c, x, y);
         let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
-        if !(libm::fabs(det) > 1e-9) {
+        if det.is_nan() || libm::fabs(det) <= 1e-9 {
             return None;
         }
         x -= (j[1][1] * ex - j[0][1] * ey) / det;

@@ -257,7 +257,8 @@ fn rect_1_synthetic_distorted_pair_is_restored() {
 #[test]
 fn rect_3_bad_calibrations_are_refused() {
     let r = rect();
-    let cases: [(fn(&mut LensCalibration), RectifyError); 9] = [
+    type Spoil = fn(&mut LensCalibration);
+    let cases: [(Spoil, RectifyError); 9] = [
         (|l| l.left.k1 = f64::NAN, RectifyError::BadCalibration),
         (|l| l.right.p2 = f64::INFINITY, RectifyError::BadCalibration),
         (|l| l.left.fx_px = -390.0, RectifyError::BadCalibration),

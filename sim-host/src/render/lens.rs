@@ -59,7 +59,7 @@ impl CoverImage {
         }
         let margin = 2.0;
         let size = [0, 1].map(|k| ((hi[k] - lo[k]) * f + 2.0 * margin).ceil() + 1.0);
-        if !(f.is_finite() && f > 0.0) || size.iter().any(|s| !(*s <= 4096.0)) {
+        if !(f.is_finite() && f > 0.0) || size.iter().any(|s| s.is_nan() || *s > 4096.0) {
             return None;
         }
         Some(Self {
@@ -182,7 +182,7 @@ impl LensRig {
         let gauss = &self.gauss;
         let resample = |image: &[u8], map: &[[f32; 2]], out: &mut [u8], camera: u64| {
             let table_mask = (gauss.len().min(1 << 16) - 1) as u64;
-            let key = hash3(noise_seed, camera, 0x006c_656e_73);
+            let key = hash3(noise_seed, camera, 0x006c_656e_7300);
             out.par_chunks_mut(IMAGE_WIDTH_PX)
                 .zip(map.par_chunks(IMAGE_WIDTH_PX))
                 .enumerate()

@@ -24,7 +24,7 @@ use fsw::kinematics::{
 };
 use fsw::perception::{CameraPose, HazardMapper, MapProgress};
 use fsw::planning::{ConvexPolygon, Planner, Wedge};
-use fsw::rectify::{ImageMemory, MapNode, RectifyConfig, RectifyProgress, Rectifier};
+use fsw::rectify::{ImageMemory, MapNode, Rectifier, RectifyConfig, RectifyProgress};
 use fsw::types::{Quat, Vec3};
 use fsw::vo::{Progress, VisualOdometry, WorkKind};
 use rover_hal::{ImuSample, JointState, StereoFrame};

@@ -11,6 +11,7 @@
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use cortex_m::peripheral::{SCB, SYST};
+use fsw::rectify::{MapNode, MAP_NODES};
 use rover_hal::{
     CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
     StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
@@ -18,7 +19,6 @@ use rover_hal::{
 use rover_replay::devices::{
     ReplayClock, ReplayImu, ReplayMobility, ReplayStereo, ReplaySun, ReplayTelemetry,
 };
-use fsw::rectify::{MapNode, MAP_NODES};
 use rover_replay::Player;
 
 use super::semihost::HostFile;

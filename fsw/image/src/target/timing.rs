@@ -6,8 +6,8 @@
 
 use super::bench::Bench;
 use super::devices::{
-    player, take_image_buffers, take_rectify_maps, SystickClock, TargetCamera, TargetClock, TargetImu, TargetMobility,
-    TargetPlatform, TargetSun, TargetTelemetry,
+    player, take_image_buffers, take_rectify_maps, SystickClock, TargetCamera, TargetClock,
+    TargetImu, TargetMobility, TargetPlatform, TargetSun, TargetTelemetry,
 };
 use super::measure::{
     repaint_stack, stack_high_water, stack_region, Meter, Stats, INSNS_PER_COUNT,
@@ -119,7 +119,9 @@ pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
         return false;
     };
     let Some([map_fsw, map_bench]) = take_rectify_maps() else {
-        report(format_args!("fsw-image: rectification maps already taken\n"));
+        report(format_args!(
+            "fsw-image: rectification maps already taken\n"
+        ));
         return false;
     };
     let Some(tape) = player() else {
