@@ -179,7 +179,7 @@ pub struct RectifyConfig {
 
 impl Default for RectifyConfig {
     fn default() -> Self {
-        Self { row_cost: 3 }
+        Self { row_cost: 4 }
     }
 }
 
@@ -535,15 +535,17 @@ pub fn rectify_row(nodes: &[MapNode], row: usize, raw: &[u8], out: &mut [u8]) {
     let step = LATTICE_STEP_PX as i32;
     let j = row / LATTICE_STEP_PX;
     let b = (row % LATTICE_STEP_PX) as i32;
-    let node = |i: usize, jj: usize| nodes.get(jj * LATTICE_COLS + i).copied();
+    let lattice_row = |jj: usize| nodes.get(jj * LATTICE_COLS..(jj + 1) * LATTICE_COLS);
+    let (Some(upper), Some(lower)) = (lattice_row(j), lattice_row(j + 1)) else {
+        out.fill(0);
+        return;
+    };
     for (cell, out_cell) in out.chunks_mut(LATTICE_STEP_PX).enumerate() {
         let corners = (
-            node(cell, j),
-            node(cell, j + 1),
-            node(cell + 1, j),
-            node(cell + 1, j + 1),
+            upper.get(cell..cell + 2),
+            lower.get(cell..cell + 2),
         );
-        let (Some(p00), Some(p01), Some(p10), Some(p11)) = corners else {
+        let (Some(&[p00, p10]), Some(&[p01, p11])) = corners else {
             out_cell.fill(0);
             continue;
         };
@@ -571,26 +573,28 @@ fn sample(raw: &[u8], qu: i32, qv: i32) -> u8 {
         return 0;
     }
     let (x, y) = ((qu >> Q_FRAC_BITS) as usize, (qv >> Q_FRAC_BITS) as usize);
-    let wx = ((qu >> (Q_FRAC_BITS - 8)) & 0xff) as u32;
-    let wy = ((qv >> (Q_FRAC_BITS - 8)) & 0xff) as u32;
     if x + 1 >= W || y + 1 >= H {
         return 0;
     }
+    let wx = ((qu >> (Q_FRAC_BITS - 8)) & 0xff) as u32;
+    let wy = ((qv >> (Q_FRAC_BITS - 8)) & 0xff) as u32;
     let top = y * W + x;
-    let pair = |at: usize| {
-        raw.get(at..at + 2)
-            .and_then(|s| <[u8; 2]>::try_from(s).ok())
-    };
-    let (Some([i00, i10]), Some([i01, i11])) = (pair(top), pair(top + W)) else {
+    // The 2 x 2 neighbourhood: one window of W + 2 bytes, indexed at fixed offsets inside it.
+    let Some(window) = raw.get(top..top + W + 2) else {
         return 0;
     };
-    let (i00, i10, i01, i11) = (
-        u32::from(i00),
-        u32::from(i10),
-        u32::from(i01),
-        u32::from(i11),
-    );
-    let upper = i00 * (256 - wx) + i10 * wx;
-    let lower = i01 * (256 - wx) + i11 * wx;
-    ((upper * (256 - wy) + lower * wy + (1 << 15)) >> 16) as u8
+    let (Some(&i00), Some(&i10), Some(&i01), Some(&i11)) = (
+        window.first(),
+        window.get(1),
+        window.get(W),
+        window.get(W + 1),
+    ) else {
+        return 0;
+    };
+    // I00 (256 - wx) + I10 wx = 256 I00 + (I10 - I00) wx, exactly (and the same along y):
+    // the module doc's formula with three multiplications; every term fits an i32.
+    let (wx, wy) = (wx as i32, wy as i32);
+    let upper = (i32::from(i00) << 8) + (i32::from(i10) - i32::from(i00)) * wx;
+    let lower = (i32::from(i01) << 8) + (i32::from(i11) - i32::from(i01)) * wx;
+    (((upper << 8) + (lower - upper) * wy + (1 << 15)) >> 16) as u8
 }

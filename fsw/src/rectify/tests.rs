@@ -211,8 +211,9 @@ fn rect_1_synthetic_distorted_pair_is_restored() {
             }
         }
     }
-    // 960 rows at 3 units, 100 units per call: 34 rows per call.
-    assert_eq!(calls, 960usize.div_ceil(34));
+    // 960 rows at `row_cost` units, 100 units per call.
+    let per_call = 100usize.div_ceil(usize::from(RectifyConfig::default().row_cost));
+    assert_eq!(calls, 960usize.div_ceil(per_call));
     let (mut worst_dot, mut worst_line, mut raw_shift): (f64, f64, f64) = (0.0, 0.0, 0.0);
     for (cam, img) in [&mem.left, &mem.right].into_iter().enumerate() {
         let c = if cam == 0 { &lens.left } else { &lens.right };
