@@ -541,10 +541,7 @@ pub fn rectify_row(nodes: &[MapNode], row: usize, raw: &[u8], out: &mut [u8]) {
         return;
     };
     for (cell, out_cell) in out.chunks_mut(LATTICE_STEP_PX).enumerate() {
-        let corners = (
-            upper.get(cell..cell + 2),
-            lower.get(cell..cell + 2),
-        );
+        let corners = (upper.get(cell..cell + 2), lower.get(cell..cell + 2));
         let (Some(&[p00, p10]), Some(&[p01, p11])) = corners else {
             out_cell.fill(0);
             continue;
