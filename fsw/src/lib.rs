@@ -25,6 +25,8 @@
 //!   contact points, wheel Jacobians, forward/inverse kinematics, vehicle odometry, planar model.
 //! - [`planning`]: RoverBug path planning (V99 sec. 4): local tangent graph over convex obstacle
 //!   polygons, motion-to-goal and boundary following with virtual sliding and gaze control.
+//! - [`rectify`]: rectification of the raw wide-angle hazcam pair (issue 15 item 4): a
+//!   fixed-point map built once from the lens calibration, applied in background work items.
 //! - [`types`]: shared math types ([`types::RelativePose`]).
 //! - [`guidance`]: carrot heading and slip-compensation loops (H04 sec. 5, H05 sec. V).
 //! - [`telemetry`]: fixed-size telemetry records encoded without allocation.
@@ -61,6 +63,7 @@ pub mod linalg;
 pub mod localization;
 pub mod perception;
 pub mod planning;
+pub mod rectify;
 pub mod sequencer;
 pub mod telemetry;
 pub mod types;

@@ -44,6 +44,7 @@ impl Platform for FuzzPlatform {
     type Camera = FuzzCamera;
     type Sun = FuzzSun;
     type Telemetry = FuzzTelemetry;
+    type ImageMemory = fsw::rectify::ImageMemory<Vec<fsw::rectify::MapNode>, Vec<u8>>;
 }
 
 /// Settings of a run.
@@ -256,6 +257,11 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
             camera: FuzzCamera::new(shared.clone(), config.vo),
             sun: FuzzSun::new(shared.clone()),
             telemetry: FuzzTelemetry::new(shared.clone()),
+            image_memory: fsw::rectify::ImageMemory {
+                map: Vec::new(),
+                left: Vec::new(),
+                right: Vec::new(),
+            },
         };
         let mut fsw_config = FswConfig::rocky8(start_n, yaw);
         fsw_config.nav.ekf.sun = Some(sun);

@@ -49,8 +49,8 @@ mod sun_sensor;
 mod telemetry;
 
 pub use camera::{
-    CaptureStatus, StereoCalibration, StereoCamera, StereoFrame, IMAGE_HEIGHT_PX, IMAGE_PIXELS,
-    IMAGE_WIDTH_PX,
+    CaptureStatus, LensCalibration, RawCamera, StereoCalibration, StereoCamera, StereoFrame,
+    IMAGE_HEIGHT_PX, IMAGE_PIXELS, IMAGE_WIDTH_PX,
 };
 pub use clock::Clock;
 pub use error::{Error, ErrorKind};

@@ -203,6 +203,7 @@ pub struct ReplayStereo<H, P, B> {
     current: usize,
     loaded: Option<u32>,
     calibration: StereoCalibration,
+    lens: Option<rover_hal::LensCalibration>,
 }
 
 impl<H: TapeHandle, P: PayloadSource, B: AsRef<[u8]> + AsMut<[u8]>> ReplayStereo<H, P, B> {
@@ -216,7 +217,15 @@ impl<H: TapeHandle, P: PayloadSource, B: AsRef<[u8]> + AsMut<[u8]>> ReplayStereo
             current: 0,
             loaded: None,
             calibration,
+            lens: None,
         }
+    }
+
+    /// The same camera reporting the lens calibration `lens` (the tape header's): its pairs are
+    /// raw images that the flight software rectifies.
+    pub fn with_lens(mut self, lens: Option<rover_hal::LensCalibration>) -> Self {
+        self.lens = lens;
+        self
     }
 
     /// Id of the pair in the current slot.
@@ -267,6 +276,9 @@ impl<H: TapeHandle, P: PayloadSource, B: AsRef<[u8]> + AsMut<[u8]>> StereoCamera
     type Error = ErrorKind;
     fn calibration(&self) -> StereoCalibration {
         self.calibration
+    }
+    fn lens_calibration(&self) -> Option<rover_hal::LensCalibration> {
+        self.lens
     }
     fn trigger(&mut self) -> Result<u64, ErrorKind> {
         match take(&self.tape, CallKind::CameraTrigger) {

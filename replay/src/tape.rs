@@ -14,11 +14,12 @@
 //! Every decoder checks lengths and codes and returns a [`TapeError`] instead of panicking.
 
 use rover_hal::{
-    CaptureStatus, ErrorKind, ImuSample, JointState, StereoCalibration, SunReading, WHEEL_COUNT,
+    CaptureStatus, ErrorKind, ImuSample, JointState, LensCalibration, RawCamera, StereoCalibration,
+    SunReading, WHEEL_COUNT,
 };
 
 /// Magic bytes at the start of a tape (the last byte is the format version).
-pub const MAGIC: [u8; 8] = *b"RVRTAPE2";
+pub const MAGIC: [u8; 8] = *b"RVRTAPE3";
 /// Largest number of path waypoints a header carries.
 pub const MAX_WAYPOINTS: usize = 16;
 /// Number of flight-configuration parameters a header carries ([`TapeHeader::nav_params`]).
@@ -26,8 +27,19 @@ pub const NAV_PARAMS: usize = 16;
 /// Bytes of the scenario name field (UTF-8, NUL padded).
 pub const NAME_BYTES: usize = 32;
 /// Size of the encoded header, bytes.
-pub const HEADER_BYTES: usize =
-    8 + 4 + 4 + 8 + 17 * 8 + 6 * 8 + NAV_PARAMS * 8 + 1 + MAX_WAYPOINTS * 16 + NAME_BYTES;
+pub const HEADER_BYTES: usize = 8
+    + 4
+    + 4
+    + 8
+    + 17 * 8
+    + LENS_BYTES
+    + 6 * 8
+    + NAV_PARAMS * 8
+    + 1
+    + MAX_WAYPOINTS * 16
+    + NAME_BYTES;
+/// Bytes of the lens calibration field: a presence byte and two raw cameras of 18 `f64`.
+const LENS_BYTES: usize = 1 + 2 * 18 * 8;
 /// Largest encoded record (tag, length and body), bytes.
 pub const MAX_RECORD_BYTES: usize = 2 + 255;
 
@@ -67,6 +79,9 @@ pub struct TapeHeader {
     pub seed: u64,
     /// Calibration of the stereo camera.
     pub calibration: StereoCalibration,
+    /// Lens calibration of the raw cameras when the camera delivers raw images (the tape's
+    /// pixels are then raw).
+    pub lens: Option<LensCalibration>,
     /// True start pose of the rover: north, east, down (m), roll, pitch, yaw (rad).
     pub start_pose: [f64; 6],
     /// The recording flight software's configuration parameters that the scenario set (IMU
@@ -112,6 +127,7 @@ impl TapeHeader {
         w.u32(self.frames)?;
         w.u64(self.seed)?;
         put_calibration(&mut w, &self.calibration)?;
+        put_lens(&mut w, self.lens.as_ref())?;
         w.f64s(&self.start_pose)?;
         w.f64s(&self.nav_params)?;
         w.u8(self.waypoint_count)?;
@@ -132,6 +148,7 @@ impl TapeHeader {
         let frames = r.u32()?;
         let seed = r.u64()?;
         let calibration = get_calibration(&mut r)?;
+        let lens = get_lens(&mut r)?;
         let start_pose = r.f64s::<6>()?;
         let nav_params = r.f64s::<NAV_PARAMS>()?;
         let waypoint_count = r.u8()?;
@@ -149,6 +166,7 @@ impl TapeHeader {
             frames,
             seed,
             calibration,
+            lens,
             start_pose,
             nav_params,
             waypoints,
@@ -512,6 +530,58 @@ fn put_calibration(w: &mut Writer<'_>, c: &StereoCalibration) -> Result<(), Tape
         w.f64s(row)?;
     }
     w.f64s(&c.pos_camera_in_rover_m)
+}
+
+fn put_lens(w: &mut Writer<'_>, lens: Option<&LensCalibration>) -> Result<(), TapeError> {
+    w.u8(u8::from(lens.is_some()))?;
+    let zero = RawCamera {
+        fx_px: 0.0,
+        fy_px: 0.0,
+        cx_px: 0.0,
+        cy_px: 0.0,
+        k1: 0.0,
+        k2: 0.0,
+        k3: 0.0,
+        p1: 0.0,
+        p2: 0.0,
+        rot_raw_from_rect: [[0.0; 3]; 3],
+    };
+    let (left, right) = lens.map_or((zero, zero), |l| (l.left, l.right));
+    for c in [left, right] {
+        w.f64s(&[
+            c.fx_px, c.fy_px, c.cx_px, c.cy_px, c.k1, c.k2, c.k3, c.p1, c.p2,
+        ])?;
+        for row in &c.rot_raw_from_rect {
+            w.f64s(row)?;
+        }
+    }
+    Ok(())
+}
+
+fn get_lens(r: &mut Reader<'_>) -> Result<Option<LensCalibration>, TapeError> {
+    let present = r.u8()?;
+    let mut camera = || -> Result<RawCamera, TapeError> {
+        let [fx_px, fy_px, cx_px, cy_px, k1, k2, k3, p1, p2] = r.f64s::<9>()?;
+        Ok(RawCamera {
+            fx_px,
+            fy_px,
+            cx_px,
+            cy_px,
+            k1,
+            k2,
+            k3,
+            p1,
+            p2,
+            rot_raw_from_rect: [r.f64s::<3>()?, r.f64s::<3>()?, r.f64s::<3>()?],
+        })
+    };
+    let left = camera()?;
+    let right = camera()?;
+    match present {
+        0 => Ok(None),
+        1 => Ok(Some(LensCalibration { left, right })),
+        _ => Err(TapeError::BadHeader),
+    }
 }
 
 fn get_calibration(r: &mut Reader<'_>) -> Result<StereoCalibration, TapeError> {

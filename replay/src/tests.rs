@@ -40,6 +40,7 @@ fn header() -> TapeHeader {
         frames: 2,
         seed: 7,
         calibration: calibration(),
+        lens: None,
         start_pose: [0.1, -0.2, 0.3, 0.01, -0.02, f64::MIN_POSITIVE],
         nav_params: [1.5e-4; crate::tape::NAV_PARAMS],
         waypoints,

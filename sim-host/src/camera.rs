@@ -30,6 +30,13 @@ pub trait StereoRenderer {
     fn set_sun(&self, sun_w: [f64; 3]) {
         let _ = sun_w;
     }
+
+    /// Draw the next frames as raw images through the lenses `lens` (the true ones), or as the
+    /// rectified pinhole pair when `None`. The default ignores it (a renderer without
+    /// geometry).
+    fn set_lens(&self, lens: Option<rover_hal::LensCalibration>) {
+        let _ = lens;
+    }
 }
 
 /// Uniform grey images (value 128): the stand-in used when no terrain renderer is available.
@@ -56,12 +63,17 @@ impl StereoRenderer for FlatGreyRenderer {
 /// procedural albedo texture of [`crate::render::AlbedoTexture`] and Lambertian sun shading.
 ///
 /// Each frame is drawn with the calibration passed to [`StereoRenderer::render`] (the simulated
-/// camera passes its true head) and the sun of the last [`StereoRenderer::set_sun`].
+/// camera passes its true head) and the sun of the last [`StereoRenderer::set_sun`]; with
+/// lenses ([`StereoRenderer::set_lens`]) as raw images through [`crate::render::lens::LensRig`]
+/// (the head's mounting and baseline from the calibration, the intrinsics from the lenses).
 ///
 /// A render error (which only a degenerate pose or calibration can cause) gives black images,
 /// which the flight software rejects as a blank frame, and is counted in [`Self::errors`].
 pub struct TexturedRenderer {
     inner: std::cell::RefCell<crate::render::StereoRenderer>,
+    /// Lenses of [`StereoRenderer::set_lens`], and their rig (built at the first frame).
+    lens: std::cell::Cell<Option<rover_hal::LensCalibration>>,
+    rig: std::cell::RefCell<Option<crate::render::lens::LensRig>>,
     texture: std::sync::Arc<crate::render::AlbedoTexture>,
     sun: std::cell::Cell<crate::render::Sun>,
     errors: std::cell::Cell<u64>,
@@ -81,6 +93,8 @@ impl TexturedRenderer {
                 crate::render::RenderSettings::default(),
             )),
             texture: std::sync::Arc::new(crate::render::AlbedoTexture::new(params)),
+            lens: std::cell::Cell::new(None),
+            rig: std::cell::RefCell::new(None),
             sun: std::cell::Cell::new(crate::render::Sun { direction_w: sun_w }),
             errors: std::cell::Cell::new(0),
         }
@@ -121,17 +135,35 @@ impl StereoRenderer for TexturedRenderer {
         left: &mut [u8],
         right: &mut [u8],
     ) {
-        let mut inner = self.inner.borrow_mut();
-        if inner.calibration() != calib {
-            inner.set_calibration(*calib);
-        }
         let textured =
             crate::render::TexturedSurface::new(BorrowedSurface(surface), self.texture.clone());
         let pose = crate::render::CameraPose {
             rot_world_from_camera: left_cam_rot_w_from_k,
             pos_world_m: left_cam_pos_w,
         };
-        let result = inner.render(&textured, &pose, &self.sun.get(), seed, left, right);
+        let result = match self.lens.get() {
+            None => {
+                let mut inner = self.inner.borrow_mut();
+                if inner.calibration() != calib {
+                    inner.set_calibration(*calib);
+                }
+                inner.render(&textured, &pose, &self.sun.get(), seed, left, right)
+            }
+            Some(lens) => {
+                let mut rig = self.rig.borrow_mut();
+                if rig.as_ref().map(|r| *r.lens()) != Some(lens) {
+                    let settings = *self.inner.borrow().settings();
+                    *rig = crate::render::lens::LensRig::new(lens, calib, settings).ok();
+                }
+                match rig.as_mut() {
+                    Some(r) => {
+                        r.set_head(calib);
+                        r.render(&textured, &pose, &self.sun.get(), seed, left, right)
+                    }
+                    None => Err(crate::render::RenderError::BadCalibration),
+                }
+            }
+        };
         if result.is_err() {
             self.errors.set(self.errors.get() + 1);
             left.fill(0);
@@ -141,5 +173,9 @@ impl StereoRenderer for TexturedRenderer {
 
     fn set_sun(&self, sun_w: [f64; 3]) {
         self.sun.set(crate::render::Sun { direction_w: sun_w });
+    }
+
+    fn set_lens(&self, lens: Option<rover_hal::LensCalibration>) {
+        self.lens.set(lens);
     }
 }

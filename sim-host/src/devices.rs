@@ -12,6 +12,19 @@ use std::cell::Cell;
 use std::rc::Rc;
 use std::time::Instant;
 
+/// The flight software's stereo-rectification memory on the host (heap buffers; external RAM
+/// on the rover CPU).
+pub type HostImageMemory = fsw::rectify::ImageMemory<Vec<fsw::rectify::MapNode>, Vec<u8>>;
+
+/// Full-size [`HostImageMemory`]: the map and two rectified images.
+pub fn host_image_memory() -> HostImageMemory {
+    fsw::rectify::ImageMemory {
+        map: vec![fsw::rectify::MapNode::default(); fsw::rectify::MAP_NODES],
+        left: vec![0; IMAGE_PIXELS],
+        right: vec![0; IMAGE_PIXELS],
+    }
+}
+
 /// Mars gravity, m/s^2 (REFERENCE.md).
 pub const MARS_GRAVITY_M_S2: f64 = 3.711;
 

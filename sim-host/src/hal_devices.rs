@@ -297,7 +297,8 @@ impl SunSensor for WorldSun {
 /// true head (the world's [`crate::sensors::camera_model::HazcamModel::truth`], this seed's
 /// calibration errors included) and the sun at the trigger time, and completes
 /// `latency_polls` polls later. [`StereoCamera::calibration`] gives the nominal head (what the
-/// ground calibration file says), never the true one.
+/// ground calibration file says), never the true one; with lenses the images are raw (through
+/// the true lenses) and [`StereoCamera::lens_calibration`] gives the nominal lenses.
 pub struct WorldStereo {
     world: SharedWorld,
     renderer: Box<dyn StereoRenderer>,
@@ -305,6 +306,8 @@ pub struct WorldStereo {
     calib: StereoCalibration,
     /// The true head (used to render).
     truth: StereoCalibration,
+    /// The nominal lenses (given to the flight software); `None` with ideal lenses.
+    lens: Option<rover_hal::LensCalibration>,
     left: Vec<u8>,
     right: Vec<u8>,
     capture: CaptureProtocol,
@@ -324,15 +327,17 @@ impl WorldStereo {
         latency_polls: u32,
         seed: u64,
     ) -> Self {
-        let (calib, truth) = {
+        let (calib, truth, lens) = {
             let w = world.borrow();
-            (w.hazcam.nominal, w.hazcam.truth)
+            (w.hazcam.nominal, w.hazcam.truth, w.hazcam.lens)
         };
+        renderer.set_lens(lens.map(|l| l.truth));
         Self {
             world,
             renderer,
             calib,
             truth,
+            lens: lens.map(|l| l.nominal),
             left: vec![0; IMAGE_PIXELS],
             right: vec![0; IMAGE_PIXELS],
             capture: CaptureProtocol::new(latency_polls),
@@ -347,6 +352,9 @@ impl StereoCamera for WorldStereo {
     type Error = ErrorKind;
     fn calibration(&self) -> StereoCalibration {
         self.calib
+    }
+    fn lens_calibration(&self) -> Option<rover_hal::LensCalibration> {
+        self.lens
     }
     fn trigger(&mut self) -> Result<u64, ErrorKind> {
         let w = self.world.borrow();

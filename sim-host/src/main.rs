@@ -107,6 +107,10 @@ enum Command {
         /// docs/terramechanics.md; the default) or `lumped`.
         #[arg(long)]
         slip_model: Option<String>,
+        /// Ideal lenses: the cameras deliver the rectified pinhole pair (no wide-angle lens
+        /// model, no rectification in the flight software), for comparison.
+        #[arg(long)]
+        ideal_lens: bool,
     },
     /// Record the HAL call tape of a scenario segment (with rendered stereo images) for replay
     /// on the host or the rover CPU (docs/timing.md).
@@ -236,6 +240,7 @@ struct RunRequest {
     no_vo: bool,
     exact_dimensions: bool,
     slip_model: Option<String>,
+    ideal_lens: bool,
     quiet: bool,
 }
 
@@ -272,6 +277,7 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
             no_vo: false,
             exact_dimensions: false,
             slip_model: None,
+            ideal_lens: false,
             quiet: true,
         })?;
         results.push((label, dir, summary, result));
@@ -349,9 +355,13 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
         no_vo,
         exact_dimensions,
         slip_model,
+        ideal_lens,
         quiet,
     } = req;
     let mut scenario = Scenario::load(&path)?;
+    if ideal_lens {
+        scenario.sensors.ideal_lens = true;
+    }
     if no_slip {
         scenario.slip = false;
     }
@@ -607,6 +617,7 @@ fn main() -> anyhow::Result<()> {
             no_vo,
             exact_dimensions,
             slip_model,
+            ideal_lens,
         }) => run_scenario(RunRequest {
             path: scenario,
             seed,
@@ -620,6 +631,7 @@ fn main() -> anyhow::Result<()> {
             no_vo,
             exact_dimensions,
             slip_model,
+            ideal_lens,
             quiet: false,
         })
         .map(|_| ()),

@@ -197,6 +197,9 @@ impl<D: StereoCamera> StereoCamera for Rec<D> {
     fn calibration(&self) -> StereoCalibration {
         self.inner.calibration()
     }
+    fn lens_calibration(&self) -> Option<rover_hal::LensCalibration> {
+        self.inner.lens_calibration()
+    }
     fn trigger(&mut self) -> Result<u64, ErrorKind> {
         let r = kind(self.inner.trigger());
         self.rec.borrow_mut().call(Call::CameraTrigger(r));
@@ -256,6 +259,7 @@ impl Platform for RecordingPlatform {
     type Camera = Rec<WorldStereo>;
     type Sun = Rec<WorldSun>;
     type Telemetry = Rec<CountingTelemetry>;
+    type ImageMemory = crate::devices::HostImageMemory;
 }
 
 struct Hooks {
@@ -273,6 +277,7 @@ impl RunHooks for Hooks {
             camera: Rec::new(d.camera, rec),
             sun: Rec::new(d.sun, rec),
             telemetry: Rec::new(d.telemetry, rec),
+            image_memory: d.image_memory,
         }
     }
     fn after_tick(&mut self, fsw: &Fsw<RecordingPlatform>) {
@@ -367,6 +372,8 @@ fn header(scenario: &Scenario, seed: u64, frames: u64) -> anyhow::Result<TapeHea
         frames: u32::try_from(frames)?,
         seed,
         calibration: hazcam_calibration(),
+        // The camera reports the nominal lenses unless the scenario has ideal ones.
+        lens: (!scenario.sensors.ideal_lens).then(crate::sensors::lens::nominal_lens),
         // The planned start (the flight configuration's), not the truth.
         start_pose: [
             nav.initial_position_n_m[0],

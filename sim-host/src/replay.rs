@@ -25,6 +25,7 @@ impl<'a> Platform for HostReplayPlatform<'a> {
     type Camera = ReplayStereo<Tape, SliceSource<'a>, Vec<u8>>;
     type Sun = ReplaySun<Tape>;
     type Telemetry = ReplayTelemetry<Tape>;
+    type ImageMemory = crate::devices::HostImageMemory;
 }
 
 /// Result of a host replay.
@@ -68,9 +69,11 @@ pub fn replay(tape: &[u8]) -> anyhow::Result<ReplayOutcome> {
             SliceSource::new(tape),
             slots,
             header.calibration,
-        ),
+        )
+        .with_lens(header.lens),
         sun: ReplaySun::new(player.clone()),
         telemetry: ReplayTelemetry::new(player.clone()),
+        image_memory: crate::devices::host_image_memory(),
     };
     let mut fsw = build_fsw(devices, &FlightSetup::from_header(&header))
         .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;

@@ -16,6 +16,7 @@ impl Platform for SimPlatform {
     type Camera = GreyStereo;
     type Sun = FixedSun;
     type Telemetry = CountingTelemetry;
+    type ImageMemory = crate::devices::HostImageMemory;
 }
 
 /// Per-group figures of a run.
@@ -61,6 +62,7 @@ pub fn run_still(frames: u64) -> anyhow::Result<RunSummary> {
         camera: GreyStereo::new(time.clone(), 3),
         sun: FixedSun::new(time.clone()),
         telemetry: CountingTelemetry::default(),
+        image_memory: crate::devices::host_image_memory(),
     };
     // The still rover cannot move: the path only gives guidance something to command.
     let mut fsw_config = FswConfig::rocky8([0.0; 3], 0.0);

@@ -5,6 +5,7 @@ use crate::sensors::camera_model::CameraTolerances;
 use crate::sensors::encoders::EncoderParams;
 use crate::sensors::faults::FaultSpec;
 use crate::sensors::imu::ImuParams;
+use crate::sensors::lens::LensTolerances;
 use crate::sensors::sun::SunParams;
 use crate::slip::SoilParams;
 use crate::slip_lumped::LumpedSoil;
@@ -155,6 +156,12 @@ pub struct SensorSpec {
     pub camera_calibration_errors: bool,
     /// 1-sigma tolerances of those errors.
     pub camera_tolerances: CameraTolerances,
+    /// Ideal lenses: the cameras deliver the rectified pinhole pair directly (the model before
+    /// the wide-angle lenses, for comparison). Default `false`: raw images through the
+    /// wide-angle lens model (`sensors::lens`), rectified by the flight software.
+    pub ideal_lens: bool,
+    /// 1-sigma tolerance of the lens calibration (per camera).
+    pub lens_tolerances: LensTolerances,
 }
 
 impl Default for SensorSpec {
@@ -170,6 +177,8 @@ impl Default for SensorSpec {
             wheel_radius_error_m: 0.0005,
             camera_calibration_errors: true,
             camera_tolerances: CameraTolerances::default(),
+            ideal_lens: false,
+            lens_tolerances: LensTolerances::default(),
         }
     }
 }

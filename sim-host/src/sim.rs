@@ -31,6 +31,7 @@ impl Platform for WorldPlatform {
     type Camera = WorldStereo;
     type Sun = WorldSun;
     type Telemetry = CountingTelemetry;
+    type ImageMemory = crate::devices::HostImageMemory;
 }
 
 /// Options of a run.
@@ -308,6 +309,7 @@ pub fn run_with<H: RunHooks>(
         telemetry: CountingTelemetry::with_refusal(crate::hal_devices::telemetry_faults(
             world.clone(),
         )),
+        image_memory: crate::devices::host_image_memory(),
     };
     let mut config = flight_config(
         scenario,

@@ -307,6 +307,8 @@ impl World {
         let hazcam = HazcamModel::new(
             scenario.sensors.camera_calibration_errors,
             &scenario.sensors.camera_tolerances,
+            scenario.sensors.ideal_lens,
+            &scenario.sensors.lens_tolerances,
             &mut streams.camera,
         );
         let [planned, next] = [scenario.waypoints[0], scenario.waypoints[1]];

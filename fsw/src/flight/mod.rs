@@ -10,7 +10,7 @@
 //! | RG2 | 20 Hz | `joints`: joint read and checks; `odometry`: kinematic interval, gate (eq. 46), EKF update or slip vector; `guidance`: carrot and slip loops (eq. 47-49), inverse kinematics, motor command; `telemetry`: status and navigation records |
 //! | RG3 | 5 Hz | `stereo`: capture policy (H04 sec. 2: every 0.25 m or 10 deg of EKF motion, at the latest every 10 s; [`nav::Navigator::capture_due`]), capture trigger and clone (eq. 41); a capture not completed within [`CAPTURE_TIMEOUT_FRAMES`] is timed out |
 //! | RG4 | 0.2 Hz | `sun`: sun read and heading update (RB sec. 5.1) |
-//! | background | every frame | stereo polling, visual odometry work items, VO gate and fusion at the capture clones |
+//! | background | every frame | stereo polling, rectification of raw pairs, visual odometry work items, VO gate and fusion at the capture clones |
 //!
 //! Every device reading is checked (error, device-flagged invalid, non-finite, time stamp not
 //! advancing, time going backwards) and counted in [`DeviceHealth`]; only checked readings are
@@ -22,6 +22,7 @@ use crate::exec::{
     ExecConfig, ExecError, Executive, FrameReport, GroupConfig, TaskConfig, TaskSet,
 };
 use crate::guidance::Point2;
+use crate::rectify::{Rectifier, RectifyConfig, RectifyMemory, RectifyProgress};
 use crate::telemetry::{
     self, DeviceHealth, FrameStatus, NavTelemetry, RecordKind, MAX_RECORD_BYTES,
 };
@@ -45,6 +46,9 @@ pub trait Platform {
     type Sun: SunSensor;
     /// Telemetry sink.
     type Telemetry: Telemetry;
+    /// Image memory of the stereo rectification (map and rectified pair; external RAM on the
+    /// rover CPU). Used only when the camera has a [`rover_hal::LensCalibration`].
+    type ImageMemory: RectifyMemory;
 }
 
 /// The devices, one of each kind, owned by the flight software.
@@ -61,6 +65,8 @@ pub struct Devices<P: Platform> {
     pub sun: P::Sun,
     /// Telemetry sink.
     pub telemetry: P::Telemetry,
+    /// Image memory of the stereo rectification ([`crate::rectify`]).
+    pub image_memory: P::ImageMemory,
 }
 
 /// Number of rate groups in the flight schedule.
@@ -157,6 +163,8 @@ pub struct FswConfig {
     pub nav: NavConfig,
     /// Plausibility limits of the device readings.
     pub plausibility: Plausibility,
+    /// Stereo rectification work settings ([`crate::rectify`]).
+    pub rectify: RectifyConfig,
 }
 
 /// Plausibility limits of device readings (issue 20): a finite reading outside them is refused
@@ -227,6 +235,7 @@ impl FswConfig {
             },
             nav: NavConfig::rocky8(position, yaw_rad),
             plausibility: Plausibility::default(),
+            rectify: RectifyConfig::default(),
         }
     }
 }
@@ -285,6 +294,16 @@ pub struct FlightState {
     pub commands_refused: u32,
     /// The last motor command sent (`None`: stopped).
     pub last_command: Option<rover_hal::MobilityCommand>,
+    /// The camera delivers raw images with a lens calibration, and the rectification map was
+    /// built: every pair is rectified before VO and the hazard mapper see it.
+    pub rectifying: bool,
+    /// The rectification map could not be built from the camera's lens calibration (fault
+    /// flag): VO and hazard mapping stay off.
+    pub rectify_fault: Option<crate::rectify::RectifyError>,
+    /// Raw pairs rectified.
+    pub rectified_pairs: u32,
+    /// Raw pairs whose rectification failed (frame lost or changed).
+    pub rectify_failures: u32,
 }
 
 /// Readings checked in this frame and not yet used by the navigator.
@@ -303,6 +322,7 @@ pub struct Fsw<P: Platform> {
     nav: Navigator,
     fresh: Fresh,
     plausibility: Plausibility,
+    rect: RectStage,
 }
 
 struct DevicesNoClock<P: Platform> {
@@ -311,6 +331,18 @@ struct DevicesNoClock<P: Platform> {
     camera: P::Camera,
     sun: P::Sun,
     telemetry: P::Telemetry,
+    image_memory: P::ImageMemory,
+}
+
+/// The rectification stage between the camera and the navigator.
+#[derive(Debug, Clone, Copy)]
+struct RectStage {
+    rectifier: Rectifier,
+    /// Capture time and sequence of the raw pair being rectified.
+    pending: Option<(u64, u32)>,
+    /// Capture time and sequence of the rectified pair in the image memory that VO or the
+    /// hazard mapper is working on.
+    frame: Option<(u64, u32)>,
 }
 
 impl<P: Platform> Fsw<P> {
@@ -330,6 +362,7 @@ impl<P: Platform> Fsw<P> {
             camera,
             sun,
             telemetry,
+            image_memory,
         } = devices;
         Ok(Self {
             devices: DevicesNoClock {
@@ -338,6 +371,7 @@ impl<P: Platform> Fsw<P> {
                 camera,
                 sun,
                 telemetry,
+                image_memory,
             },
             clock,
             exec,
@@ -345,6 +379,11 @@ impl<P: Platform> Fsw<P> {
             nav,
             fresh: Fresh::default(),
             plausibility: config.plausibility,
+            rect: RectStage {
+                rectifier: Rectifier::new(config.rectify),
+                pending: None,
+                frame: None,
+            },
         })
     }
 
@@ -356,6 +395,7 @@ impl<P: Platform> Fsw<P> {
             state: &mut self.state,
             nav: &mut self.nav,
             fresh: &mut self.fresh,
+            rect: &mut self.rect,
         };
         let report = self.exec.run_frame(&mut self.clock, &mut work);
         self.state.exec_status = (self.exec.cycle_slips(), self.exec.timing_fault());
@@ -375,8 +415,33 @@ impl<P: Platform> Fsw<P> {
     /// Build the visual odometry state (about 96 KB) in place: call once after the flight
     /// software has reached its final location (a static on the rover CPU), before the first
     /// tick. Without it VO stays off (the EKF runs on kinematics and IMU).
+    ///
+    /// When the camera delivers raw images ([`rover_hal::StereoCamera::lens_calibration`]),
+    /// the rectification map is built here first ([`crate::rectify`]); if the lens
+    /// calibration is refused (NaN, absurd coefficients, a field the raw images do not cover),
+    /// [`FlightState::rectify_fault`] is set and VO and the hazard mapping stay off: they never
+    /// run on unrectified images.
     pub fn start_vo(&mut self) {
+        if let Some(lens) = self.devices.camera.lens_calibration() {
+            let rect = self.devices.camera.calibration();
+            match self
+                .rect
+                .rectifier
+                .build(&lens, &rect, &mut self.devices.image_memory)
+            {
+                Ok(_) => self.state.rectifying = true,
+                Err(e) => {
+                    self.state.rectify_fault = Some(e);
+                    return;
+                }
+            }
+        }
         self.nav.start_vo();
+    }
+
+    /// The rectification state (map figures, pair in progress).
+    pub fn rectifier(&self) -> &Rectifier {
+        &self.rect.rectifier
     }
 
     /// The navigator (estimates, slip, guidance output).
@@ -396,6 +461,7 @@ struct Work<'a, P: Platform> {
     state: &'a mut FlightState,
     nav: &'a mut Navigator,
     fresh: &'a mut Fresh,
+    rect: &'a mut RectStage,
 }
 
 /// Frame period of the schedule, us (200 Hz).
@@ -649,11 +715,77 @@ impl<P: Platform> Work<'_, P> {
         }
     }
 
+    /// Background: rectify rows of the raw pair in the camera's buffers into the image
+    /// memory ([`crate::rectify`]); when the pair is done the camera frame is released and VO
+    /// (or the hazard mapper) starts on the rectified pair. Returns the units used.
+    fn rectify_step(&mut self, quantum: u32) -> u32 {
+        let progress = match self.devices.camera.frame() {
+            Ok(frame) => self
+                .rect
+                .rectifier
+                .step(&frame, &mut self.devices.image_memory, quantum),
+            Err(e) => {
+                let health = &mut self.state.health[DeviceId::Camera as usize];
+                count_error(health, rover_hal::Error::kind(&e));
+                RectifyProgress::Finished(Err(crate::rectify::RectifyError::FrameChanged))
+            }
+        };
+        let result = match progress {
+            RectifyProgress::Working { .. } => return quantum.max(1),
+            RectifyProgress::Finished(result) => result,
+        };
+        // The raw pair is no longer needed either way.
+        self.release_frame();
+        let pending = self.rect.pending.take();
+        match (result, pending) {
+            (Ok(()), Some((t_us, sequence))) => {
+                self.state.rectified_pairs = self.state.rectified_pairs.saturating_add(1);
+                let (left, right) = self.devices.image_memory.images();
+                let frame = rover_hal::StereoFrame {
+                    left,
+                    right,
+                    capture_t_us: t_us,
+                    sequence,
+                };
+                if self.nav.vo_start(&frame) {
+                    self.rect.frame = Some((t_us, sequence));
+                } else {
+                    self.nav.capture_lost();
+                }
+            }
+            _ => {
+                self.rect.rectifier.reset();
+                self.state.rectify_failures = self.state.rectify_failures.saturating_add(1);
+                self.nav.capture_lost();
+            }
+        }
+        quantum.max(1)
+    }
+
     fn poll_stereo(&mut self, quantum: u32) -> u32 {
         if self.nav.replaying() {
             return self.nav.replay_step();
         }
+        if self.rect.rectifier.is_busy() {
+            return self.rectify_step(quantum);
+        }
         if self.nav.vo_busy() {
+            if let Some((t_us, sequence)) = self.rect.frame {
+                // VO or the hazard mapper on the rectified pair in the image memory (the raw
+                // pair was released when it was rectified).
+                let (left, right) = self.devices.image_memory.images();
+                let frame = rover_hal::StereoFrame {
+                    left,
+                    right,
+                    capture_t_us: t_us,
+                    sequence,
+                };
+                let (used, done) = self.nav.vo_step(&frame, quantum);
+                if done {
+                    self.rect.frame = None;
+                }
+                return used;
+            }
             let (used, done) = match self.devices.camera.frame() {
                 Ok(frame) => self.nav.vo_step(&frame, quantum),
                 Err(e) => {
@@ -668,6 +800,8 @@ impl<P: Platform> Work<'_, P> {
             }
             return used;
         }
+        // VO went idle without finishing on the rectified pair (capture lost): forget it.
+        self.rect.frame = None;
         let Some(t_us) = self.state.capture_pending_t_us else {
             return 0;
         };
@@ -685,7 +819,19 @@ impl<P: Platform> Work<'_, P> {
                             self.state.stereo_frames = self.state.stereo_frames.saturating_add(1);
                             self.state.last_capture_t_us = Some(t_us);
                             if self.nav.capture_pending() {
-                                vo_started = self.nav.vo_start(&frame);
+                                if self.state.rectifying {
+                                    // Raw pair: rectified in the next background slices,
+                                    // then handed to VO (rectify_step).
+                                    vo_started = self.rect.rectifier.start(&frame).is_ok();
+                                    if vo_started {
+                                        self.rect.pending = Some((t_us, frame.sequence));
+                                    } else {
+                                        self.state.rectify_failures =
+                                            self.state.rectify_failures.saturating_add(1);
+                                    }
+                                } else {
+                                    vo_started = self.nav.vo_start(&frame);
+                                }
                             }
                         } else if !size_ok {
                             count_invalid(health);

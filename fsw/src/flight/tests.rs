@@ -56,9 +56,12 @@ impl Mobility for TestMobility {
     }
 }
 
-/// A camera that never completes a capture.
-struct StuckCamera;
+/// A camera that never completes a capture (with the lens calibration it reports).
+struct StuckCamera(Option<rover_hal::LensCalibration>);
 impl StereoCamera for StuckCamera {
+    fn lens_calibration(&self) -> Option<rover_hal::LensCalibration> {
+        self.0
+    }
     type Error = ErrorKind;
     fn calibration(&self) -> StereoCalibration {
         StereoCalibration {
@@ -109,6 +112,8 @@ impl Platform for TestPlatform {
     type Camera = StuckCamera;
     type Sun = TestSun;
     type Telemetry = RefusingTelemetry;
+    type ImageMemory =
+        crate::rectify::ImageMemory<std::vec::Vec<crate::rectify::MapNode>, std::vec::Vec<u8>>;
 }
 
 fn imu(t_us: u64) -> ImuSample {
@@ -172,9 +177,14 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
         clock: TestClock,
         imu: TestImu(imu_script),
         mobility: TestMobility(joint_script),
-        camera: StuckCamera,
+        camera: StuckCamera(None),
         sun: TestSun(sun_script),
         telemetry: RefusingTelemetry,
+        image_memory: crate::rectify::ImageMemory {
+            map: std::vec::Vec::new(),
+            left: std::vec::Vec::new(),
+            right: std::vec::Vec::new(),
+        },
     };
     let config = FswConfig::rocky8([0.0; 3], 0.0);
     let mut fsw = match Fsw::new(devices, &config, &[[0.0, 0.0], [1.0, 0.0]]) {
@@ -225,7 +235,7 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
 fn nav_1_alignment_drive_command_and_sensor_loss_hold() {
     use crate::estimation::ephemeris::SunEphemeris;
     use nav::{NavConfig, NavError, NavMode, Navigator};
-    let calib = StuckCamera.calibration();
+    let calib = StuckCamera(None).calibration();
     let path = [[0.0, 0.0], [5.0 * 0.3_f64.cos(), 5.0 * 0.3_f64.sin()]];
     // A 2 deg roll (right side down) seen by the accelerometer at rest; the rover actually
     // faces 0.3 rad east of north while the plan says north.
@@ -499,9 +509,14 @@ fn fp_3_implausible_values_and_time_leaps() {
         clock: TestClock,
         imu: TestImu(imu_script),
         mobility: TestMobility(Script::new([Err(ErrorKind::NotReady); 4])),
-        camera: StuckCamera,
+        camera: StuckCamera(None),
         sun: TestSun(Script::new([Err(ErrorKind::NotReady); 3])),
         telemetry: RefusingTelemetry,
+        image_memory: crate::rectify::ImageMemory {
+            map: std::vec::Vec::new(),
+            left: std::vec::Vec::new(),
+            right: std::vec::Vec::new(),
+        },
     };
     let config = FswConfig::rocky8([0.0; 3], 0.0);
     let mut fsw = match Fsw::new(devices, &config, &[[0.0, 0.0], [1.0, 0.0]]) {
@@ -615,4 +630,133 @@ fn fp_5_alignment_dispersion_restarts() {
     assert_eq!(nav.mode(), NavMode::Driving);
     let (r, p, _) = nav.pose().q_nr.euler_angles();
     assert!(r.abs() < 1e-9 && p.abs() < 1e-9, "tilt {r} {p}");
+}
+
+/// A wide-angle raw camera of the hazcam class (the rectified geometry is the hazcam's).
+fn hazcam_lens() -> rover_hal::LensCalibration {
+    let camera = rover_hal::RawCamera {
+        fx_px: 390.3,
+        fy_px: 389.2,
+        cx_px: 312.4,
+        cy_px: 247.1,
+        k1: -0.2834,
+        k2: 0.07396,
+        k3: 0.0,
+        p1: 0.000_194,
+        p2: 0.000_018,
+        rot_raw_from_rect: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    };
+    rover_hal::LensCalibration {
+        left: camera,
+        right: camera,
+    }
+}
+
+/// A flight software on a camera with `lens`, `memory` rectification memory and the hazcam's
+/// rectified geometry; `start_vo` called.
+fn fsw_with_lens(
+    lens: Option<rover_hal::LensCalibration>,
+    full_memory: bool,
+) -> Fsw<HazcamPlatform> {
+    let n = |len: usize| if full_memory { len } else { 0 };
+    let devices = Devices::<HazcamPlatform> {
+        clock: TestClock,
+        imu: TestImu(Script::new([Err(ErrorKind::NotReady); 7])),
+        mobility: TestMobility(Script::new([Err(ErrorKind::NotReady); 4])),
+        camera: HazcamCamera(StuckCamera(lens)),
+        sun: TestSun(Script::new([Err(ErrorKind::NotReady); 3])),
+        telemetry: RefusingTelemetry,
+        image_memory: crate::rectify::ImageMemory {
+            map: vec![crate::rectify::MapNode::default(); n(crate::rectify::MAP_NODES)],
+            left: vec![0u8; n(rover_hal::IMAGE_PIXELS)],
+            right: vec![0u8; n(rover_hal::IMAGE_PIXELS)],
+        },
+    };
+    let config = FswConfig::rocky8([0.0; 3], 0.0);
+    let mut fsw = match Fsw::new(devices, &config, &[[0.0, 0.0], [1.0, 0.0]]) {
+        Ok(f) => f,
+        Err(e) => panic!("schedule refused: {e:?}"),
+    };
+    fsw.start_vo();
+    fsw
+}
+
+/// The stuck camera with the hazcam's rectified geometry.
+struct HazcamCamera(StuckCamera);
+impl StereoCamera for HazcamCamera {
+    type Error = ErrorKind;
+    fn calibration(&self) -> StereoCalibration {
+        let h = core::f64::consts::FRAC_1_SQRT_2;
+        StereoCalibration {
+            fx_px: 384.791_625_3,
+            fy_px: 384.079_510_6,
+            cx_px: 319.5,
+            cy_px: 239.5,
+            baseline_m: 0.084,
+            rot_rover_from_camera: [[0.0, -h, h], [1.0, 0.0, 0.0], [0.0, h, h]],
+            pos_camera_in_rover_m: [0.2, 0.0, -0.6],
+        }
+    }
+    fn lens_calibration(&self) -> Option<rover_hal::LensCalibration> {
+        self.0.lens_calibration()
+    }
+    fn trigger(&mut self) -> Result<u64, ErrorKind> {
+        self.0.trigger()
+    }
+    fn poll(&mut self) -> Result<CaptureStatus, ErrorKind> {
+        self.0.poll()
+    }
+    fn frame(&self) -> Result<StereoFrame<'_>, ErrorKind> {
+        self.0.frame()
+    }
+    fn release(&mut self) -> Result<(), ErrorKind> {
+        self.0.release()
+    }
+}
+
+struct HazcamPlatform;
+impl Platform for HazcamPlatform {
+    type Clock = TestClock;
+    type Imu = TestImu;
+    type Mobility = TestMobility;
+    type Camera = HazcamCamera;
+    type Sun = TestSun;
+    type Telemetry = RefusingTelemetry;
+    type ImageMemory =
+        crate::rectify::ImageMemory<std::vec::Vec<crate::rectify::MapNode>, std::vec::Vec<u8>>;
+}
+
+/// RECT-6: the flight software builds the rectification map from the camera's lens calibration
+/// at `start_vo` and then runs VO; a NaN or absurd lens calibration, or missing image memory,
+/// sets the fault flag and leaves VO off (it never runs on unrectified images); a camera
+/// without a lens calibration runs VO on its (rectified) images directly.
+#[test]
+fn rect_6_lens_calibration_at_start_vo() {
+    let ok = fsw_with_lens(Some(hazcam_lens()), true);
+    assert!(ok.state().rectifying);
+    assert_eq!(ok.state().rectify_fault, None);
+    assert!(ok.rectifier().has_map());
+    assert!(ok.nav().vo_built());
+    let stats = ok.rectifier().map_stats();
+    assert!(stats.min_margin_px > 1.0 && stats.max_round_trip_px < 0.01);
+
+    let mut nan = hazcam_lens();
+    nan.right.k2 = f64::NAN;
+    let mut absurd = hazcam_lens();
+    absurd.left.k1 = -0.9;
+    for (lens, memory, want) in [
+        (nan, true, crate::rectify::RectifyError::BadCalibration),
+        (absurd, true, crate::rectify::RectifyError::Folded),
+        (hazcam_lens(), false, crate::rectify::RectifyError::Memory),
+    ] {
+        let f = fsw_with_lens(Some(lens), memory);
+        assert_eq!(f.state().rectify_fault, Some(want));
+        assert!(!f.state().rectifying);
+        assert!(!f.nav().vo_built(), "VO must stay off: {want:?}");
+    }
+
+    let plain = fsw_with_lens(None, false);
+    assert!(!plain.state().rectifying);
+    assert_eq!(plain.state().rectify_fault, None);
+    assert!(plain.nav().vo_built());
 }

@@ -23,9 +23,11 @@
 //! Pixel `(i, j)` (column, row) has its centre at `u = i`, `v = j`.
 //!
 //! # Not modelled
-//! Cast shadows, inter-reflection, lens distortion and vignetting (the images are the rectified
-//! pair the flight software expects), motion blur, exposure control.
+//! Cast shadows, inter-reflection, vignetting, motion blur, exposure control. Lens distortion is
+//! modelled by [`lens::LensRig`]: a pinhole pair larger than the raw field, resampled through
+//! each raw camera's lens.
 
+pub mod lens;
 mod mesh;
 mod noise;
 mod raster;
@@ -39,7 +41,7 @@ pub use texture::{AlbedoTexture, HeightFn, TextureParams, TexturedSurface};
 use crate::surface::TerrainSurface;
 use mesh::{Mesh, MeshSpec};
 use raster::{Frame, View};
-use rover_hal::{StereoCalibration, IMAGE_HEIGHT_PX, IMAGE_PIXELS, IMAGE_WIDTH_PX};
+use rover_hal::{StereoCalibration, IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX};
 
 /// Ground albedo averaged over a footprint, for anti-aliased rendering. The default method
 /// point-samples [`TerrainSurface::albedo`].
@@ -222,7 +224,18 @@ pub struct StereoRenderer {
 impl StereoRenderer {
     /// A renderer for `IMAGE_WIDTH_PX x IMAGE_HEIGHT_PX` images with the calibration `calib`.
     pub fn new(calib: StereoCalibration, settings: RenderSettings) -> Self {
-        let (width, height) = (IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX);
+        Self::with_size(calib, settings, IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX)
+    }
+
+    /// A renderer for `width x height` pinhole images (at least 2 x 2; the lens model renders
+    /// a pinhole image larger than the raw field, [`lens::LensRig`]).
+    pub fn with_size(
+        calib: StereoCalibration,
+        settings: RenderSettings,
+        width: usize,
+        height: usize,
+    ) -> Self {
+        let (width, height) = (width.max(2), height.max(2));
         Self {
             calib,
             settings,
@@ -255,8 +268,13 @@ impl StereoRenderer {
         self.calib = calib;
     }
 
-    /// Render the pair seen from `left_pose` into `left` and `right` (`IMAGE_PIXELS` bytes
-    /// each, row-major), with the albedo filtered to each pixel's footprint. `noise_seed` selects
+    /// Image size, pixels (width, height).
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Render the pair seen from `left_pose` into `left` and `right` (`width * height` bytes
+    /// each, row-major; `IMAGE_PIXELS` for [`Self::new`]), with the albedo filtered to each pixel's footprint. `noise_seed` selects
     /// the image noise (use a different seed per frame).
     pub fn render<S: FilteredAlbedo + ?Sized>(
         &mut self,
@@ -349,7 +367,7 @@ impl StereoRenderer {
         right: usize,
     ) -> Result<(), RenderError> {
         let expected = self.width * self.height;
-        if left != expected || right != expected || expected != IMAGE_PIXELS {
+        if left != expected || right != expected {
             return Err(RenderError::BufferSize {
                 expected,
                 left,

@@ -24,9 +24,10 @@
 //! | mounting angles of the head (roll, pitch, yaw about `x_R`, `y_R`, `z_R`) | 0.1 deg | simulator assumption (camera-to-body alignment after a fiducial survey) |
 //! | mounting position of the head (per axis of `R`) | 2 mm | simulator assumption, the same figure as the vehicle dimension errors and the total-station accuracy of H04 (2 mm) |
 //!
-//! Not modelled: a relative rotation or different intrinsics between the left and right
-//! cameras (rectification error: it would need a renderer with two camera models), lens
-//! distortion residuals.
+//! With the wide-angle lenses ([`super::lens`], the default) the focal-length and
+//! principal-point errors move to the two raw cameras (alike), and each camera's lens gets its
+//! own distortion-coefficient errors; the flight software rectifies with the nominal lenses.
+//! Not modelled: a relative rotation between the raw cameras.
 
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use rand::Rng;
@@ -169,18 +170,31 @@ impl CameraErrors {
 /// the renderer draws with.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HazcamModel {
-    /// What the ground calibration file says (returned by the HAL's `calibration()`).
+    /// What the ground calibration file says (returned by the HAL's `calibration()`): the
+    /// rectified pair the flight software works in.
     pub nominal: StereoCalibration,
-    /// The real head (used to render).
+    /// The real head (used to render). With lenses, only its mounting and baseline are drawn
+    /// from: its focal-length and principal-point errors are in the true raw cameras.
     pub truth: StereoCalibration,
     /// Truth minus nominal.
     pub errors: CameraErrors,
+    /// The raw cameras' lenses ([`super::lens`]); `None`: ideal lenses, the camera delivers the
+    /// rectified pinhole pair (the model before the lenses, kept for comparison).
+    pub lens: Option<super::lens::LensModel>,
 }
 
 impl HazcamModel {
-    /// The head of one seed: errors drawn from `rng` with `tol` when `enabled`, else none. The
-    /// draws are taken in both cases so that switching the errors off changes nothing else.
-    pub fn new(enabled: bool, tol: &CameraTolerances, rng: &mut ChaCha8Rng) -> Self {
+    /// The head of one seed: errors drawn from `rng` with `tol` when `enabled`, else none;
+    /// wide-angle lenses ([`super::lens`]) unless `ideal_lens`, their per-camera errors drawn
+    /// with `lens_tol` when `enabled`. The draws are taken in every case (the lens draws after
+    /// the head's) so that switching the errors or the lenses off changes nothing else.
+    pub fn new(
+        enabled: bool,
+        tol: &CameraTolerances,
+        ideal_lens: bool,
+        lens_tol: &super::lens::LensTolerances,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
         let nominal = nominal_hazcam();
         let drawn = CameraErrors::draw(tol, rng);
         let errors = if enabled {
@@ -188,10 +202,24 @@ impl HazcamModel {
         } else {
             CameraErrors::default()
         };
+        let lens_nominal = super::lens::nominal_lens();
+        let lens_drawn = super::lens::draw_truth(
+            &lens_nominal,
+            &nominal,
+            errors.focal_rel,
+            errors.principal_point_px,
+            lens_tol,
+            rng,
+        );
+        let lens = (!ideal_lens).then_some(super::lens::LensModel {
+            nominal: lens_nominal,
+            truth: if enabled { lens_drawn } else { lens_nominal },
+        });
         Self {
             nominal,
             truth: errors.apply(&nominal),
             errors,
+            lens,
         }
     }
 }
@@ -230,7 +258,7 @@ mod tests {
         let n = 4000;
         let (mut f2, mut b2, mut a2, mut p2, mut c2) = (0.0, 0.0, 0.0, 0.0, 0.0);
         for _ in 0..n {
-            let m = HazcamModel::new(true, &tol, &mut rng);
+            let m = HazcamModel::new(true, &tol, false, &Default::default(), &mut rng);
             f2 += (m.truth.fx_px / m.nominal.fx_px - 1.0).powi(2);
             c2 += (m.truth.cy_px - m.nominal.cy_px).powi(2);
             b2 += (m.truth.baseline_m - m.nominal.baseline_m).powi(2);
@@ -255,8 +283,10 @@ mod tests {
             "{}",
             rms(a2)
         );
-        let off = HazcamModel::new(false, &tol, &mut rng);
+        let off = HazcamModel::new(false, &tol, false, &Default::default(), &mut rng);
         assert_eq!(off.truth, off.nominal);
+        let lens = off.lens.unwrap();
+        assert_eq!(lens.truth, lens.nominal);
         assert_eq!(off.nominal, nominal_hazcam());
     }
 }

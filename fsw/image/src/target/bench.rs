@@ -7,7 +7,9 @@
 //! kinematics of its command; every stereo pair goes through one full visual-odometry update
 //! (`VisualOdometry::<150>::start`, then `step` one work item at a time, each item measured by kind;
 //! images in `.extram`) and, when it gives a pose,
-//! the gate and update between the two capture clones. Updates are applied ungated so that
+//! the gate and update between the two capture clones. When the tape's camera delivers raw
+//! images (a lens calibration in the header), each pair is first rectified
+//! (`fsw::rectify`, `rectify_pair`, one row item at a time) into the buffers VO reads. Updates are applied ungated so that
 //! every update is measured whole.
 
 use super::devices::ImageBuffer;
@@ -23,6 +25,7 @@ use fsw::kinematics::{
 };
 use fsw::perception::{CameraPose, HazardMapper, MapProgress};
 use fsw::planning::{ConvexPolygon, Planner, Wedge};
+use fsw::rectify::{ImageMemory, MapNode, Rectifier, RectifyConfig, RectifyProgress};
 use fsw::types::{Quat, Vec3};
 use fsw::vo::{Progress, VisualOdometry, WorkKind};
 use rover_hal::{ImuSample, JointState, StereoFrame};
@@ -36,7 +39,7 @@ const MAX_VO_ITEMS: usize = 8192;
 pub const VO_FEATURES: usize = 150;
 
 /// Names of the measured tasks, in report order.
-const TASKS: [&str; 14] = [
+const TASKS: [&str; 15] = [
     "ekf_propagate",
     "ekf_gate_relative_pose",
     "ekf_update_relative_pose",
@@ -48,6 +51,7 @@ const TASKS: [&str; 14] = [
     "vo_update",
     "hazard_map",
     "roverbug_plan",
+    "rectify_pair",
     "localization_map",
     "localize",
     "sequencer_replan",
@@ -63,6 +67,7 @@ const GUIDANCE: usize = 7;
 const VO: usize = 8;
 const HAZARD_MAP: usize = 9;
 const PLAN: usize = 10;
+const RECTIFY: usize = 11;
 
 /// Largest number of work items of one hazard map (far above the mapper's bound).
 const MAX_MAP_ITEMS: usize = 4096;
@@ -140,7 +145,12 @@ pub struct Bench {
     loc: LocBench,
     calibration: rover_hal::StereoCalibration,
     guidance: Guidance<MAX_WAYPOINTS>,
+    /// The pair VO and the mapper read (rectified from `raw` when the tape's camera has a lens
+    /// calibration, loaded directly otherwise).
     images: [&'static mut ImageBuffer; 2],
+    /// The tape's raw pair and the rectification (map in external RAM) when the camera has a
+    /// lens calibration.
+    rectify: Option<BenchRectify>,
     loaded: Option<u32>,
     kin: KinematicOdometry,
     vo_prior: KinematicOdometry,
@@ -155,6 +165,15 @@ pub struct Bench {
     /// Instructions per VO work item, by kind (`fsw::vo::WorkKind`).
     vo_items: [Stats; WorkKind::COUNT],
     vo_summary: VoSummary,
+    /// Instructions per rectification row item.
+    rectify_row: Stats,
+}
+
+/// The bench's rectification: state, map and the tape's raw pair.
+struct BenchRectify {
+    rectifier: Rectifier,
+    map: &'static mut [MapNode],
+    raw: [&'static mut ImageBuffer; 2],
 }
 
 impl Bench {
@@ -164,6 +183,8 @@ impl Bench {
     pub fn install(
         header: &TapeHeader,
         images: [&'static mut ImageBuffer; 2],
+        raw: [&'static mut ImageBuffer; 2],
+        map: &'static mut [MapNode],
     ) -> Option<&'static mut Self> {
         let [n, e, d, roll, pitch, yaw] = header.start_pose;
         let mut start = NominalState::at_rest(0);
@@ -186,6 +207,27 @@ impl Bench {
         let wheel_xy = contacts.map(|c| [c.x, c.y]);
         let path = Path::new(header.waypoints()).ok()?;
         let guidance = Guidance::new(path, GuidanceConfig::rocky8(wheel_xy)).ok()?;
+        let mut images = images;
+        let rectify = match header.lens {
+            None => None,
+            Some(lens) => {
+                let [out_left, out_right] = &mut images;
+                let mut memory = ImageMemory {
+                    map,
+                    left: &mut out_left[..],
+                    right: &mut out_right[..],
+                };
+                let mut rectifier = Rectifier::new(RectifyConfig::default());
+                rectifier
+                    .build(&lens, &header.calibration, &mut memory)
+                    .ok()?;
+                Some(BenchRectify {
+                    rectifier,
+                    map: memory.map,
+                    raw,
+                })
+            }
+        };
         let bench = Self {
             ekf,
             vo,
@@ -195,6 +237,7 @@ impl Bench {
             calibration: header.calibration,
             guidance,
             images,
+            rectify,
             loaded: None,
             kin: KinematicOdometry::new(ROCKY8, OdometryConfig::default()),
             vo_prior: KinematicOdometry::new(ROCKY8, OdometryConfig::default()),
@@ -211,6 +254,7 @@ impl Bench {
                 inliers_min: u16::MAX,
                 ..VoSummary::default()
             },
+            rectify_row: Stats::new(),
         };
         bench_static(bench)
     }
@@ -389,7 +433,10 @@ impl Bench {
     }
 
     fn load(&mut self, payload: &mut HostFile, i: &ImagesRef) -> Result<(), TapeError> {
-        let [left, right] = &mut self.images;
+        let [left, right] = match &mut self.rectify {
+            Some(r) => &mut r.raw,
+            None => &mut self.images,
+        };
         let l = left
             .get_mut(..i.left_len as usize)
             .ok_or(TapeError::BufferTooSmall)?;
@@ -409,6 +456,9 @@ impl Bench {
             return;
         }
         self.last_vo_capture_us = Some(f.capture_t_us);
+        if self.rectify.is_some() && !self.rectify_pair(meter, f) {
+            return;
+        }
         let Some(frame) = frame_of(&self.images, f) else {
             return;
         };
@@ -472,6 +522,47 @@ impl Bench {
             let _ = self.ekf.release(old);
         }
         self.prev_capture = capture;
+    }
+
+    /// Rectifies the raw pair of `f` into the VO images (`fsw::rectify`, one row item per
+    /// `step`, the sum measured as `rectify_pair`). False when the pair could not be rectified
+    /// (VO then skips it, as the flight software does).
+    fn rectify_pair(&mut self, meter: &mut Meter, f: &FrameInfo) -> bool {
+        let Some(r) = self.rectify.as_mut() else {
+            return false;
+        };
+        let Some(raw) = frame_of(&r.raw, f) else {
+            return false;
+        };
+        let [out_left, out_right] = &mut self.images;
+        let mut memory = ImageMemory {
+            map: &mut *r.map,
+            left: &mut out_left[..],
+            right: &mut out_right[..],
+        };
+        let rectifier = &mut r.rectifier;
+        let (started, mut n) = meter.measure(|| rectifier.start(&raw));
+        let mut ok = false;
+        if started.is_ok() {
+            for _ in 0..=Rectifier::ITEMS_PER_PAIR {
+                let (p, k) = meter.measure(|| rectifier.step(&raw, &mut memory, 1));
+                n += k;
+                self.rectify_row.add(k, true);
+                if let RectifyProgress::Finished(result) = p {
+                    ok = result.is_ok();
+                    break;
+                }
+            }
+        }
+        if let Some(s) = self.stats.get_mut(RECTIFY) {
+            s.add(n, ok);
+        }
+        ok
+    }
+
+    /// Instructions per rectification row item.
+    pub fn rectify_rows(&self) -> &Stats {
+        &self.rectify_row
     }
 
     /// A hazard map of `frame` at the EKF pose of its capture clone (work item by work item,

@@ -11,6 +11,7 @@
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use cortex_m::peripheral::{SCB, SYST};
+use fsw::rectify::{MapNode, MAP_NODES};
 use rover_hal::{
     CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
     StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
@@ -38,6 +39,29 @@ impl fsw::flight::Platform for TargetPlatform {
     type Camera = TargetCamera;
     type Sun = TargetSun;
     type Telemetry = TargetTelemetry;
+    type ImageMemory = TargetImageMemory;
+}
+
+/// The flight software's rectification memory: map and rectified pair in external RAM (empty
+/// for the still camera, which delivers a rectified test pattern).
+pub type TargetImageMemory = fsw::rectify::ImageMemory<&'static mut [MapNode], &'static mut [u8]>;
+
+/// Rectification maps in external RAM: the flight software's and the bench's.
+pub const RECTIFY_MAPS: usize = 2;
+
+/// Rectification map nodes, in external RAM.
+#[link_section = ".extram"]
+static mut RECTIFY_MAP: [[MapNode; MAP_NODES]; RECTIFY_MAPS] =
+    [[MapNode { u: 0, v: 0 }; MAP_NODES]; RECTIFY_MAPS];
+static RECTIFY_MAP_TAKEN: AtomicBool = AtomicBool::new(false);
+
+/// The external-RAM rectification maps (once; `None` afterwards).
+pub fn take_rectify_maps() -> Option<&'static mut [[MapNode; MAP_NODES]; RECTIFY_MAPS]> {
+    if RECTIFY_MAP_TAKEN.swap(true, Ordering::AcqRel) {
+        return None;
+    }
+    // SAFETY: the flag above makes this the only reference ever made to RECTIFY_MAP.
+    Some(unsafe { &mut *core::ptr::addr_of_mut!(RECTIFY_MAP) })
 }
 
 /// The replay state shared by the replay devices.
@@ -47,8 +71,9 @@ pub type Tape = &'static RefCell<Player>;
 pub type ImageBuffer = [u8; IMAGE_PIXELS];
 
 /// Number of image buffers in external RAM: two pairs for the replay camera, one pair for the
-/// visual-odometry measurement.
-pub const IMAGE_BUFFERS: usize = 6;
+/// visual-odometry measurement (the bench's rectified pair), one pair for the flight
+/// software's rectified images, one pair for the bench's raw images.
+pub const IMAGE_BUFFERS: usize = 10;
 
 /// Stereo image buffers, in external RAM.
 #[link_section = ".extram"]
@@ -98,6 +123,9 @@ pub enum TargetMobility {
 }
 
 /// Stereo camera.
+// One instance in a static, never moved: the replay variant's size (its calibration and lens
+// calibration) costs nothing, and there is no heap to box it into.
+#[allow(clippy::large_enum_variant)]
 pub enum TargetCamera {
     /// Still run: a fixed test pattern.
     Still(ExtramStereo),
@@ -181,6 +209,12 @@ impl StereoCamera for TargetCamera {
         match self {
             Self::Still(d) => d.calibration(),
             Self::Replay(d) => d.calibration(),
+        }
+    }
+    fn lens_calibration(&self) -> Option<rover_hal::LensCalibration> {
+        match self {
+            Self::Still(d) => d.lens_calibration(),
+            Self::Replay(d) => d.lens_calibration(),
         }
     }
     fn trigger(&mut self) -> Result<u64, ErrorKind> {

@@ -37,6 +37,12 @@ pub fn run(mut core: cortex_m::Peripherals) -> bool {
         camera: TargetCamera::Still(ExtramStereo::new([left, right], &SYSTICKS)),
         sun: TargetSun::Still(devices::FixedSun::new(&SYSTICKS)),
         telemetry: TargetTelemetry::Counting(devices::CountingTelemetry::default()),
+        // The still camera delivers a rectified test pattern: no rectification memory.
+        image_memory: fsw::rectify::ImageMemory {
+            map: &mut [],
+            left: &mut [],
+            right: &mut [],
+        },
     };
     let Some(fsw) = super::install_new_fsw(devices, &FlightSetup::still()) else {
         return false;

@@ -6,8 +6,8 @@
 
 use super::bench::Bench;
 use super::devices::{
-    player, take_image_buffers, SystickClock, TargetCamera, TargetClock, TargetImu, TargetMobility,
-    TargetPlatform, TargetSun, TargetTelemetry,
+    player, take_image_buffers, take_rectify_maps, SystickClock, TargetCamera, TargetClock,
+    TargetImu, TargetMobility, TargetPlatform, TargetSun, TargetTelemetry,
 };
 use super::measure::{
     repaint_stack, stack_high_water, stack_region, Meter, Stats, INSNS_PER_COUNT,
@@ -114,8 +114,14 @@ pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
         tape_bytes
     ));
 
-    let Some([b0, b1, b2, b3, b4, b5]) = take_image_buffers() else {
+    let Some([b0, b1, b2, b3, b4, b5, b6, b7, b8, b9]) = take_image_buffers() else {
         report(format_args!("fsw-image: image buffers already taken\n"));
+        return false;
+    };
+    let Some([map_fsw, map_bench]) = take_rectify_maps() else {
+        report(format_args!(
+            "fsw-image: rectification maps already taken\n"
+        ));
         return false;
     };
     let Some(tape) = player() else {
@@ -127,14 +133,21 @@ pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
         clock: TargetClock::Replay(ReplayClock::new(tape, clock)),
         imu: TargetImu::Replay(ReplayImu::new(tape)),
         mobility: TargetMobility::Replay(ReplayMobility::new(tape)),
-        camera: TargetCamera::Replay(ReplayStereo::new(tape, payload, slots, header.calibration)),
+        camera: TargetCamera::Replay(
+            ReplayStereo::new(tape, payload, slots, header.calibration).with_lens(header.lens),
+        ),
         sun: TargetSun::Replay(ReplaySun::new(tape)),
         telemetry: TargetTelemetry::Replay(ReplayTelemetry::new(tape)),
+        image_memory: fsw::rectify::ImageMemory {
+            map: &mut map_fsw[..],
+            left: &mut b6[..],
+            right: &mut b7[..],
+        },
     };
     let Some(fsw) = super::install_new_fsw(devices, &FlightSetup::from_header(&header)) else {
         return false;
     };
-    let Some(bench) = Bench::install(&header, [b4, b5]) else {
+    let Some(bench) = Bench::install(&header, [b4, b5], [b8, b9], &mut map_bench[..]) else {
         report(format_args!(
             "fsw-image: navigation tasks refused their setup\n"
         ));
@@ -221,6 +234,7 @@ pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
     for (name, s) in bench.tasks() {
         print_stats("task", name, s);
     }
+    print_stats("task", "rectify_row", bench.rectify_rows());
     for (name, s) in bench.vo_items() {
         print_stats("vo_item", name, s);
     }

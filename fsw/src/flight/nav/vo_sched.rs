@@ -38,6 +38,11 @@ impl Navigator {
         }
     }
 
+    /// True when the visual odometry state was built ([`Self::start_vo`]).
+    pub fn vo_built(&self) -> bool {
+        self.vo.is_some()
+    }
+
     /// True when VO or a hazard map is running on a frame (the camera frame must stay held).
     pub fn vo_busy(&self) -> bool {
         matches!(
