@@ -98,6 +98,7 @@ impl Navigator {
             Err(KinematicsError::TimeNotAdvancing) => return,
             Err(_) => {
                 self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
+                self.boresight.interrupt();
                 self.release(Some(start));
                 self.interval = None;
                 self.restart_interval(j, t_us);
@@ -167,9 +168,9 @@ impl Navigator {
         // alive an accepted interval is fused by the same call (unless holding); without VO the
         // interval is tested here and then fused with the slip allowance below.
         let fusing = !(vo_lost || holding);
+        // Cross-slope component of gravity in R (sin of the cross slope).
+        let cross = libm::fabs(ekf.state().q_nr.inverse_transform_vector(&Vec3::z()).y);
         let crab = {
-            // Cross-slope component of gravity in R (sin of the cross slope).
-            let cross = libm::fabs(ekf.state().q_nr.inverse_transform_vector(&Vec3::z()).y);
             let a = self.config.kin_crab_allowance * cross * rp.trans_0_1_m.norm();
             if a.is_finite() {
                 a * a
@@ -199,6 +200,11 @@ impl Navigator {
             }
             self.recorder.relative_pose(&fused, false);
         }
+        // The wheels' motion between captures, for VO's boresight (only intervals fused as
+        // slip-free count).
+        let usable = fusing && result.as_ref().is_ok_and(|d| d.accepted);
+        self.boresight
+            .kinematic(&self.config.vo_boresight, &rp, usable, cross);
         match result {
             Ok(d) => {
                 self.counters.kin_tested = self.counters.kin_tested.saturating_add(1);
@@ -326,6 +332,7 @@ impl Navigator {
             return;
         }
         self.gyro_since_joints = Some(crate::types::Quat::identity());
+        self.boresight.interrupt();
         let result = ekf.clone_at(t_us);
         self.recorder.clone_at(t_us);
         match result {

@@ -38,6 +38,7 @@
 //! VO-aided estimate and the kinematic pose is visible.
 
 mod align;
+mod boresight;
 mod diagnostics;
 mod guidance_adapter;
 pub mod hazard_nav;
@@ -50,6 +51,7 @@ pub mod vo_gate;
 mod vo_sched;
 
 use align::Alignment;
+pub use boresight::{Boresight, BoresightConfig};
 use diagnostics::Trajectories;
 use protection::{FaultResponse, Protection, ProtectionConfig};
 pub use radius::{RadiusScale, RadiusScaleConfig};
@@ -234,6 +236,8 @@ pub struct NavConfig {
     pub protection: ProtectionConfig,
     /// Online estimate of the effective wheel-radius scale.
     pub radius_scale: RadiusScaleConfig,
+    /// Online estimate of VO's translation boresight in yaw ([`Boresight`]).
+    pub vo_boresight: BoresightConfig,
     /// Minor frames without a checked IMU sample after which the rover is stopped.
     pub imu_timeout_frames: u32,
     /// RG2 cycles without a checked joint reading after which the rover is stopped.
@@ -340,6 +344,7 @@ impl NavConfig {
             guidance: GuidanceConfig::rocky8(xy),
             protection: ProtectionConfig::default(),
             radius_scale: RadiusScaleConfig::default(),
+            vo_boresight: BoresightConfig::default(),
             imu_timeout_frames: 20,
             joints_timeout_cycles: 10,
             stopped_wheel_rate_rad_s: 0.01,
@@ -534,6 +539,8 @@ pub struct Navigator {
     protection: Protection,
     /// Effective wheel-radius scale estimate.
     radius_scale: RadiusScale,
+    /// VO translation boresight estimate.
+    boresight: Boresight,
     /// Why fault protection stopped the drive.
     fault_response: FaultResponse,
     /// A VO update was fused since the last kinematic interval.
@@ -636,6 +643,7 @@ impl Navigator {
             vo_started: false,
             protection: Protection::default(),
             radius_scale: RadiusScale::new(),
+            boresight: Boresight::new(),
             fault_response: FaultResponse::None,
             vo_fused_since_interval: false,
             last_wheel_rates: [0.0; 6],
@@ -663,6 +671,12 @@ impl Navigator {
     /// The effective wheel-radius scale applied to the kinematic translation (1 = nominal).
     pub fn radius_scale(&self) -> f64 {
         self.radius_scale.scale
+    }
+
+    /// The VO translation boresight removed from each VO pose (rad about `z_R`, positive from
+    /// `x_R` towards `y_R`) and the number of samples it was learnt from ([`Boresight`]).
+    pub fn vo_boresight(&self) -> (f64, u32) {
+        (self.boresight.yaw_rad, self.boresight.updates)
     }
 
     /// The slip measured over the last complete fault-protection window (1 - EKF travel /

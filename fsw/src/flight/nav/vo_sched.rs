@@ -105,6 +105,7 @@ impl Navigator {
                 // Record from here on, so that the VO result can be applied at capture time
                 // exactly (replay) however late it arrives.
                 self.recorder.begin(&self.ekf);
+                self.boresight.capture(t_us);
                 self.mark_capture(reason);
                 true
             }
@@ -291,7 +292,10 @@ impl Navigator {
         }
     }
 
-    pub(super) fn vo_fuse(&mut self, rp: &RelativePose) {
+    pub(super) fn vo_fuse(&mut self, raw: &RelativePose) {
+        // VO's translation boresight (boresight.rs) removed before anything uses the pose.
+        let corrected = self.boresight.correct(&self.config.vo_boresight, raw);
+        let rp = &corrected;
         let (Some(key), Some(ekf)) = (self.key_clone, self.ekf_running.then_some(&mut self.ekf))
         else {
             return;
@@ -319,6 +323,9 @@ impl Navigator {
         // complete (exact); otherwise at the capture clones (exact there, first order now). The
         // replay runs in background slices (replay_step): the live filter takes the result when
         // the replay has caught up.
+        // An accepted pose teaches the boresight (from its raw translation) when the wheels'
+        // motion over the same capture interval is clean.
+        self.boresight.learn(&self.config.vo_boresight, raw);
         let result = if self.recorder.active() {
             self.counters.vo_replayed = self.counters.vo_replayed.saturating_add(1);
             self.recorder.start_late(&fused, false)
