@@ -19,13 +19,8 @@
 //! too), and once the snapshot has caught up it is copied into the live filter. The result is
 //! the same, bit for bit, as [`Recorder::apply_late`] at that moment.
 //!
-//! Capacity: [`REPLAY_IMU`] IMU samples (1.6 s at 200 Hz), [`REPLAY_POSES`] relative poses
-//! (1.6 s of kinematic intervals at 20 Hz) and [`REPLAY_MEASUREMENTS`] other operations (the
-//! clone and release of each interval, sun and zero-velocity updates: 40 to 60 per second).
-//! The relative poses (368 B each) have their own list so that the small operations do not take
-//! their room: with one list of 64 the recording held 1.07 s, and the 0.2 s that rectifying the
-//! wide-angle pair adds before VO (issue 15) made a third to a half of the VO results on
-//! `marsyard-25m` and `rough-kinematics` arrive after it overflowed. When a capacity is exceeded the recording is abandoned ([`Recorder::overflowed`])
+//! Capacity: [`REPLAY_IMU`] IMU samples (1.28 s at 200 Hz) and [`REPLAY_MEASUREMENTS`] other
+//! operations. When a capacity is exceeded the recording is abandoned ([`Recorder::overflowed`])
 //! and the caller applies the measurement at the clones instead (first-order exact).
 
 use super::{Ekf, EstError, GateDecision};
@@ -33,17 +28,19 @@ use crate::types::RelativePose;
 use rover_hal::{ImuSample, SunReading};
 
 /// IMU samples a recording holds.
-pub const REPLAY_IMU: usize = 320;
-/// Relative poses a recording holds.
-pub const REPLAY_POSES: usize = 32;
-/// Zero-velocity and sun updates, clones, releases and inflations a recording holds.
-pub const REPLAY_MEASUREMENTS: usize = 96;
-/// Operations (of all kinds) a recording holds.
-const REPLAY_OPS: usize = REPLAY_IMU + REPLAY_POSES + REPLAY_MEASUREMENTS;
+pub const REPLAY_IMU: usize = 256;
+/// Relative poses, zero-velocity and sun updates, clones and releases a recording holds.
+pub const REPLAY_MEASUREMENTS: usize = 64;
+/// Operations (of both kinds) a recording holds.
+const REPLAY_OPS: usize = REPLAY_IMU + REPLAY_MEASUREMENTS;
 
-/// One recorded operation other than propagation and relative poses.
+/// One recorded operation other than propagation.
+// Stored in a fixed array: there is no heap to box the large variant into.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Measurement {
+    /// `update_relative_pose(m, gated)`.
+    RelativePose { m: RelativePose, gated: bool },
     /// `update_zero_velocity(t_us)`.
     ZeroVelocity { t_us: u64 },
     /// `update_sun(reading)`.
@@ -64,26 +61,22 @@ enum Measurement {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Op {
     Imu,
-    Pose,
     Measurement,
 }
 
-/// A recording of filter operations since a snapshot (see the module doc). About 47 KB.
+/// A recording of filter operations since a snapshot (see the module doc). About 30 KB.
 #[derive(Debug, Clone)]
 pub struct Recorder {
     snapshot: Option<Ekf>,
     imu: [ImuSample; REPLAY_IMU],
     imu_count: usize,
-    poses: [Option<(RelativePose, bool)>; REPLAY_POSES],
-    pose_count: usize,
     measurements: [Option<Measurement>; REPLAY_MEASUREMENTS],
     measurement_count: usize,
     ops: [Op; REPLAY_OPS],
     op_count: usize,
     overflowed: bool,
-    /// Replay in progress on the snapshot: next operation, IMU sample, relative pose and
-    /// measurement.
-    cursor: Option<(usize, usize, usize, usize)>,
+    /// Replay in progress on the snapshot: next operation, IMU sample and measurement.
+    cursor: Option<(usize, usize, usize)>,
 }
 
 /// State of a sliced replay ([`Recorder::replay_step`]).
@@ -113,8 +106,6 @@ impl Recorder {
             snapshot: None,
             imu: [ImuSample::default(); REPLAY_IMU],
             imu_count: 0,
-            poses: [None; REPLAY_POSES],
-            pose_count: 0,
             measurements: [None; REPLAY_MEASUREMENTS],
             measurement_count: 0,
             ops: [Op::Imu; REPLAY_OPS],
@@ -132,7 +123,6 @@ impl Recorder {
             None => self.snapshot = Some(ekf.clone()),
         }
         self.imu_count = 0;
-        self.pose_count = 0;
         self.measurement_count = 0;
         self.op_count = 0;
         self.overflowed = false;
@@ -216,17 +206,7 @@ impl Recorder {
 
     /// Record `update_relative_pose(m, gated)`.
     pub fn relative_pose(&mut self, m: &RelativePose, gated: bool) {
-        if !self.active() {
-            return;
-        }
-        if self.pose_count < REPLAY_POSES && self.push_op(Op::Pose) {
-            if let Some(slot) = self.poses.get_mut(self.pose_count) {
-                *slot = Some((*m, gated));
-            }
-            self.pose_count += 1;
-        } else {
-            self.overflowed = true;
-        }
+        self.measurement(Measurement::RelativePose { m: *m, gated });
     }
 
     /// Record `update_zero_velocity(t_us)`.
@@ -298,7 +278,7 @@ impl Recorder {
             return Err(EstError::NoStateAtTime { t_us: m.t1_us });
         };
         let decision = snapshot.update_relative_pose(m, gated);
-        self.cursor = Some((0, 0, 0, 0));
+        self.cursor = Some((0, 0, 0));
         decision
     }
 
@@ -306,7 +286,7 @@ impl Recorder {
     /// snapshot has caught up with the recording it is copied into `ekf` (the live filter) and
     /// the recording ends ([`ReplayProgress::Done`]).
     pub fn replay_step(&mut self, ekf: &mut Ekf, max_ops: usize) -> ReplayProgress {
-        let Some((mut op, mut i, mut p, mut k)) = self.cursor else {
+        let Some((mut op, mut i, mut k)) = self.cursor else {
             return ReplayProgress::Idle;
         };
         if self.overflowed {
@@ -326,12 +306,6 @@ impl Recorder {
                     }
                     i += 1;
                 }
-                Op::Pose => {
-                    if let Some(Some((m, gated))) = self.poses.get(p) {
-                        let _ = snapshot.update_relative_pose(m, *gated);
-                    }
-                    p += 1;
-                }
                 Op::Measurement => {
                     if let Some(Some(meas)) = self.measurements.get(k) {
                         replay_one(snapshot, meas);
@@ -346,7 +320,7 @@ impl Recorder {
             self.end();
             ReplayProgress::Done
         } else {
-            self.cursor = Some((op, i, p, k));
+            self.cursor = Some((op, i, k));
             ReplayProgress::Working
         }
     }
@@ -354,6 +328,9 @@ impl Recorder {
 
 fn replay_one(ekf: &mut Ekf, m: &Measurement) {
     match m {
+        Measurement::RelativePose { m, gated } => {
+            let _ = ekf.update_relative_pose(m, *gated);
+        }
         Measurement::ZeroVelocity { t_us } => {
             let _ = ekf.update_zero_velocity(*t_us);
         }

@@ -44,6 +44,9 @@ pub struct HazardCounters {
     pub gazes: u32,
     /// RG2 cycles the rover held still waiting for a map.
     pub holds: u32,
+    /// Gaze turns given up because a remembered obstacle was inside the circle the rover's
+    /// corners sweep when it turns in place; the rover maps where it stands instead.
+    pub gazes_skipped: u32,
 }
 
 /// The planner's verdict as the ground sees it.
@@ -84,6 +87,21 @@ pub const WEDGE_EROSION_MARGIN_M: f64 = 0.1;
 const GAZE_TOLERANCE_RAD: f64 = 0.05;
 /// Yaw rate of a gaze turn, rad/s.
 const GAZE_RATE_RAD_S: f64 = 0.1;
+/// Clearance kept between the circle the rover's footprint sweeps turning in place and a
+/// remembered obstacle, m.
+pub const GAZE_TURN_MARGIN_M: f64 = 0.1;
+
+/// Radius (m) of the circle the rover's footprint sweeps turning in place about its reference
+/// point: the farthest wheel contact plus the wheel radius fore and aft, the half-width (with
+/// its margin, [`crate::perception::ROVER_HALF_WIDTH_M`]) across.
+pub fn turn_sweep_radius(geometry: &RoverGeometry) -> f64 {
+    let reach = match wheel_contact_points(geometry, &SuspensionState::default()) {
+        Ok(p) => p.iter().fold(0.0_f64, |m, c| m.max(libm::fabs(c.x))),
+        Err(_) => 0.5,
+    } + geometry.wheel_radius_m;
+    let w = crate::perception::ROVER_HALF_WIDTH_M;
+    libm::sqrt(reach * reach + w * w)
+}
 
 impl Navigator {
     /// Build the hazard mapper and the planner in place (about 68 KB) when
@@ -363,6 +381,9 @@ impl Navigator {
     /// place with body command `c` (gaze); `None`: drive the guidance path.
     pub(super) fn hazard_command(&mut self) -> Option<Option<VehicleCommand>> {
         let heading = self.ekf_running.then(|| yaw_of(&self.ekf.state().q_nr));
+        let position = [self.ekf.state().p_n.x, self.ekf.state().p_n.y];
+        let sweep = turn_sweep_radius(&self.config.geometry);
+        let grown = crate::perception::ROVER_HALF_WIDTH_M + self.config.perception.grow_margin_m;
         let h = self.hazard.as_mut()?;
         if h.verdict != PlannerVerdict::Driving {
             return None;
@@ -373,6 +394,26 @@ impl Navigator {
                 h.gaze_rad = None;
                 h.map_wanted = true;
                 h.counters.holds = h.counters.holds.saturating_add(1);
+                return Some(None);
+            }
+            // Turning in place sweeps the footprint's corners round a circle wider than the
+            // half-width the obstacles are grown by; an obstacle seen earlier (now beside or
+            // behind the hazcams) can be inside it (`unreachable`: a ring rock hit during a
+            // gaze). Then the gaze is given up and the rover maps where it stands (backing up
+            // first was tried: reverse driving broke VO on `unreachable` and `cul-de-sac`,
+            // 17 failed updates and a 44 deg VO attitude error; not investigated).
+            let nearest = h
+                .planner
+                .memory()
+                .grown()
+                .iter()
+                .map(|p| p.distance(position))
+                .fold(f64::INFINITY, f64::min);
+            let room = nearest + grown >= sweep + GAZE_TURN_MARGIN_M;
+            if !room {
+                h.gaze_rad = None;
+                h.map_wanted = true;
+                h.counters.gazes_skipped = h.counters.gazes_skipped.saturating_add(1);
                 return Some(None);
             }
             let rate = if e > 0.0 {
