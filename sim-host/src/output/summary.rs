@@ -203,6 +203,8 @@ pub struct PlannerSummary {
     pub map_errors: u32,
     /// Gaze turns.
     pub gazes: u32,
+    /// Gaze turns given up: a remembered obstacle inside the turning sweep.
+    pub gazes_skipped: u32,
     /// RG2 cycles held still waiting for a map.
     pub hold_cycles: u32,
 }
@@ -420,6 +422,7 @@ pub fn summarise(run: &RunResult) -> Summary {
             maps: p.hazard.maps,
             map_errors: p.hazard.map_errors,
             gazes: p.hazard.gazes,
+            gazes_skipped: p.hazard.gazes_skipped,
             hold_cycles: p.hazard.holds,
         }),
         slip: SlipSummary {

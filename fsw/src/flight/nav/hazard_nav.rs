@@ -88,8 +88,12 @@ const GAZE_TOLERANCE_RAD: f64 = 0.05;
 /// Yaw rate of a gaze turn, rad/s.
 const GAZE_RATE_RAD_S: f64 = 0.1;
 /// Clearance kept between the circle the rover's footprint sweeps turning in place and a
-/// remembered obstacle, m.
-pub const GAZE_TURN_MARGIN_M: f64 = 0.1;
+/// remembered obstacle's hazard outline, m: the outline is the hull of 0.1 m hazard cells above
+/// the step limit, smaller than the rock's base, and the position is the EKF's. From the
+/// collision it prevents (`unreachable` seed 1 with the lens model: a ring rock 0.95 m from the
+/// rover's centre hit during a gaze, with the hull about 0.2 m in radius and a 0.61 m sweep)
+/// the margin must exceed 0.15 m.
+pub const GAZE_TURN_MARGIN_M: f64 = 0.2;
 
 /// Radius (m) of the circle the rover's footprint sweeps turning in place about its reference
 /// point: the farthest wheel contact plus the wheel radius fore and aft, the half-width (with
@@ -446,5 +450,21 @@ impl Navigator {
         }
         h.map_wanted = true;
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The turning sweep of Rocky 8: farthest wheel contact 0.393 m ahead plus the 0.10 m
+    /// wheel radius, 0.351 m half-width: about 0.61 m, wider than the 0.351 m the obstacles
+    /// are grown by across the track.
+    #[test]
+    fn turn_sweep_covers_the_footprint_corners() {
+        let r = turn_sweep_radius(&ROCKY8);
+        let expected = libm::sqrt(0.493 * 0.493 + crate::perception::ROVER_HALF_WIDTH_M.powi(2));
+        assert!((r - expected).abs() < 0.01, "{r}");
+        assert!(r > crate::perception::ROVER_HALF_WIDTH_M + 0.2);
     }
 }
