@@ -947,7 +947,7 @@ fixed:
   the kinematic solve, World::force_fallbacks), the rover scrubbed about 30 % of its rim
   travel, VO delivered 11 poses in 39 s and fault protection stopped it `PositionUncertain`. It
   is not the SIL scenario until the flight software handles it.
-- **SIL-GATE-1**, upper bound (false alarms on `flat-firm` without slip at most 8 %): 10.1 % on
+- **SIL-GATE-1**, upper bound (false alarms on `flat-firm` without slip at most 8 %): 8.8 % on
   the SIL seed with the wide-angle lens model and rectification in the loop (issue 15), 8.4 %
   with ideal lenses before it; on seeds 2-10 (ideal lenses) 2.9-4.6 %. The false alarms
   cluster: the slip hold (any rejection stops the kinematic fusion for a second) lets the IMU

@@ -19,8 +19,16 @@
 //! too), and once the snapshot has caught up it is copied into the live filter. The result is
 //! the same, bit for bit, as [`Recorder::apply_late`] at that moment.
 //!
-//! Capacity: [`REPLAY_IMU`] IMU samples (1.28 s at 200 Hz) and [`REPLAY_MEASUREMENTS`] other
-//! operations. When a capacity is exceeded the recording is abandoned ([`Recorder::overflowed`])
+//! Capacity: [`REPLAY_IMU`] IMU samples (1.07 s at 200 Hz), [`REPLAY_POSES`] relative poses
+//! (1.2 s of kinematic intervals at 20 Hz) and [`REPLAY_MEASUREMENTS`] other operations (the
+//! clone and release of each interval, sun and zero-velocity updates: 40 to 60 per second).
+//! The relative poses (368 B each) have their own list so that the small operations do not take
+//! their room: one list of 64 for both held the same 1.07 s in 15 KB more RAM. Longer
+//! recordings (1.28 and 1.6 s), to keep the VO results that rectifying the wide-angle pair makes
+//! late (issue 15), were tried and made the filter diverge on `cul-de-sac` seed 2 when those
+//! results were replayed (`docs/estimation.md`); results later than 1.07 s are dropped
+//! ([`ReplayProgress::Abandoned`], counted by the navigator). When a capacity is exceeded
+//! the recording is abandoned ([`Recorder::overflowed`])
 //! and the caller applies the measurement at the clones instead (first-order exact).
 
 use super::{Ekf, EstError, GateDecision};
@@ -28,19 +36,17 @@ use crate::types::RelativePose;
 use rover_hal::{ImuSample, SunReading};
 
 /// IMU samples a recording holds.
-pub const REPLAY_IMU: usize = 256;
-/// Relative poses, zero-velocity and sun updates, clones and releases a recording holds.
-pub const REPLAY_MEASUREMENTS: usize = 64;
-/// Operations (of both kinds) a recording holds.
-const REPLAY_OPS: usize = REPLAY_IMU + REPLAY_MEASUREMENTS;
+pub const REPLAY_IMU: usize = 214;
+/// Relative poses a recording holds.
+pub const REPLAY_POSES: usize = 24;
+/// Zero-velocity and sun updates, clones, releases and inflations a recording holds.
+pub const REPLAY_MEASUREMENTS: usize = 48;
+/// Operations (of all kinds) a recording holds.
+const REPLAY_OPS: usize = REPLAY_IMU + REPLAY_POSES + REPLAY_MEASUREMENTS;
 
-/// One recorded operation other than propagation.
-// Stored in a fixed array: there is no heap to box the large variant into.
-#[allow(clippy::large_enum_variant)]
+/// One recorded operation other than propagation and relative poses.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Measurement {
-    /// `update_relative_pose(m, gated)`.
-    RelativePose { m: RelativePose, gated: bool },
     /// `update_zero_velocity(t_us)`.
     ZeroVelocity { t_us: u64 },
     /// `update_sun(reading)`.
@@ -61,22 +67,26 @@ enum Measurement {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Op {
     Imu,
+    Pose,
     Measurement,
 }
 
-/// A recording of filter operations since a snapshot (see the module doc). About 30 KB.
+/// A recording of filter operations since a snapshot (see the module doc). About 34 KB.
 #[derive(Debug, Clone)]
 pub struct Recorder {
     snapshot: Option<Ekf>,
     imu: [ImuSample; REPLAY_IMU],
     imu_count: usize,
+    poses: [Option<(RelativePose, bool)>; REPLAY_POSES],
+    pose_count: usize,
     measurements: [Option<Measurement>; REPLAY_MEASUREMENTS],
     measurement_count: usize,
     ops: [Op; REPLAY_OPS],
     op_count: usize,
     overflowed: bool,
-    /// Replay in progress on the snapshot: next operation, IMU sample and measurement.
-    cursor: Option<(usize, usize, usize)>,
+    /// Replay in progress on the snapshot: next operation, IMU sample, relative pose and
+    /// measurement.
+    cursor: Option<(usize, usize, usize, usize)>,
 }
 
 /// State of a sliced replay ([`Recorder::replay_step`]).
@@ -106,6 +116,8 @@ impl Recorder {
             snapshot: None,
             imu: [ImuSample::default(); REPLAY_IMU],
             imu_count: 0,
+            poses: [None; REPLAY_POSES],
+            pose_count: 0,
             measurements: [None; REPLAY_MEASUREMENTS],
             measurement_count: 0,
             ops: [Op::Imu; REPLAY_OPS],
@@ -123,6 +135,7 @@ impl Recorder {
             None => self.snapshot = Some(ekf.clone()),
         }
         self.imu_count = 0;
+        self.pose_count = 0;
         self.measurement_count = 0;
         self.op_count = 0;
         self.overflowed = false;
@@ -206,7 +219,17 @@ impl Recorder {
 
     /// Record `update_relative_pose(m, gated)`.
     pub fn relative_pose(&mut self, m: &RelativePose, gated: bool) {
-        self.measurement(Measurement::RelativePose { m: *m, gated });
+        if !self.active() {
+            return;
+        }
+        if self.pose_count < REPLAY_POSES && self.push_op(Op::Pose) {
+            if let Some(slot) = self.poses.get_mut(self.pose_count) {
+                *slot = Some((*m, gated));
+            }
+            self.pose_count += 1;
+        } else {
+            self.overflowed = true;
+        }
     }
 
     /// Record `update_zero_velocity(t_us)`.
@@ -278,7 +301,7 @@ impl Recorder {
             return Err(EstError::NoStateAtTime { t_us: m.t1_us });
         };
         let decision = snapshot.update_relative_pose(m, gated);
-        self.cursor = Some((0, 0, 0));
+        self.cursor = Some((0, 0, 0, 0));
         decision
     }
 
@@ -286,7 +309,7 @@ impl Recorder {
     /// snapshot has caught up with the recording it is copied into `ekf` (the live filter) and
     /// the recording ends ([`ReplayProgress::Done`]).
     pub fn replay_step(&mut self, ekf: &mut Ekf, max_ops: usize) -> ReplayProgress {
-        let Some((mut op, mut i, mut k)) = self.cursor else {
+        let Some((mut op, mut i, mut p, mut k)) = self.cursor else {
             return ReplayProgress::Idle;
         };
         if self.overflowed {
@@ -306,6 +329,12 @@ impl Recorder {
                     }
                     i += 1;
                 }
+                Op::Pose => {
+                    if let Some(Some((m, gated))) = self.poses.get(p) {
+                        let _ = snapshot.update_relative_pose(m, *gated);
+                    }
+                    p += 1;
+                }
                 Op::Measurement => {
                     if let Some(Some(meas)) = self.measurements.get(k) {
                         replay_one(snapshot, meas);
@@ -320,7 +349,7 @@ impl Recorder {
             self.end();
             ReplayProgress::Done
         } else {
-            self.cursor = Some((op, i, k));
+            self.cursor = Some((op, i, p, k));
             ReplayProgress::Working
         }
     }
@@ -328,9 +357,6 @@ impl Recorder {
 
 fn replay_one(ekf: &mut Ekf, m: &Measurement) {
     match m {
-        Measurement::RelativePose { m, gated } => {
-            let _ = ekf.update_relative_pose(m, *gated);
-        }
         Measurement::ZeroVelocity { t_us } => {
             let _ = ekf.update_zero_velocity(*t_us);
         }

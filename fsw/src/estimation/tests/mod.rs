@@ -435,7 +435,7 @@ fn late_vo_drive(
     let ekf = harness::init_filter(&sc, &truth, &mut rng);
     let mut samples = std::vec::Vec::new();
     let mut truth_poses = std::vec::Vec::new();
-    for _ in 0..600 {
+    for _ in 0..900 {
         truth.advance(&mut rng);
         samples.push(truth.imu(&mut rng));
         truth_poses.push(truth.pose);
