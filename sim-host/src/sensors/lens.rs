@@ -345,35 +345,22 @@ mod tests {
         assert!((hfov - 78.7).abs() < 0.2, "{hfov}");
         let mut margin = f64::INFINITY;
         for c in [lens.left, lens.right] {
-            for j in 0..480 {
-                for i in [0usize, 639] {
-                    let v = [
-                        (i as f64 - 319.5) / rect.fx_px,
-                        (j as f64 - 239.5) / rect.fy_px,
-                        1.0,
-                    ];
-                    let p = project(&c, v).unwrap();
-                    margin = margin
-                        .min(p[0])
-                        .min(639.0 - p[0])
-                        .min(p[1])
-                        .min(479.0 - p[1]);
-                }
-            }
-            for i in 0..640 {
-                for j in [0usize, 479] {
-                    let v = [
-                        (i as f64 - 319.5) / rect.fx_px,
-                        (j as f64 - 239.5) / rect.fy_px,
-                        1.0,
-                    ];
-                    let p = project(&c, v).unwrap();
-                    margin = margin
-                        .min(p[0])
-                        .min(639.0 - p[0])
-                        .min(p[1])
-                        .min(479.0 - p[1]);
-                }
+            // The border of the rectified image: left and right columns, top and bottom rows.
+            let border = (0..480usize)
+                .flat_map(|j| [(0usize, j), (639, j)])
+                .chain((0..640usize).flat_map(|i| [(i, 0usize), (i, 479)]));
+            for (i, j) in border {
+                let v = [
+                    (i as f64 - 319.5) / rect.fx_px,
+                    (j as f64 - 239.5) / rect.fy_px,
+                    1.0,
+                ];
+                let p = project(&c, v).unwrap();
+                margin = margin
+                    .min(p[0])
+                    .min(639.0 - p[0])
+                    .min(p[1])
+                    .min(479.0 - p[1]);
             }
             // The raw corner sees further off axis than the rectified corner (about 47 deg).
             let corner = unit_ray(&c, 0.0, 0.0).unwrap();
