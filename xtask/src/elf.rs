@@ -360,7 +360,7 @@ fn sign_extend(value: u32, bits: u32) -> i64 {
 }
 
 /// Target of a 32-bit Thumb-2 branch: BL (T1), B.W (T4) or B<cond>.W (T3).
-fn branch32(pc: u64, hw1: u16, hw2: u16) -> Option<u64> {
+pub(crate) fn branch32(pc: u64, hw1: u16, hw2: u16) -> Option<u64> {
     if hw1 & 0xF800 != 0xF000 {
         return None;
     }
@@ -394,7 +394,7 @@ fn branch32(pc: u64, hw1: u16, hw2: u16) -> Option<u64> {
 }
 
 /// Target of a 16-bit Thumb branch: B (T2) or B<cond> (T1).
-fn branch16(pc: u64, hw1: u16) -> Option<u64> {
+pub(crate) fn branch16(pc: u64, hw1: u16) -> Option<u64> {
     let hw1 = u32::from(hw1);
     let offset = if hw1 & 0xF800 == 0xE000 {
         sign_extend((hw1 & 0x7FF) << 1, 12)

@@ -23,6 +23,7 @@
 mod campaign;
 mod elf;
 mod report;
+mod stack;
 mod timing;
 
 use anyhow::{bail, Context, Result};
@@ -53,6 +54,7 @@ fn main() -> Result<()> {
         Some("fuzz") => fuzz(&args[1..]),
         Some("report") => report::report_checks(),
         Some("campaign") => campaign::slurm_smoke(),
+        Some("stack") => stack_command(),
         Some("timing") => {
             setup()?;
             timing::timing()
@@ -71,10 +73,55 @@ fn main() -> Result<()> {
             eprintln!(
                 "  campaign  the smoke campaign through a single-node Slurm cluster and locally"
             );
+            eprintln!(
+                "  stack  build the rover-CPU image and print its static worst-case stack paths"
+            );
             eprintln!("  timing timing analysis on the rover CPU model, writes docs/timing.md");
             bail!("unknown or missing command")
         }
     }
+}
+
+/// `cargo xtask stack`: build the rover-CPU image and print the static stack analysis
+/// ([`stack`]) of its entry and of the flight software's frame.
+fn stack_command() -> Result<()> {
+    run(cargo().args([
+        "build",
+        "--profile",
+        FLIGHT_PROFILE,
+        "--target",
+        TARGET,
+        "-p",
+        "fsw-image",
+    ]))?;
+    let r = stack::analyse(&image_path())?;
+    let s = stack::summarise(&r);
+    let rows = std::env::var("STACK_ROWS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(25);
+    for (title, p) in [
+        ("entry", &s.entry),
+        ("Fsw::tick", &s.tick),
+        ("entry through Fsw::tick", &s.flight),
+    ] {
+        match p {
+            Some(p) => print!("{}", stack::path_text(&r, title, p, rows)),
+            None => println!("{title}: not found in the image"),
+        }
+    }
+    println!(
+        "{} functions, {} indirect calls/jumps, {} cycles ({} edges cut)",
+        r.funcs.len(),
+        r.indirect_total(),
+        r.cycles.len(),
+        r.cut_edges
+    );
+    for c in &r.cycles {
+        let names: Vec<String> = c.iter().map(|&i| stack::short(&r.funcs[i].name)).collect();
+        println!("  cycle: {}", names.join(" <-> "));
+    }
+    Ok(())
 }
 
 fn workspace_root() -> Result<PathBuf> {
