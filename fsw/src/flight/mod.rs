@@ -555,6 +555,7 @@ fn count_error(health: &mut DeviceHealth, kind: ErrorKind) {
 }
 
 impl<P: Platform> Work<'_, P> {
+    #[inline(never)]
     fn read_imu(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Imu as usize];
         let base = &mut self.state.time_bases[DeviceId::Imu as usize];
@@ -591,6 +592,7 @@ impl<P: Platform> Work<'_, P> {
         }
     }
 
+    #[inline(never)]
     fn read_joints(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Joints as usize];
         let base = &mut self.state.time_bases[DeviceId::Joints as usize];
@@ -643,6 +645,7 @@ impl<P: Platform> Work<'_, P> {
         }
     }
 
+    #[inline(never)]
     fn send_status(&mut self, tick: u64) {
         let record = FrameStatus {
             tick,
@@ -657,6 +660,7 @@ impl<P: Platform> Work<'_, P> {
         self.send(RecordKind::NavStatus, &nav);
     }
 
+    #[inline(never)]
     fn command_motors(&mut self) {
         let result = match self.nav.guidance_cycle() {
             Some(command) => {
@@ -678,6 +682,7 @@ impl<P: Platform> Work<'_, P> {
         }
     }
 
+    #[inline(never)]
     fn trigger_stereo(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Camera as usize];
         if self.state.capture_pending_t_us.is_some() {
@@ -861,6 +866,7 @@ impl<P: Platform> Work<'_, P> {
         }
     }
 
+    #[inline(never)]
     fn read_sun(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Sun as usize];
         let base = &mut self.state.time_bases[DeviceId::Sun as usize];
@@ -888,7 +894,12 @@ impl<P: Platform> Work<'_, P> {
     }
 }
 
+// The tasks and the background are `#[inline(never)]` (here, in `Work` and in the navigator's
+// task entry points): inlined into `Fsw::tick` their locals shared one 14 KB frame that was on
+// the stack under every task (issue 18, `cargo xtask stack`); apart, the frame of the one task
+// running is. No effect on the numerics (no FP contraction in Rust).
 impl<P: Platform> TaskSet for Work<'_, P> {
+    #[inline(never)]
     fn run_task(&mut self, task: usize, tick: u64) {
         match task {
             0 => self.read_imu(tick),
@@ -903,6 +914,7 @@ impl<P: Platform> TaskSet for Work<'_, P> {
         }
     }
 
+    #[inline(never)]
     fn background(&mut self, quantum: u32, _tick: u64) -> u32 {
         if quantum == 0 {
             return 0;

@@ -406,6 +406,25 @@ impl Planner {
         wedge: &Wedge,
         new_obstacles: &[ConvexPolygon],
     ) -> Result<PlannerOutput, PlanError> {
+        self.plan_each(position, heading_rad, wedge, new_obstacles)
+    }
+
+    /// [`Self::plan`] with the new obstacles taken one at a time from an iterator (at most one
+    /// polygon on the caller's stack instead of a whole map's: issue 18's flight stack budget).
+    /// The iterator is not advanced when the input is refused (non-finite pose, bad wedge, no
+    /// goal); it is otherwise drained in order before anything else is planned.
+    pub fn plan_each<I>(
+        &mut self,
+        position: Point2,
+        heading_rad: f64,
+        wedge: &Wedge,
+        new_obstacles: I,
+    ) -> Result<PlannerOutput, PlanError>
+    where
+        I: IntoIterator,
+        I::Item: core::borrow::Borrow<ConvexPolygon>,
+    {
+        use core::borrow::Borrow;
         if !(position[0].is_finite() && position[1].is_finite() && heading_rad.is_finite()) {
             return Err(PlanError::NonFinitePose);
         }
@@ -428,7 +447,7 @@ impl Planner {
         }
         let protected = self.follow.map(|f| f.reference);
         for o in new_obstacles {
-            self.memory.insert(o, position, protected);
+            self.memory.insert(o.borrow(), position, protected);
         }
         self.memory.refresh_components();
 

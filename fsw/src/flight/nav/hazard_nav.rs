@@ -283,19 +283,6 @@ impl Navigator {
         let Some(map) = h.mapper.map() else {
             return;
         };
-        let mut polygons: heapless::Vec<ConvexPolygon, { crate::perception::MAX_OBSTACLES }> =
-            heapless::Vec::new();
-        for o in &map.obstacles {
-            match ConvexPolygon::from_points(&o.vertices) {
-                Ok(p) => {
-                    // Capacity equals the map's: cannot overflow.
-                    let _ = polygons.push(p);
-                }
-                Err(_) => {
-                    h.counters.polygons_refused = h.counters.polygons_refused.saturating_add(1)
-                }
-            }
-        }
         h.counters.last_obstacles = u32::try_from(map.obstacles.len()).unwrap_or(u32::MAX);
         // The planner keeps its path inside the wedge it is given; the rover's body sweeps half
         // its width to each side of the path, where a narrow hazcam wedge has not looked (a
@@ -316,7 +303,26 @@ impl Navigator {
             max_range_m: w.max_range_m - shift - d,
         };
         h.counters.plans = h.counters.plans.saturating_add(1);
-        let out = match h.planner.plan(position, heading, &wedge, &polygons) {
+        // The obstacles' polygons are built one at a time as the planner takes them (a whole
+        // map's, 16 x 440 B, no longer sits on the stack: issue 18). Polygons the planner did
+        // not take (input refused) are still built to count the refused ones.
+        let mut refused = 0u32;
+        let mut polygons =
+            map.obstacles
+                .iter()
+                .filter_map(|o| match ConvexPolygon::from_points(&o.vertices) {
+                    Ok(p) => Some(p),
+                    Err(_) => {
+                        refused = refused.saturating_add(1);
+                        None
+                    }
+                });
+        let result = h
+            .planner
+            .plan_each(position, heading, &wedge, polygons.by_ref());
+        polygons.for_each(drop);
+        h.counters.polygons_refused = h.counters.polygons_refused.saturating_add(refused);
+        let out = match result {
             Ok(o) => o,
             Err(_) => {
                 h.counters.plan_errors = h.counters.plan_errors.saturating_add(1);

@@ -64,6 +64,7 @@ impl Navigator {
 
     /// RG2: one checked joint reading (`None`: none this cycle). Kinematic interval, gate,
     /// fusion or slip vector, dead reckoning; zero-velocity update when stopped.
+    #[inline(never)]
     pub fn kinematic_cycle(&mut self, joints: Option<&JointState>) {
         let Some(j) = joints else {
             self.cycles_without_joints = self.cycles_without_joints.saturating_add(1);

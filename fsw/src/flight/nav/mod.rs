@@ -802,6 +802,7 @@ impl Navigator {
     }
 
     /// RG1: one checked IMU sample (`None`: no new sample this frame).
+    #[inline(never)]
     pub fn propagate(&mut self, sample: Option<&ImuSample>) {
         let Some(s) = sample else {
             self.frames_without_imu = self.frames_without_imu.saturating_add(1);
