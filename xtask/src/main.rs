@@ -117,6 +117,42 @@ fn stack_command() -> Result<()> {
         r.cycles.len(),
         r.cut_edges
     );
+    // STACK_CALLEES=<name part>: the callees of the matching functions, with their depths.
+    if let Ok(part) = std::env::var("STACK_CALLEES") {
+        for (i, f) in r
+            .funcs
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.name.contains(&part))
+        {
+            println!(
+                "{} (frame {} B, worst case {} B):",
+                f.name,
+                f.frame,
+                r.deepest(i).total
+            );
+            for (c, tail) in f
+                .calls
+                .iter()
+                .map(|&c| (c, false))
+                .chain(f.tails.iter().map(|&t| (t, true)))
+            {
+                let g = &r.funcs[c];
+                println!(
+                    "  {}{} frame {} B, worst case {} B",
+                    if tail { "(tail) " } else { "" },
+                    stack::short(&g.name),
+                    g.frame,
+                    r.deepest(c).total
+                );
+            }
+        }
+    }
+    if std::env::var("STACK_INDIRECT").is_ok() {
+        for f in r.funcs.iter().filter(|f| f.indirect > 0) {
+            println!("  indirect x{}: {}", f.indirect, f.name);
+        }
+    }
     for c in &r.cycles {
         let names: Vec<String> = c.iter().map(|&i| stack::short(&r.funcs[i].name)).collect();
         println!("  cycle: {}", names.join(" <-> "));

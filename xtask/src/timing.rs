@@ -2,6 +2,7 @@
 //! bit-identical host/target replay, stack and memory budgets; writes `docs/timing.md`.
 
 use crate::elf::{self, ElfReport};
+use crate::stack::{self, StackReport, Summary as StackSummary};
 use crate::{cargo, image_path, qemu_args, run, step, FLIGHT_PROFILE, TARGET};
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
@@ -35,6 +36,19 @@ const GOAL_STACK: u64 = 32 * 1024;
 /// Least stack-region headroom every measured phase must leave (enforced): a peak that reaches
 /// the bottom of the painted region may have overflowed into the statics unseen.
 const MIN_STACK_HEADROOM: u64 = 4 * 1024;
+
+/// Most stack the flight phase may use, bytes (issue 18: the flight stack at most 32 KiB):
+/// the painted high-water mark of "flight software, 2000 replayed frames", which includes the
+/// image's `main`, the measuring closure and the replay harness under `Fsw::tick`. Enforced:
+/// `cargo xtask timing` fails above it (the margin is in `docs/timing.md`, Goals and Stack).
+const MAX_FLIGHT_STACK: u64 = 32 * 1024;
+
+/// True when the painted flight phase is within [`MAX_FLIGHT_STACK`].
+fn flight_stack_ok(m: &Measured) -> bool {
+    m.stack
+        .get("flight")
+        .is_some_and(|&v| v <= MAX_FLIGHT_STACK)
+}
 
 /// The deepest measured stack phase (initialisation, flight, navigation tasks), bytes.
 fn stack_peak(m: &Measured) -> u64 {
@@ -337,6 +351,8 @@ pub fn timing() -> Result<()> {
     }
     let report = elf::analyse(&image)?;
     let stack_sizes = stack_sizes_note();
+    let static_stack = stack::analyse(&image)?;
+    let static_summary = stack::summarise(&static_stack);
     let qemu = Command::new("qemu-system-arm")
         .arg("--version")
         .output()
@@ -344,7 +360,14 @@ pub fn timing() -> Result<()> {
         .and_then(|o| String::from_utf8(o.stdout).ok())
         .and_then(|s| s.lines().next().map(str::to_string))
         .unwrap_or_else(|| "qemu-system-arm".into());
-    let doc = document(&m, &report, &target_replay, &stack_sizes, &qemu)?;
+    let doc = document(
+        &m,
+        &report,
+        &target_replay,
+        &stack_sizes,
+        (&static_stack, &static_summary),
+        &qemu,
+    )?;
     let old = std::fs::read_to_string(DOC).unwrap_or_default();
     std::fs::write(DOC, &doc).with_context(|| format!("cannot write {DOC}"))?;
     println!(
@@ -361,6 +384,14 @@ pub fn timing() -> Result<()> {
         bail!(
             "the image has panic sites outside its number formatting (issue 18: the flight code \
              has no panic path); enclosing functions: {flight_panics:?}"
+        );
+    }
+    if !flight_stack_ok(&m) {
+        bail!(
+            "the flight phase's painted stack peak ({} B) exceeds {} B (issue 18; \
+             docs/timing.md, Stack; `cargo xtask stack` shows the deepest static path)",
+            m.stack.get("flight").copied().unwrap_or(0),
+            MAX_FLIGHT_STACK
         );
     }
     if !stack_headroom_ok(&m) {
@@ -501,17 +532,175 @@ fn summary(m: &Measured, r: &ElfReport) -> String {
     };
     format!(
         "timing summary: propagate max {} insns, VO max {} insns, total utilisation at 300 MHz \
-         {:.1}-{:.1} % (CPI 1-2), stack flight {} B / nav tasks {} B, static RAM {} B, \
-         panic sites {}",
+         {:.1}-{:.1} % (CPI 1-2), stack flight {} B (margin {} B to {} B) / nav tasks {} B, \
+         static RAM {} B, panic sites {}",
         thousands(m.task("ekf_propagate").max),
         thousands(m.task("vo_update").max),
         100.0 * u(CPI[0]),
         100.0 * u(CPI[1]),
         m.stack.get("flight").copied().unwrap_or(0),
+        margin(
+            MAX_FLIGHT_STACK,
+            m.stack.get("flight").copied().unwrap_or(0)
+        ),
+        MAX_FLIGHT_STACK,
         m.stack.get("bench").copied().unwrap_or(0),
         r.section(".data") + r.section(".bss") + r.section(".uninit"),
         r.panic_total()
     )
+}
+
+/// `limit - used` with its sign, thousands separated.
+fn margin(limit: u64, used: u64) -> String {
+    if used <= limit {
+        thousands(limit - used)
+    } else {
+        format!("-{}", thousands(used - limit))
+    }
+}
+
+/// Rows of a deepest path shown in the document.
+const STATIC_PATH_ROWS: usize = 14;
+
+/// The "Static analysis" part of the Stack section ([`crate::stack`]).
+fn static_section(d: &mut String, m: &Measured, sr: &StackReport, ss: &StackSummary) -> Result<()> {
+    let painted = |k: &str| m.stack.get(k).copied().unwrap_or(0);
+    writeln!(d, "### Static analysis\n")?;
+    writeln!(
+        d,
+        "`xtask/src/stack.rs` (also `cargo xtask stack`) decodes the image's Thumb-2 code itself \
+         (literal pools skipped by the `$d` mapping symbols): the frame of each of the {} \
+         functions is the sum of its stack-pointer decrements (`push`, `push.w`, `str [sp, \
+         #-4]!`, `sub sp`, `subw sp`, `sub.w sp, sp, rN` after `movw`/`movt`, `vpush`); `bl` \
+         is a call under the caller's frame, a `b`/`b.w`/`b<cond>` out of the function a tail \
+         call at the caller's entry stack pointer. The worst case of a root is the deepest path \
+         of frames through that call graph (exception entry, 32-104 B, not included). \
+         Indirect calls and jumps cannot be followed and are counted; cycles are listed and \
+         cut after one trip.\n",
+        sr.funcs.len()
+    )?;
+    writeln!(
+        d,
+        "| root | static worst case | painted | functions reachable | indirect calls/jumps reachable |"
+    )?;
+    writeln!(d, "|---|---:|---:|---:|---:|")?;
+    let rows: [(&str, &Option<stack::DeepPath>, String); 3] = [
+        (
+            "image entry (`Reset`): initialisation and every phase",
+            &ss.entry,
+            format!("{} B (initialisation)", thousands(painted("init"))),
+        ),
+        ("`Fsw::tick` alone", &ss.tick, "-".into()),
+        (
+            "image entry through `Fsw::tick` (flight phase)",
+            &ss.flight,
+            format!("{} B (flight)", thousands(painted("flight"))),
+        ),
+    ];
+    for (name, p, painted) in rows {
+        match p {
+            Some(p) => writeln!(
+                d,
+                "| {name} | {} B | {painted} | {} | {} |",
+                thousands(p.total),
+                p.reachable,
+                p.reachable_indirect
+            )?,
+            None => writeln!(d, "| {name} | not found in the image | {painted} | - | - |")?,
+        }
+    }
+    writeln!(d)?;
+    if let Some(p) = &ss.flight {
+        writeln!(
+            d,
+            "Deepest path from the entry through `Fsw::tick` (the flight phase's static bound; the \
+             painted figure also covers the replay harness around `tick` and reads up to 256 B \
+             high, see above):\n"
+        )?;
+        path_table(d, sr, p)?;
+    }
+    if let Some(p) = &ss.entry {
+        writeln!(d, "Deepest path from the entry (initialisation):\n")?;
+        path_table(d, sr, p)?;
+    }
+    let with_indirect: Vec<String> = sr
+        .funcs
+        .iter()
+        .filter(|f| f.indirect > 0)
+        .map(|f| format!("`{}` ({})", stack::short(&f.name), f.indirect))
+        .collect();
+    let unresolved: usize = sr.funcs.iter().map(|f| f.unresolved).sum();
+    let tick_indirect = ss.tick.as_ref().map_or(0, |p| p.reachable_indirect);
+    let entry_indirect = ss.entry.as_ref().map_or(0, |p| p.reachable_indirect);
+    writeln!(
+        d,
+        "Indirect calls and jumps: {} in {} functions of the image{}{}. {} of them are reachable \
+         from `Fsw::tick`{} and {} from the entry{}. Direct branches to no known function: \
+         {unresolved}.\n",
+        sr.indirect_total(),
+        with_indirect.len(),
+        if with_indirect.is_empty() { "" } else { ": " },
+        with_indirect.join(", "),
+        tick_indirect,
+        if tick_indirect == 0 {
+            " (its figure covers everything it can call)"
+        } else {
+            " (its figure leaves out what they call)"
+        },
+        entry_indirect,
+        if entry_indirect == 0 {
+            ""
+        } else {
+            " (the entry's figure leaves out what they call: when they are all in `core::fmt`, \
+             the number formatting of the semihosting reports printed between the phases, \
+             through trait objects)"
+        },
+    )?;
+    if sr.cycles.is_empty() {
+        writeln!(d, "Cycles (recursion) in the call graph: none.\n")?;
+    } else {
+        let list: Vec<String> = sr
+            .cycles
+            .iter()
+            .map(|c| {
+                let names: Vec<String> = c
+                    .iter()
+                    .map(|&i| format!("`{}`", stack::short(&sr.funcs[i].name)))
+                    .collect();
+                names.join(" / ")
+            })
+            .collect();
+        writeln!(
+            d,
+            "Cycles (recursion) in the call graph: {} ({} closing edges cut): {}.\n",
+            sr.cycles.len(),
+            sr.cut_edges,
+            list.join("; ")
+        )?;
+    }
+    Ok(())
+}
+
+/// One deepest path as a table, [`STATIC_PATH_ROWS`] rows at most.
+fn path_table(d: &mut String, sr: &StackReport, p: &stack::DeepPath) -> Result<()> {
+    writeln!(d, "| stack in use at entry | frame | function |")?;
+    writeln!(d, "|---:|---:|---|")?;
+    for st in p.steps.iter().take(STATIC_PATH_ROWS) {
+        let f = &sr.funcs[st.func];
+        writeln!(
+            d,
+            "| {} B | {} B | {}`{}` |",
+            thousands(st.depth_at_entry),
+            thousands(f.frame),
+            if st.tail { "(tail call) " } else { "" },
+            stack::short(&f.name).replace('|', "\\|")
+        )?;
+    }
+    if p.steps.len() > STATIC_PATH_ROWS {
+        writeln!(d, "| | | ... {} more |", p.steps.len() - STATIC_PATH_ROWS)?;
+    }
+    writeln!(d)?;
+    Ok(())
 }
 
 const TASK_DOC: [(&str, &str, &str); 16] = [
@@ -607,6 +796,7 @@ fn document(
     r: &ElfReport,
     replay: &[&str],
     stack_sizes: &str,
+    (sr, ss): (&StackReport, &StackSummary),
     qemu: &str,
 ) -> Result<String> {
     let mut d = String::new();
@@ -944,6 +1134,7 @@ fn document(
             .map(|s| s.size / 1024)
             .unwrap_or(0)
     )?;
+    static_section(&mut d, m, sr, ss)?;
 
     writeln!(d, "## Memory\n")?;
     writeln!(
@@ -1148,6 +1339,13 @@ fn document(
         "| stack <= 32 KiB (flight software and navigation tasks) | {} B | {} |",
         thousands(st),
         pass(st <= GOAL_STACK)
+    )?;
+    writeln!(
+        d,
+        "| flight-phase stack <= 32 KiB (enforced) | {} B, margin {} B | {} |",
+        thousands(stack("flight")),
+        margin(MAX_FLIGHT_STACK, stack("flight")),
+        pass(flight_stack_ok(m))
     )?;
     writeln!(
         d,
