@@ -19,6 +19,9 @@
 //! - `cargo xtask timing`: timing analysis on the rover CPU model (instruction counts per task,
 //!   utilisation, response times, stack, memory, panic sites) and the bit-identical host/target
 //!   replay check; writes `docs/timing.md`. Also the last step of `test`.
+//! - `cargo xtask stack`: build the rover-CPU image and print its static worst-case stack paths
+//!   ([`stack`]; `STACK_CALLEES=<name part>` lists a function's callees, `STACK_INDIRECT=1` the
+//!   functions with indirect calls).
 
 mod campaign;
 mod elf;
