@@ -1380,3 +1380,30 @@ fn document(
     )?;
     Ok(d)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flight_stack_limit_is_enforced_at_32_kib() {
+        let with = |flight: u64| Measured {
+            stack: pairs(&[
+                "init",
+                "1000",
+                "flight",
+                &flight.to_string(),
+                "region",
+                "281188",
+            ]),
+            ..Measured::default()
+        };
+        assert!(flight_stack_ok(&with(25_544)));
+        assert!(flight_stack_ok(&with(32_768)));
+        assert!(!flight_stack_ok(&with(32_769)));
+        // A missing figure is a failure, not a pass.
+        assert!(!flight_stack_ok(&Measured::default()));
+        assert_eq!(margin(MAX_FLIGHT_STACK, 25_544), "7,224");
+        assert_eq!(margin(MAX_FLIGHT_STACK, 40_816), "-8,048");
+    }
+}
