@@ -117,6 +117,8 @@ pub fn run(sc: &Scenario, seed: u64) -> RunStats {
     let gb = gauss3(&mut rng) * sc.p0_sigma[1];
     let ab = gauss3(&mut rng) * sc.p0_sigma[3];
     let mut truth = Truth::new(sc.motion, sc.imu_dt_us, gb, ab);
+    // The truth's IMU is the one the filter is configured for (consistency tests).
+    truth.noise = sc.config.imu_noise;
     let mut ekf = init_filter(sc, &truth, &mut rng);
     let mut stats = RunStats::default();
 

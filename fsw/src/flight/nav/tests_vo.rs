@@ -427,7 +427,9 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
     );
     assert!(fused_off > 100 && fused_on > 100, "{fused_off} {fused_on}");
     assert!(
-        bias_off.abs() > 5e-6 && turn_off.abs() > 0.05_f64.to_radians(),
+        // 0.12 deg with a gyro bias walk of 1e-6; 0.044 deg with the flight profile's 1.9e-5
+        // (the filter lets its bias follow faster), 0.005 deg is the bound with the estimate.
+        bias_off.abs() > 5e-6 && turn_off.abs() > 0.03_f64.to_radians(),
         "without the estimate VO's boresight turns the heading and is learnt as a gyro bias: \
          {bias_off} rad/s, {turn_off} rad"
     );
