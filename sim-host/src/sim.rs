@@ -223,6 +223,9 @@ pub struct RunResult {
     pub vo_mean_features: Option<f64>,
     /// Mean inliers of the VO updates that delivered a pose.
     pub vo_mean_inliers: Option<f64>,
+    /// VO yaw boresight learnt by the flight software at the end (rad, positive: VO's
+    /// translation turned towards `+y` of `R`) and the samples it learnt from.
+    pub vo_boresight: (f64, u32),
     /// Every VO relative pose checked against the truth.
     pub vo_checks: Vec<VoCheck>,
     /// Rocks of the terrain `[north, east, radius]` for the top view.
@@ -462,6 +465,7 @@ pub fn run_with<H: RunHooks>(
         slip_compensation: !options.no_slip_comp,
         vo_mean_features: (vo_seen > 0).then(|| vo_features / f64::from(vo_seen)),
         vo_mean_inliers: (vo_seen > 0).then(|| vo_inliers / f64::from(vo_seen)),
+        vo_boresight: fsw.nav().vo_boresight(),
         vo_checks,
         rocks: w
             .terrain

@@ -86,6 +86,11 @@ pub struct VoSummary {
     pub mean_features: Option<f64>,
     /// Mean inliers per frame.
     pub mean_inliers: Option<f64>,
+    /// VO yaw boresight learnt by the flight software (`docs/estimation.md`, "VO boresight
+    /// learnt as a gyro bias"), mrad, at the end of the run.
+    pub boresight_mrad: f64,
+    /// Samples the boresight was learnt from.
+    pub boresight_samples: u32,
 }
 
 /// Timing of one rate group.
@@ -440,6 +445,8 @@ pub fn summarise(run: &RunResult) -> Summary {
             failures: Some(u64::from(run.nav.vo_failures)),
             mean_features: run.vo_mean_features,
             mean_inliers: run.vo_mean_inliers,
+            boresight_mrad: run.vo_boresight.0 * 1e3,
+            boresight_samples: run.vo_boresight.1,
         },
         timing,
         device_faults: run.device_faults,
