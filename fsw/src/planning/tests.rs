@@ -689,8 +689,8 @@ fn pln_in_place_init_equals_new() {
     .unwrap();
     used.set_goal([10.0, 0.0]).unwrap();
     let w = wedge_at([0.0, 0.0], 0.0);
-    let rock = ConvexPolygon::from_points(&[[3.0, -0.5], [4.0, -0.5], [4.0, 0.5], [3.0, 0.5]])
-        .unwrap();
+    let rock =
+        ConvexPolygon::from_points(&[[3.0, -0.5], [4.0, -0.5], [4.0, 0.5], [3.0, 0.5]]).unwrap();
     assert!(used.plan([0.0, 0.0], 0.0, &w, &[rock]).is_ok());
     assert_ne!(format!("{used:?}"), format!("{fresh:?}"));
     used.init(config).unwrap();

@@ -786,7 +786,10 @@ fn vo_19_in_place_init_equals_new() {
     assert_eq!(crate::types::QUAT_IDENTITY, crate::types::Quat::identity());
     assert_eq!(crate::types::VEC3_ZERO, Vec3::zeros());
     assert_eq!(crate::types::zero_matrix::<6, 6>(), Mat6::zeros());
-    assert_eq!(super::motion::RigidMotion::IDENTITY.rotation, Mat3::identity());
+    assert_eq!(
+        super::motion::RigidMotion::IDENTITY.rotation,
+        Mat3::identity()
+    );
     let cal = hazcam();
     let config = VoConfig::default();
     let poses = [
