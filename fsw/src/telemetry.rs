@@ -41,6 +41,17 @@ pub struct DeviceHealth {
 }
 
 impl DeviceHealth {
+    /// All counters zero (as [`Default`], usable in a `const`).
+    pub const EMPTY: Self = Self {
+        good: 0,
+        errors: 0,
+        stale: 0,
+        time_backwards: 0,
+        invalid: 0,
+        time_jumps: 0,
+        resyncs: 0,
+    };
+
     /// Total number of bad readings of any kind.
     pub fn faults(&self) -> u32 {
         self.errors

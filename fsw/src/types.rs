@@ -16,6 +16,19 @@ pub type Mat6 = Matrix6<f64>;
 /// Unit quaternion, f64.
 pub type Quat = UnitQuaternion<f64>;
 
+/// The zero 3-vector as a `const` (`Vec3::zeros()`, for compile-time initialisers).
+pub const VEC3_ZERO: Vec3 = Vec3::new(0.0, 0.0, 0.0);
+/// The identity rotation as a `const` (`Quat::identity()`: `w = 1`, for compile-time
+/// initialisers).
+pub const QUAT_IDENTITY: Quat = Quat::new_unchecked(nalgebra::Quaternion {
+    coords: nalgebra::Vector4::new(0.0, 0.0, 0.0, 1.0),
+});
+
+/// The zero `R x C` matrix as a `const` (`SMatrix::zeros()`, for compile-time initialisers).
+pub const fn zero_matrix<const R: usize, const C: usize>() -> nalgebra::SMatrix<f64, R, C> {
+    nalgebra::SMatrix::from_array_storage(nalgebra::ArrayStorage([[0.0; R]; C]))
+}
+
 /// A relative pose of the rover between two times `t0` and `t1`, with its covariance: the
 /// measurement that vehicle odometry (H04 sec. 3-4) and visual odometry (H04 sec. 2) hand to the
 /// estimator (H04 eq. 28-45).

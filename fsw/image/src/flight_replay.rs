@@ -123,20 +123,34 @@ pub fn flight_config(setup: &FlightSetup) -> FswConfig {
     config
 }
 
-/// Build the flight software around `devices`: the one place the rover-CPU image and the host
-/// replay construct it. A setup without a path gets a 1 m path north (a still rover: guidance
-/// commands, the still devices do not move).
-#[inline(always)]
+/// The path of `setup`: its waypoints, or a 1 m path north for a setup without a path (a
+/// still rover: guidance commands, the still devices do not move).
+fn setup_path(setup: &FlightSetup) -> &[[f64; 2]] {
+    let count = setup.waypoint_count.min(MAX_WAYPOINTS);
+    match setup.waypoints.get(..count) {
+        Some(w) if count >= 2 => w,
+        _ => &[[0.0, 0.0], [1.0, 0.0]],
+    }
+}
+
+/// Build the flight software around `devices` for `setup` (host replay; a value of about
+/// 220 KB). Identical to [`init_fsw`] on [`Fsw::EMPTY`], the rover-CPU image's way.
 pub fn build_fsw<P: Platform>(
     devices: Devices<P>,
     setup: &FlightSetup,
 ) -> Result<Fsw<P>, FswError> {
-    let count = setup.waypoint_count.min(MAX_WAYPOINTS);
-    let path = match setup.waypoints.get(..count) {
-        Some(w) if count >= 2 => w,
-        _ => &[[0.0, 0.0], [1.0, 0.0]],
-    };
-    Fsw::new(devices, &flight_config(setup), path)
+    Fsw::new(devices, &flight_config(setup), setup_path(setup))
+}
+
+/// Initialise the flight software `fsw` in place around `devices` for `setup` ([`Fsw::init`]):
+/// the rover-CPU image's construction of its static. A setup without a path gets a 1 m path
+/// north (a still rover: guidance commands, the still devices do not move).
+pub fn init_fsw<P: Platform>(
+    fsw: &mut Fsw<P>,
+    devices: Devices<P>,
+    setup: &FlightSetup,
+) -> Result<(), FswError> {
+    fsw.init(devices, &flight_config(setup), setup_path(setup))
 }
 
 /// Selected public flight state, the navigation state (`nav`: EKF nominal state and full

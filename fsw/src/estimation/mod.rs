@@ -260,6 +260,56 @@ impl Ekf {
         self.fault = other.fault;
     }
 
+    /// A placeholder filter (zero configuration, zero state and covariance, no clones): the
+    /// compile-time value a statically allocated navigator starts from before
+    /// [`Self::init`] writes the real filter in place. Not meant to be run.
+    pub const EMPTY: Self = Self {
+        config: EkfConfig {
+            imu_noise: ImuNoise {
+                gyro_rad_s_sqrt_hz: 0.0,
+                gyro_bias_rad_s2_sqrt_hz: 0.0,
+                accel_m_s2_sqrt_hz: 0.0,
+                accel_bias_m_s3_sqrt_hz: 0.0,
+            },
+            gravity_n_m_s2: crate::types::VEC3_ZERO,
+            max_imu_dt_us: 0,
+            max_measurement_skew_us: 0,
+            sun: None,
+            sun_sigma_rad: 0.0,
+            zupt_sigma_m_s: 0.0,
+            zero_rate_sigma_rad_s: 0.0,
+            max_attitude_var_rad2: 0.0,
+            max_position_var_m2: 0.0,
+        },
+        x: NominalState {
+            t_us: 0,
+            q_nr: crate::types::QUAT_IDENTITY,
+            b_g: crate::types::VEC3_ZERO,
+            v_n: crate::types::VEC3_ZERO,
+            b_a: crate::types::VEC3_ZERO,
+            p_n: crate::types::VEC3_ZERO,
+        },
+        p: crate::types::zero_matrix::<DIM, DIM>(),
+        clones: [None; MAX_CLONES],
+        next_serial: 0,
+        hold: None,
+        fault: false,
+    };
+
+    /// [`Self::new`] in place: this filter becomes the one `Ekf::new(config, x0, p0)` returns
+    /// (every field rewritten, no 9 KB temporary). On error the configuration is set and the
+    /// rest is as [`Self::reset`] leaves it on error (unchanged).
+    pub fn init(
+        &mut self,
+        config: EkfConfig,
+        x0: NominalState,
+        p0: &CoreCov,
+    ) -> Result<(), EstError> {
+        self.config = config;
+        self.next_serial = 0;
+        self.reset(x0, p0)
+    }
+
     /// The nominal (estimated) state.
     pub fn state(&self) -> &NominalState {
         &self.x

@@ -109,22 +109,58 @@ impl Default for Recorder {
     }
 }
 
+/// The zero IMU sample (`ImuSample::default()`, usable in a `const`).
+const NO_SAMPLE: ImuSample = ImuSample {
+    t_us: 0,
+    gyro_rad_s: [0.0; 3],
+    accel_m_s2: [0.0; 3],
+    valid: false,
+};
+
 impl Recorder {
+    /// An idle recorder (a compile-time value: the initialiser of a statically allocated
+    /// navigator).
+    pub const EMPTY: Self = Self {
+        snapshot: None,
+        imu: [NO_SAMPLE; REPLAY_IMU],
+        imu_count: 0,
+        poses: [None; REPLAY_POSES],
+        pose_count: 0,
+        measurements: [None; REPLAY_MEASUREMENTS],
+        measurement_count: 0,
+        ops: [Op::Imu; REPLAY_OPS],
+        op_count: 0,
+        overflowed: false,
+        cursor: None,
+    };
+
     /// An idle recorder.
     pub fn new() -> Self {
-        Self {
-            snapshot: None,
-            imu: [ImuSample::default(); REPLAY_IMU],
-            imu_count: 0,
-            poses: [None; REPLAY_POSES],
-            pose_count: 0,
-            measurements: [None; REPLAY_MEASUREMENTS],
-            measurement_count: 0,
-            ops: [Op::Imu; REPLAY_OPS],
-            op_count: 0,
-            overflowed: false,
-            cursor: None,
+        Self::EMPTY
+    }
+
+    /// Make this recorder idle in place, as [`Self::new`] returns it (the 34 KB of lists are
+    /// cleared in loops, not built as a temporary); a held snapshot is dropped.
+    pub fn reset(&mut self) {
+        self.snapshot = None;
+        for s in self.imu.iter_mut() {
+            *s = NO_SAMPLE;
         }
+        self.imu_count = 0;
+        for p in self.poses.iter_mut() {
+            *p = None;
+        }
+        self.pose_count = 0;
+        for m in self.measurements.iter_mut() {
+            *m = None;
+        }
+        self.measurement_count = 0;
+        for o in self.ops.iter_mut() {
+            *o = Op::Imu;
+        }
+        self.op_count = 0;
+        self.overflowed = false;
+        self.cursor = None;
     }
 
     /// Start recording at the filter's current state (call right after cloning the capture).

@@ -179,6 +179,44 @@ pub struct Executive<const G: usize, const T: usize> {
 }
 
 impl<const G: usize, const T: usize> Executive<G, T> {
+    /// An executive with no schedule (every group disabled, no task budget): the placeholder a
+    /// statically allocated flight software starts from before [`Self::new`]'s value replaces
+    /// it (`crate::flight::Fsw::init`).
+    pub const EMPTY: Self = Self {
+        config: ExecConfig {
+            frame_period_us: 5_000,
+            background_quantum: 0,
+            slip_fault_threshold: 0,
+        },
+        groups: [GroupState {
+            config: GroupConfig {
+                name: "",
+                divisor: 1,
+                offset: 0,
+                enabled: false,
+            },
+            enabled: false,
+            runs: 0,
+            timing: TimingStats::new(0),
+        }; G],
+        tasks: [TaskState {
+            config: TaskConfig {
+                name: "",
+                group: 0,
+                budget_us: 0,
+            },
+            timing: TimingStats::new(0),
+        }; T],
+        pending_enable: [None; G],
+        tick: 0,
+        frame: TimingStats::new(0),
+        background_units: 0,
+        cycle_slips: 0,
+        consecutive_slips: 0,
+        timing_fault: false,
+        clock_faults: 0,
+    };
+
     /// Build an executive from its group and task tables. Rejects zero divisors, offsets not
     /// below their divisor, tasks naming unknown groups, and tasks out of group order.
     pub fn new(

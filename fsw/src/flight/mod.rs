@@ -193,15 +193,20 @@ pub struct Plausibility {
 
 impl Default for Plausibility {
     fn default() -> Self {
-        Self {
-            gyro_max_rad_s: 450.0 * core::f64::consts::PI / 180.0,
-            accel_max_m_s2: 18.0 * 9.80665,
-            drive_rate_factor: 2.0,
-            angle_margin_rad: 0.2,
-            stamp_lead_factor: 4,
-            resync_readings: 20,
-        }
+        Self::DEFAULT
     }
+}
+
+impl Plausibility {
+    /// The default limits (as [`Default`], usable in a `const`).
+    pub const DEFAULT: Self = Self {
+        gyro_max_rad_s: 450.0 * core::f64::consts::PI / 180.0,
+        accel_max_m_s2: 18.0 * 9.80665,
+        drive_rate_factor: 2.0,
+        angle_margin_rad: 0.2,
+        stamp_lead_factor: 4,
+        resync_readings: 20,
+    };
 }
 
 /// Time-base state of one device: the frame of its last accepted reading and a candidate new
@@ -306,6 +311,33 @@ pub struct FlightState {
     pub rectify_failures: u32,
 }
 
+impl FlightState {
+    /// The state before the first frame (the same as [`Default`], usable in a `const`).
+    pub const EMPTY: Self = Self {
+        imu: None,
+        joints: None,
+        sun: None,
+        capture_pending_t_us: None,
+        capture_pending_tick: 0,
+        last_capture_t_us: None,
+        health: [DeviceHealth::EMPTY; 4],
+        time_bases: [TimeBase {
+            last_tick: 0,
+            candidate: None,
+        }; 4],
+        stereo_frames: 0,
+        telemetry_dropped: 0,
+        exec_status: (0, false),
+        commands_sent: 0,
+        commands_refused: 0,
+        last_command: None,
+        rectifying: false,
+        rectify_fault: None,
+        rectified_pairs: 0,
+        rectify_failures: 0,
+    };
+}
+
 /// Readings checked in this frame and not yet used by the navigator.
 #[derive(Debug, Clone, Copy, Default)]
 struct Fresh {
@@ -314,15 +346,27 @@ struct Fresh {
 }
 
 /// The flight software: devices, executive and state.
+///
+/// About 220 KB, nearly all of it the [`Navigator`]. On the rover CPU it is a static that
+/// starts as [`Fsw::EMPTY`] (a compile-time value, no code runs) and is built in place by
+/// [`Fsw::init`] and [`Fsw::start_vo`], so that its construction never holds a copy of it on
+/// the stack; [`Fsw::new`] builds a value (host code, tests).
 pub struct Fsw<P: Platform> {
-    devices: DevicesNoClock<P>,
-    clock: P::Clock,
+    /// The devices; `None` only before [`Fsw::init`] (a frame without them does nothing).
+    devices: Option<Attached<P>>,
     exec: Executive<GROUP_COUNT, TASK_COUNT>,
     state: FlightState,
     nav: Navigator,
     fresh: Fresh,
     plausibility: Plausibility,
     rect: RectStage,
+}
+
+/// The devices owned by the flight software, the clock apart (it is lent to the executive
+/// while the tasks borrow the others).
+struct Attached<P: Platform> {
+    devices: DevicesNoClock<P>,
+    clock: P::Clock,
 }
 
 struct DevicesNoClock<P: Platform> {
@@ -346,14 +390,53 @@ struct RectStage {
 }
 
 impl<P: Platform> Fsw<P> {
+    /// The flight software without devices, before [`Self::init`]: a compile-time value (the
+    /// initialiser of the rover CPU's static; every field an empty placeholder, no devices,
+    /// an executive without schedule). [`Self::tick`] does nothing until [`Self::init`].
+    pub const EMPTY: Self = Self {
+        devices: None,
+        exec: Executive::EMPTY,
+        state: FlightState::EMPTY,
+        nav: Navigator::EMPTY,
+        fresh: Fresh {
+            imu: None,
+            joints: None,
+        },
+        plausibility: Plausibility::DEFAULT,
+        rect: RectStage {
+            rectifier: Rectifier::new(RectifyConfig { row_cost: 1 }),
+            pending: None,
+            frame: None,
+        },
+    };
+
     /// Build the flight software around its devices with the default schedule, to follow
-    /// `path` (waypoints north, east in `N`, m).
-    /// Inlined so that the (large) flight software is built where its caller puts it.
-    #[inline(always)]
+    /// `path` (waypoints north, east in `N`, m): [`Self::EMPTY`] initialised by [`Self::init`].
+    /// The value is about 220 KB: on the rover CPU use [`Self::init`] on a static instead.
     pub fn new(devices: Devices<P>, config: &FswConfig, path: &[Point2]) -> Result<Self, FswError> {
-        let exec = Executive::new(config.exec, SCHEDULE_GROUPS, SCHEDULE_TASKS)
+        let mut fsw = Self::EMPTY;
+        fsw.init(devices, config, path)?;
+        Ok(fsw)
+    }
+
+    /// Build the flight software in place (the rover CPU's static): around `devices`, with the
+    /// default schedule, to follow `path` (waypoints north, east in `N`, m). Every field is
+    /// rewritten (a used flight software is reset completely); the large navigation state is
+    /// written field by field in place ([`Navigator::init`]), never built as a temporary.
+    /// The visual odometry and hazard navigation come later, in place too ([`Self::start_vo`]).
+    /// On error the devices are dropped and the flight software stays without devices
+    /// ([`Self::tick`] does nothing).
+    pub fn init(
+        &mut self,
+        devices: Devices<P>,
+        config: &FswConfig,
+        path: &[Point2],
+    ) -> Result<(), FswError> {
+        self.devices = None;
+        self.exec = Executive::new(config.exec, SCHEDULE_GROUPS, SCHEDULE_TASKS)
             .map_err(FswError::Schedule)?;
-        let nav = Navigator::new(config.nav, path, &devices.camera.calibration())
+        self.nav
+            .init(&config.nav, path, &devices.camera.calibration())
             .map_err(FswError::Nav)?;
         let Devices {
             clock,
@@ -364,7 +447,7 @@ impl<P: Platform> Fsw<P> {
             telemetry,
             image_memory,
         } = devices;
-        Ok(Self {
+        self.devices = Some(Attached {
             devices: DevicesNoClock {
                 imu,
                 mobility,
@@ -374,30 +457,32 @@ impl<P: Platform> Fsw<P> {
                 image_memory,
             },
             clock,
-            exec,
-            state: FlightState::default(),
-            nav,
-            fresh: Fresh::default(),
-            plausibility: config.plausibility,
-            rect: RectStage {
-                rectifier: Rectifier::new(config.rectify),
-                pending: None,
-                frame: None,
-            },
-        })
+        });
+        self.state = FlightState::EMPTY;
+        self.fresh = Fresh::default();
+        self.plausibility = config.plausibility;
+        self.rect = RectStage {
+            rectifier: Rectifier::new(config.rectify),
+            pending: None,
+            frame: None,
+        };
+        Ok(())
     }
 
     /// Run one minor frame (call once per tick).
     pub fn tick(&mut self) -> FrameReport {
+        let Some(Attached { devices, clock }) = self.devices.as_mut() else {
+            return FrameReport::default();
+        };
         let mut work = Work {
             limits: &self.plausibility,
-            devices: &mut self.devices,
+            devices,
             state: &mut self.state,
             nav: &mut self.nav,
             fresh: &mut self.fresh,
             rect: &mut self.rect,
         };
-        let report = self.exec.run_frame(&mut self.clock, &mut work);
+        let report = self.exec.run_frame(clock, &mut work);
         self.state.exec_status = (self.exec.cycle_slips(), self.exec.timing_fault());
         report
     }
@@ -422,12 +507,15 @@ impl<P: Platform> Fsw<P> {
     /// [`FlightState::rectify_fault`] is set and VO and the hazard mapping stay off: they never
     /// run on unrectified images.
     pub fn start_vo(&mut self) {
-        if let Some(lens) = self.devices.camera.lens_calibration() {
-            let rect = self.devices.camera.calibration();
+        let Some(Attached { devices, .. }) = self.devices.as_mut() else {
+            return;
+        };
+        if let Some(lens) = devices.camera.lens_calibration() {
+            let rect = devices.camera.calibration();
             match self
                 .rect
                 .rectifier
-                .build(&lens, &rect, &mut self.devices.image_memory)
+                .build(&lens, &rect, &mut devices.image_memory)
             {
                 Ok(_) => self.state.rectifying = true,
                 Err(e) => {
@@ -449,9 +537,9 @@ impl<P: Platform> Fsw<P> {
         &self.nav
     }
 
-    /// The clock (for drivers that need the time base).
-    pub fn clock_mut(&mut self) -> &mut P::Clock {
-        &mut self.clock
+    /// The clock (for drivers that need the time base); `None` before [`Self::init`].
+    pub fn clock_mut(&mut self) -> Option<&mut P::Clock> {
+        self.devices.as_mut().map(|a| &mut a.clock)
     }
 }
 

@@ -760,3 +760,69 @@ fn rect_6_lens_calibration_at_start_vo() {
     assert_eq!(plain.state().rectify_fault, None);
     assert!(plain.nav().vo_built());
 }
+
+/// Issue 18: a used navigator initialised in place (`Navigator::init`, the rover CPU's way) runs
+/// bit for bit as a new one: every field is rewritten, the filter, recorder and VO storage in
+/// place. The sequence: alignment at rest, kinematic intervals, guidance, an IMU gap.
+#[test]
+fn nav_4_in_place_init_of_a_used_navigator_runs_as_a_new_one() {
+    use nav::{NavConfig, NavMode, Navigator};
+    let calib = StuckCamera(None).calibration();
+    let path = [[0.0, 0.0], [5.0, 1.0]];
+    // No sun: the alignment ends after its 400 samples.
+    let config = NavConfig {
+        align_sun_wait_samples: 0,
+        ..NavConfig::rocky8([0.0; 3], 0.0)
+    };
+    let run = |nav: &mut Navigator, samples: u64| {
+        let mut out = std::vec::Vec::new();
+        nav.start_vo();
+        for k in 0..samples {
+            nav.propagate(Some(&imu(5_000 * (k + 1))));
+            if k % 10 == 9 {
+                nav.kinematic_cycle(Some(&joints(5_000 * (k + 1))));
+                out.push(format!("{:?}", nav.guidance_cycle()));
+            }
+        }
+        for _ in 0..25 {
+            nav.propagate(None);
+        }
+        out.push(format!("{:?}", nav.guidance_cycle()));
+        let ekf = nav.ekf().map(|e| (*e.state(), *e.covariance()));
+        out.push(format!(
+            "{:?} {:?} {:?} {:?} {:?} {}",
+            nav.mode(),
+            nav.pose(),
+            nav.counters(),
+            ekf,
+            nav.slip(),
+            nav.vo_built()
+        ));
+        out
+    };
+    let mut fresh = std::boxed::Box::new(Navigator::new(config, &path, &calib).unwrap());
+    let expected = run(&mut fresh, 420);
+    assert!(expected.len() > 40);
+    assert!(
+        expected.last().is_some_and(|s| s.starts_with("Driving")),
+        "{expected:?}"
+    );
+    // Used with another start and path, then initialised in place.
+    let other = NavConfig {
+        align_sun_wait_samples: 0,
+        ..NavConfig::rocky8([1.0, 2.0, 0.0], 0.4)
+    };
+    let mut used =
+        std::boxed::Box::new(Navigator::new(other, &[[1.0, 2.0], [3.0, 3.0]], &calib).unwrap());
+    // Twice: stopped after the alignment, and in the middle of it.
+    assert_ne!(run(&mut used, 420), expected);
+    used.init(&config, &path, &calib).unwrap();
+    assert_eq!(run(&mut used, 420), expected);
+    used.init(&other, &[[1.0, 2.0], [3.0, 3.0]], &calib)
+        .unwrap();
+    assert_ne!(run(&mut used, 200), expected);
+    used.init(&config, &path, &calib).unwrap();
+    assert_eq!(used.mode(), NavMode::Aligning);
+    assert!(!used.vo_built());
+    assert_eq!(run(&mut used, 420), expected);
+}

@@ -192,18 +192,18 @@ fn finite_reading(j: &JointState) -> bool {
 
 impl KinematicOdometry {
     /// A new integrator; call [`Self::start`] before [`Self::update`].
-    pub fn new(geometry: RoverGeometry, config: OdometryConfig) -> Self {
+    pub const fn new(geometry: RoverGeometry, config: OdometryConfig) -> Self {
         KinematicOdometry {
             geometry,
             config,
             last: None,
             t0_us: 0,
-            rot_0_k: Quat::identity(),
-            trans_0_k_m: Vec3::zeros(),
-            covariance: Mat6::zeros(),
+            rot_0_k: crate::types::QUAT_IDENTITY,
+            trans_0_k_m: crate::types::VEC3_ZERO,
+            covariance: crate::types::zero_matrix::<6, 6>(),
             contact_rad: [0.0; WHEEL_COUNT],
             window: SuspensionWindow::new(),
-            contact_trans_0_k_m: Vec3::zeros(),
+            contact_trans_0_k_m: crate::types::VEC3_ZERO,
         }
     }
 

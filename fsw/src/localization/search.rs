@@ -214,47 +214,98 @@ pub struct Localizer {
 }
 
 impl Localizer {
-    /// A localizer with `config` ([`LocalizationError::InvalidConfig`] when out of range).
+    /// A localizer with `config` ([`LocalizationError::InvalidConfig`] when out of range):
+    /// [`Self::EMPTY`] initialised by [`Self::init`].
     pub fn new(config: LocalizerConfig) -> Result<Self, LocalizationError> {
+        let mut localizer = Self::EMPTY;
+        localizer.init(config)?;
+        Ok(localizer)
+    }
+
+    /// A placeholder (zero configuration and table, idle): the compile-time value of a
+    /// statically allocated localizer before [`Self::init`]. Not meant to run.
+    pub const EMPTY: Self = Self {
+        config: LocalizerConfig {
+            sigma_m: 0.0,
+            outlier_distance_m: 0.0,
+            window_sigmas: 0.0,
+            min_window_m: 0.0,
+            min_yaw_window_rad: 0.0,
+            max_nodes: 0,
+            min_points: 0,
+            min_inliers: 0,
+            min_inlier_fraction: 0.0,
+            ambiguity_nats: 0.0,
+            neighbourhood_steps: 0,
+            covariance_scale: 0.0,
+        },
+        lut: [0; MAX_D2_CELLS as usize + 1],
+        inlier_d2: 0,
+        points: [[0.0; 2]; MAX_POINTS],
+        radius: [0.0; MAX_POINTS],
+        n: 0,
+        centroid_g_m: [0.0; 2],
+        prior: [0.0; 3],
+        base: [0.0; 2],
+        yaw_step: 0.0,
+        half: [0; 3],
+        cos_t: [1.0; YAW_POSES],
+        sin_t: [0.0; YAW_POSES],
+        queue: BinaryHeap::new(),
+        best: Leaf {
+            score: i32::MIN,
+            x: 0,
+            y: 0,
+            t: 0,
+        },
+        runner_up: None,
+        phase: Phase::Idle,
+        nodes: 0,
+        point_evaluations: 0,
+        queue_peak: 0,
+        revision: 0,
+    };
+
+    /// [`Self::new`] in place: this localizer becomes the one `new(config)` returns (every
+    /// field rewritten, the arrays in loops: no 24 KB temporary on the stack). Refuses an
+    /// invalid configuration (nothing changed then).
+    pub fn init(&mut self, config: LocalizerConfig) -> Result<(), LocalizationError> {
         if !config.is_valid() {
             return Err(LocalizationError::InvalidConfig);
         }
         let scale = MAP_CELL_M * MAP_CELL_M / (2.0 * config.sigma_m * config.sigma_m);
         let d_out = config.outlier_distance_m / MAP_CELL_M;
         let cap = (d_out * d_out * scale).min(MAX_TERM_MILLI / 1000.0);
-        let mut lut = [0i32; MAX_D2_CELLS as usize + 1];
-        for (d2, v) in lut.iter_mut().enumerate() {
+        for (d2, v) in self.lut.iter_mut().enumerate() {
             let nats = (d2 as f64 * scale).min(cap);
             *v = -(libm::round(nats * 1000.0).clamp(0.0, MAX_TERM_MILLI) as i32);
         }
-        Ok(Self {
-            config,
-            lut,
-            inlier_d2: libm::floor(d_out * d_out) as u32,
-            points: [[0.0; 2]; MAX_POINTS],
-            radius: [0.0; MAX_POINTS],
-            n: 0,
-            centroid_g_m: [0.0; 2],
-            prior: [0.0; 3],
-            base: [0.0; 2],
-            yaw_step: 0.0,
-            half: [0; 3],
-            cos_t: [1.0; YAW_POSES],
-            sin_t: [0.0; YAW_POSES],
-            queue: BinaryHeap::new(),
-            best: Leaf {
-                score: i32::MIN,
-                x: 0,
-                y: 0,
-                t: 0,
-            },
-            runner_up: None,
-            phase: Phase::Idle,
-            nodes: 0,
-            point_evaluations: 0,
-            queue_peak: 0,
-            revision: 0,
-        })
+        self.config = config;
+        self.inlier_d2 = libm::floor(d_out * d_out) as u32;
+        self.points.fill([0.0; 2]);
+        self.radius.fill(0.0);
+        self.n = 0;
+        self.centroid_g_m = [0.0; 2];
+        self.prior = [0.0; 3];
+        self.base = [0.0; 2];
+        self.yaw_step = 0.0;
+        self.half = [0; 3];
+        self.cos_t.fill(1.0);
+        self.sin_t.fill(0.0);
+        self.queue.clear();
+        self.best = Leaf {
+            score: i32::MIN,
+            x: 0,
+            y: 0,
+            t: 0,
+        };
+        self.runner_up = None;
+        self.phase = Phase::Idle;
+        self.nodes = 0;
+        self.point_evaluations = 0;
+        self.queue_peak = 0;
+        self.revision = 0;
+        Ok(())
     }
 
     /// The configuration.

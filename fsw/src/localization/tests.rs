@@ -675,3 +675,27 @@ fn node_survey() {
         );
     }
 }
+
+/// A localizer that localized, initialised in place (`Localizer::init`), is the new one.
+#[test]
+fn in_place_init_equals_new() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let rocks = random_rocks(&mut rng, 14.0, 0.8);
+    let map = build_map(&rock_points(&rocks, &mut rng, 0.0));
+    let truth = GridFrame::new([1.3, -2.1, 0.0], 0.7);
+    let grid = hazard_grid(&rocks, &truth, &mut rng, 0.0, 0);
+    let prior_frame = GridFrame::new([1.8, -2.4, 0.0], 0.735);
+    let config = LocalizerConfig::default();
+    let fresh = Localizer::new(config).unwrap();
+    let mut used = Localizer::new(LocalizerConfig {
+        sigma_m: 0.2,
+        ..config
+    })
+    .unwrap();
+    assert!(used
+        .localize(&map, &grid, &prior_frame, diag(0.3, 0.3, 0.03))
+        .is_ok());
+    assert_ne!(format!("{used:?}"), format!("{fresh:?}"));
+    used.init(config).unwrap();
+    assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
+}

@@ -94,6 +94,33 @@ impl Footprint {
         })
     }
 
+    /// A placeholder (zero camera and rotations): the compile-time value of a statically
+    /// allocated hazard mapper before its initialisation writes [`Self::level`]'s.
+    pub const EMPTY: Self = Self {
+        pose: CameraPose {
+            rot_world_from_camera: crate::types::zero_matrix::<3, 3>(),
+            position_world_m: crate::types::VEC3_ZERO,
+        },
+        rot_camera_from_world: crate::types::zero_matrix::<3, 3>(),
+        down_in_camera: crate::types::VEC3_ZERO,
+        prior_normal: crate::types::VEC3_ZERO,
+        prior_point: crate::types::VEC3_ZERO,
+        camera_height_m: 0.0,
+        frame: GridFrame {
+            origin_world_m: [0.0; 3],
+            heading_rad: 0.0,
+            heading_cos: 0.0,
+            heading_sin: 0.0,
+        },
+        camera: PinholeStereo {
+            fx_px: 0.0,
+            fy_px: 0.0,
+            cx_px: 0.0,
+            cy_px: 0.0,
+            baseline_m: 0.0,
+        },
+    };
+
     /// A placeholder: camera at the origin looking down `z_W`, prior 1 m below (used before
     /// the first capture).
     pub fn level(camera: PinholeStereo) -> Self {

@@ -116,13 +116,18 @@ pub struct HazardLimits {
 
 impl Default for HazardLimits {
     fn default() -> Self {
-        Self {
-            max_step_m: WHEEL_RADIUS_M,
-            max_slope_rad: 20.0 * core::f64::consts::PI / 180.0,
-            max_roughness_m: 0.05,
-            plane_min_cells: 6,
-        }
+        Self::DEFAULT
     }
+}
+
+impl HazardLimits {
+    /// The default limits (as [`Default`], usable in a `const`).
+    pub const DEFAULT: Self = Self {
+        max_step_m: WHEEL_RADIUS_M,
+        max_slope_rad: 20.0 * core::f64::consts::PI / 180.0,
+        max_roughness_m: 0.05,
+        plane_min_cells: 6,
+    };
 }
 
 /// Indices of the work kinds ([`MapWork`]) in [`PerceptionConfig::work_cost`].
@@ -177,25 +182,28 @@ pub struct PerceptionConfig {
 
 impl Default for PerceptionConfig {
     fn default() -> Self {
-        Self {
-            stereo: VoConfig::default(),
-            sample_spacing_cells: 2,
-            max_height_above_m: 0.45,
-            max_depth_below_m: 0.5,
-            max_height_sigma_m: 0.05,
-            limits: HazardLimits::default(),
-            grow_margin_m: 0.1,
-            min_obstacle_cells: 2,
-            min_obstacle_points: 3,
-            max_obstacles: MAX_OBSTACLES as u8,
-            min_points: 30,
-            max_wedge_range_m: 3.5,
-            work_cost: [27, 2, 24, 17, 9, 1],
-        }
+        Self::DEFAULT
     }
 }
 
 impl PerceptionConfig {
+    /// The default settings (as [`Default`], usable in a `const`).
+    pub const DEFAULT: Self = Self {
+        stereo: VoConfig::DEFAULT,
+        sample_spacing_cells: 2,
+        max_height_above_m: 0.45,
+        max_depth_below_m: 0.5,
+        max_height_sigma_m: 0.05,
+        limits: HazardLimits::DEFAULT,
+        grow_margin_m: 0.1,
+        min_obstacle_cells: 2,
+        min_obstacle_points: 3,
+        max_obstacles: MAX_OBSTACLES as u8,
+        min_points: 30,
+        max_wedge_range_m: 3.5,
+        work_cost: [27, 2, 24, 17, 9, 1],
+    };
+
     /// True when every field is finite and in range (and the stereo part is valid).
     pub fn is_valid(&self) -> bool {
         let l = &self.limits;
@@ -411,6 +419,29 @@ pub struct MapCounts {
     pub work_items: u32,
 }
 
+impl MapCounts {
+    /// All counts zero (as [`Default`], usable in a `const`).
+    pub const EMPTY: Self = Self {
+        samples: 0,
+        matched: 0,
+        rejects: crate::vo::VoQuality::EMPTY.stereo_rejects,
+        imprecise: 0,
+        outside_grid: 0,
+        ncc_evaluations: 0,
+        cells_known: 0,
+        cells_sparse: 0,
+        cells_hazard: 0,
+        wedge_cells: 0,
+        wedge_cells_known: 0,
+        components: 0,
+        small_dropped: 0,
+        obstacles_dropped: 0,
+        vertices_reduced: 0,
+        fill_overflows: 0,
+        work_items: 0,
+    };
+}
+
 /// The hazard map of one hazcam pair (V99 sec. 4): obstacles as grown convex polygons and the
 /// visible wedge, world frame `W`.
 #[derive(Debug, Clone, PartialEq)]
@@ -433,13 +464,31 @@ pub struct HazardMap {
 impl HazardMap {
     /// An empty map (no obstacles, empty wedge at the origin).
     pub fn empty() -> Self {
-        Self {
-            capture_t_us: 0,
-            obstacles: heapless::Vec::new(),
-            wedge: Wedge::empty([0.0, 0.0], 0.0),
-            grid: GridFrame::default(),
-            counts: MapCounts::default(),
-        }
+        Self::EMPTY
+    }
+
+    /// A map with no obstacles and an empty wedge (as [`Self::empty`], usable in a `const`).
+    pub const EMPTY: Self = Self {
+        capture_t_us: 0,
+        obstacles: heapless::Vec::new(),
+        wedge: Wedge::empty([0.0, 0.0], 0.0),
+        grid: GridFrame {
+            origin_world_m: [0.0; 3],
+            heading_rad: 0.0,
+            heading_cos: 0.0,
+            heading_sin: 0.0,
+        },
+        counts: MapCounts::EMPTY,
+    };
+
+    /// Make this map [`Self::empty`] in place (the obstacle list is emptied, not rebuilt as a
+    /// temporary).
+    pub fn clear(&mut self) {
+        self.capture_t_us = 0;
+        self.obstacles.clear();
+        self.wedge = Wedge::empty([0.0, 0.0], 0.0);
+        self.grid = GridFrame::default();
+        self.counts = MapCounts::EMPTY;
     }
 
     /// Fraction of the wedge's grid cells covered by points (0..1; 0 for an empty wedge; see

@@ -334,13 +334,18 @@ pub struct Component {
 
 impl Default for Component {
     fn default() -> Self {
-        Self {
-            cells: 0,
-            points: 0,
-            rows: [(u8::MAX, 0); GRID_ROWS],
-            overflowed: false,
-        }
+        Self::EMPTY
     }
+}
+
+impl Component {
+    /// No cells (as [`Default`], usable in a `const`).
+    pub const EMPTY: Self = Self {
+        cells: 0,
+        points: 0,
+        rows: [(u8::MAX, 0); GRID_ROWS],
+        overflowed: false,
+    };
 }
 
 impl Component {

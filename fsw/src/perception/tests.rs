@@ -680,3 +680,23 @@ fn perc_12_detection_limits() {
         }
     }
 }
+
+#[test]
+fn perc_in_place_init_equals_new() {
+    let cal = crate::vo::rocky8_hazcam();
+    let config = PerceptionConfig::default();
+    let fresh = Box::new(HazardMapper::new(config, &cal).unwrap());
+    // A mapper that made a map, initialised in place, is the new one.
+    let (scene, _) = rock_scene(0.0, 0.0, 0.0);
+    let mut run = map_scene(&scene, &level_rover(0.0, 0.0, 0.0));
+    assert!(run.result.is_ok());
+    assert_ne!(format!("{:?}", run.mapper), format!("{fresh:?}"));
+    run.mapper.init(config, &cal).unwrap();
+    assert_eq!(format!("{:?}", run.mapper), format!("{fresh:?}"));
+    let bad = PerceptionConfig {
+        max_wedge_range_m: f64::NAN,
+        ..config
+    };
+    assert!(run.mapper.init(bad, &cal).is_err());
+    assert_eq!(format!("{:?}", run.mapper), format!("{fresh:?}"));
+}

@@ -134,6 +134,23 @@ impl Default for LocalTangentGraph {
 }
 
 impl LocalTangentGraph {
+    /// Make this graph [`Self::new`] in place (arrays refilled, not rebuilt as a temporary).
+    pub fn reset(&mut self) {
+        self.points.fill([0.0; 2]);
+        self.owner.fill(START_OWNER);
+        self.vertex.fill(0);
+        self.valid.fill(false);
+        self.settled.fill(false);
+        self.cost.fill(f64::INFINITY);
+        self.prev.fill(0);
+        self.len = 0;
+        self.stats = LtgStats {
+            nodes: 0,
+            pairs: 0,
+            segment_checks: 0,
+        };
+    }
+
     /// An empty graph.
     pub const fn new() -> Self {
         Self {

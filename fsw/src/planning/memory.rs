@@ -84,14 +84,36 @@ pub struct ObstacleMemory {
 }
 
 impl ObstacleMemory {
-    /// An empty memory whose polygons are inflated by `clearance_m` (m, finite, at least 0;
-    /// other values are taken as 0).
-    pub const fn new(clearance_m: f64) -> Self {
-        let clearance_m = if clearance_m.is_finite() && clearance_m >= 0.0 {
+    /// Make this memory `new(clearance_m)` in place (the polygon lists are emptied, not rebuilt
+    /// as a temporary).
+    pub fn reset(&mut self, clearance_m: f64) {
+        self.grown.clear();
+        self.inflated.clear();
+        self.component.fill(0);
+        self.clearance_m = Self::valid_clearance(clearance_m);
+        self.components_stale = false;
+        self.stats = MemoryStats {
+            added: 0,
+            merged: 0,
+            evicted: 0,
+            dropped: 0,
+            rejected: 0,
+        };
+    }
+
+    /// `clearance_m` when finite and at least 0, else 0.
+    const fn valid_clearance(clearance_m: f64) -> f64 {
+        if clearance_m.is_finite() && clearance_m >= 0.0 {
             clearance_m
         } else {
             0.0
-        };
+        }
+    }
+
+    /// An empty memory whose polygons are inflated by `clearance_m` (m, finite, at least 0;
+    /// other values are taken as 0).
+    pub const fn new(clearance_m: f64) -> Self {
+        let clearance_m = Self::valid_clearance(clearance_m);
         Self {
             grown: Vec::new(),
             inflated: Vec::new(),

@@ -313,7 +313,55 @@ impl Planner {
         if !config.valid() {
             return Err(PlanError::BadConfig);
         }
-        Ok(Self {
+        Ok(Self::empty(config))
+    }
+
+    /// A planner with the default configuration, an empty memory and no goal (the
+    /// compile-time value of a statically allocated navigator before [`Self::init`]).
+    pub const EMPTY: Self = Self::empty(PlannerConfig::DEFAULT);
+
+    /// [`Self::new`] in place: this planner becomes the one `new(config)` returns (the memory
+    /// and the tangent graph are cleared in loops: no 33 KiB temporary on the stack). Refuses
+    /// an invalid configuration (nothing changed then).
+    pub fn init(&mut self, config: PlannerConfig) -> Result<(), PlanError> {
+        if !config.valid() {
+            return Err(PlanError::BadConfig);
+        }
+        self.config = config;
+        self.goal = None;
+        self.memory.reset(config.clearance_m);
+        self.ltg.reset();
+        self.local.clear();
+        self.mode = Mode::MotionToGoal;
+        self.halted = None;
+        self.d_min_m = f64::INFINITY;
+        self.follow = None;
+        self.last_position = None;
+        self.committed.clear();
+        self.consecutive_gazes = 0;
+        self.counters = Self::EMPTY_COUNTERS;
+        Ok(())
+    }
+
+    /// Zero counters.
+    const EMPTY_COUNTERS: PlannerCounters = PlannerCounters {
+        calls: 0,
+        replans: 0,
+        gazes: 0,
+        follow_entries: 0,
+        follow_resumes: 0,
+        follow_exits: 0,
+        follow_restarts: 0,
+        escapes: 0,
+        local_overflows: 0,
+        ltg_solves: 0,
+        max_segment_checks: 0,
+        max_ltg_pairs: 0,
+    };
+
+    /// The planner `new(config)` returns, without the configuration check.
+    const fn empty(config: PlannerConfig) -> Self {
+        Self {
             config,
             goal: None,
             memory: ObstacleMemory::new(config.clearance_m),
@@ -340,7 +388,7 @@ impl Planner {
                 max_segment_checks: 0,
                 max_ltg_pairs: 0,
             },
-        })
+        }
     }
 
     /// Sets the goal `T` (m in `N`) and starts a new traverse in motion-to-goal: clears the

@@ -674,3 +674,25 @@ fn pln_6_worst_case_work() {
     assert!(c.max_segment_checks <= c.max_ltg_pairs);
     assert!(matches!(out.status, PlanStatus::Driving | PlanStatus::Gaze));
 }
+
+/// A planner that planned, initialised in place (`Planner::init`), is the new one; so is the
+/// compile-time placeholder `Planner::EMPTY` for the default configuration.
+#[test]
+fn pln_in_place_init_equals_new() {
+    let config = PlannerConfig::default();
+    let fresh = Planner::new(config).unwrap();
+    assert_eq!(format!("{:?}", Planner::EMPTY), format!("{fresh:?}"));
+    let mut used = Planner::new(PlannerConfig {
+        clearance_m: 0.3,
+        ..config
+    })
+    .unwrap();
+    used.set_goal([10.0, 0.0]).unwrap();
+    let w = wedge_at([0.0, 0.0], 0.0);
+    let rock =
+        ConvexPolygon::from_points(&[[3.0, -0.5], [4.0, -0.5], [4.0, 0.5], [3.0, 0.5]]).unwrap();
+    assert!(used.plan([0.0, 0.0], 0.0, &w, &[rock]).is_ok());
+    assert_ne!(format!("{used:?}"), format!("{fresh:?}"));
+    used.init(config).unwrap();
+    assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
+}

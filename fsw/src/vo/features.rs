@@ -52,12 +52,24 @@ pub struct ForstnerDetector {
 
 impl Default for ForstnerDetector {
     fn default() -> Self {
-        Self {
-            columns: [[0; 3]; IMAGE_WIDTH_PX],
-            cells: [Candidate::default(); CELL_COUNT],
-            candidate_count: 0,
-        }
+        Self::EMPTY
     }
+}
+
+/// An empty grid cell (`Candidate::default()`, usable in a `const`).
+const NO_CANDIDATE: Candidate = Candidate {
+    interest: 0.0,
+    x: 0,
+    y: 0,
+};
+
+impl ForstnerDetector {
+    /// A detector with zero sums and empty cells (as [`Default`], usable in a `const`).
+    pub const EMPTY: Self = Self {
+        columns: [[0; 3]; IMAGE_WIDTH_PX],
+        cells: [NO_CANDIDATE; CELL_COUNT],
+        candidate_count: 0,
+    };
 }
 
 /// The rows a central-difference gradient row `y` needs, cut to the interior columns
@@ -125,10 +137,11 @@ fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
 }
 
 impl ForstnerDetector {
-    /// Clears the cells and the running sums; the next row to score is [`FIRST_ROW`].
+    /// Clears the cells and the running sums (in place: the detector becomes
+    /// [`Self::EMPTY`]); the next row to score is [`FIRST_ROW`].
     pub fn reset(&mut self) {
-        self.columns = [[0; 3]; IMAGE_WIDTH_PX];
-        self.cells = [Candidate::default(); CELL_COUNT];
+        self.columns.fill([0; 3]);
+        self.cells.fill(NO_CANDIDATE);
         self.candidate_count = 0;
     }
 

@@ -169,43 +169,48 @@ pub struct VoConfig {
 
 impl Default for VoConfig {
     fn default() -> Self {
-        Self {
-            min_interest: 50.0,
-            min_roundness: 0.3,
-            min_distance_px: 20.0,
-            min_disparity_px: 1,
-            max_disparity_px: 128,
-            stereo_coarse_step: 2,
-            track_disparity_margin_px: 0,
-            min_correlation: 0.8,
-            uniqueness_margin: 0.02,
-            max_row_offset_px: 1.5,
-            left_right_tolerance_px: 1.0,
-            left_right_window_px: 0,
-            left_right_step: 2,
-            half_window_px: 2,
-            half_min_std: 4.0,
-            half_min_correlation: 0.5,
-            max_gap_px: 1.5,
-            min_range_m: 0.2,
-            max_range_m: 30.0,
-            sigma_px: 0.3,
-            sigma_calibration_px: 0.2,
-            search_radius_px: 24,
-            max_refine_shift_px: 3.0,
-            lmeds_hypotheses: 64,
-            lmeds_seed: 0x005e_ed0f_5107_0d0e,
-            inlier_gate_chi2: 16.27,
-            ml_iterations: 10,
-            min_features: 12,
-            min_matches: 10,
-            min_tracked: 8,
-            min_inliers: 6,
-            min_image_std: 3.0,
-            max_clipped_fraction: 0.5,
-            work_cost: [30, 52, 9, 26, 11, 12, 29, 1],
-        }
+        Self::DEFAULT
     }
+}
+
+impl VoConfig {
+    /// The default tuning (as [`Default`], usable in a `const`).
+    pub const DEFAULT: Self = Self {
+        min_interest: 50.0,
+        min_roundness: 0.3,
+        min_distance_px: 20.0,
+        min_disparity_px: 1,
+        max_disparity_px: 128,
+        stereo_coarse_step: 2,
+        track_disparity_margin_px: 0,
+        min_correlation: 0.8,
+        uniqueness_margin: 0.02,
+        max_row_offset_px: 1.5,
+        left_right_tolerance_px: 1.0,
+        left_right_window_px: 0,
+        left_right_step: 2,
+        half_window_px: 2,
+        half_min_std: 4.0,
+        half_min_correlation: 0.5,
+        max_gap_px: 1.5,
+        min_range_m: 0.2,
+        max_range_m: 30.0,
+        sigma_px: 0.3,
+        sigma_calibration_px: 0.2,
+        search_radius_px: 24,
+        max_refine_shift_px: 3.0,
+        lmeds_hypotheses: 64,
+        lmeds_seed: 0x005e_ed0f_5107_0d0e,
+        inlier_gate_chi2: 16.27,
+        ml_iterations: 10,
+        min_features: 12,
+        min_matches: 10,
+        min_tracked: 8,
+        min_inliers: 6,
+        min_image_std: 3.0,
+        max_clipped_fraction: 0.5,
+        work_cost: [30, 52, 9, 26, 11, 12, 29, 1],
+    };
 }
 
 impl VoConfig {
@@ -391,6 +396,31 @@ pub struct VoQuality {
     pub stereo_rejects: StereoRejectCounts,
     /// Work items this update used (a deterministic function of the input).
     pub work_items: u32,
+}
+
+impl VoQuality {
+    /// No update yet (as [`Default`], usable in a `const`).
+    pub const EMPTY: Self = Self {
+        features: 0,
+        stereo_matches: 0,
+        tracked: 0,
+        inliers: 0,
+        residual_rms_m: 0.0,
+        chi2_per_dof: 0.0,
+        covariance_scale: 0.0,
+        rounds_reverted: 0,
+        stereo_rejects: StereoRejectCounts {
+            out_of_image: 0,
+            weak_correlation: 0,
+            ambiguous: 0,
+            refinement_failed: 0,
+            range_end: 0,
+            left_right: 0,
+            discontinuity: 0,
+            triangulation: 0,
+        },
+        work_items: 0,
+    };
 }
 
 /// Result of a completed update.

@@ -66,11 +66,14 @@ pub struct RigidMotion {
 impl RigidMotion {
     /// No motion.
     pub fn identity() -> Self {
-        Self {
-            rotation: Mat3::identity(),
-            translation_m: Vec3::zeros(),
-        }
+        Self::IDENTITY
     }
+
+    /// No motion (as [`Self::identity`], usable in a `const`).
+    pub const IDENTITY: Self = Self {
+        rotation: Mat3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        translation_m: crate::types::VEC3_ZERO,
+    };
 
     /// The eq. 11 residual `r = Q_c - R Q_p - T`, m.
     pub fn residual(&self, c: &Correspondence) -> Vec3 {

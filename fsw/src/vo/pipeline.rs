@@ -19,7 +19,7 @@ use super::motion::{
 use super::stereo::{match_and_triangulate, triangulate_config, PinholeStereo};
 use super::track::{refine_warp, search_window, Affine2, WarpModel};
 use super::{VoConfig, VoError, VoOutput, VoQuality, TEMPLATE_PIXELS};
-use crate::types::{Mat3, RelativePose, Vec3};
+use crate::types::RelativePose;
 use rover_hal::{StereoCalibration, StereoFrame};
 
 /// Heap steps or candidates handled by one work item of the feature sort and selection.
@@ -37,12 +37,15 @@ struct KeyFeature {
 
 impl Default for KeyFeature {
     fn default() -> Self {
-        Self {
-            pixels: [0.0; 4],
-            template: [0; TEMPLATE_PIXELS],
-        }
+        NO_KEY_FEATURE
     }
 }
+
+/// An unused keyframe slot (`KeyFeature::default()`, usable in a `const`).
+const NO_KEY_FEATURE: KeyFeature = KeyFeature {
+    pixels: [0.0; 4],
+    template: [0; TEMPLATE_PIXELS],
+};
 
 /// Where an update is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -190,15 +193,14 @@ pub struct VisualOdometry<const N: usize> {
     quality: VoQuality,
 }
 
-fn zero_correspondence() -> Correspondence {
-    Correspondence {
-        q_p: Vec3::zeros(),
-        cov_p: Mat3::zeros(),
-        q_c: Vec3::zeros(),
-        cov_c: Mat3::zeros(),
-        info_prior: Mat3::zeros(),
-    }
-}
+/// An unused correspondence slot (zero points and covariances, usable in a `const`).
+const ZERO_CORRESPONDENCE: Correspondence = Correspondence {
+    q_p: crate::types::VEC3_ZERO,
+    cov_p: crate::types::zero_matrix::<3, 3>(),
+    q_c: crate::types::VEC3_ZERO,
+    cov_c: crate::types::zero_matrix::<3, 3>(),
+    info_prior: crate::types::zero_matrix::<3, 3>(),
+};
 
 fn rotation_and_translation_finite(prior: &RelativePose) -> bool {
     prior.rot_0_1.coords.iter().all(|v| v.is_finite())
@@ -211,41 +213,104 @@ impl<const N: usize> VisualOdometry<N> {
     /// [`VoError::InvalidCalibration`] when they are out of range, [`VoError::InvalidConfig`]
     /// when `N` is below 3 or above `u16::MAX`.
     pub fn new(config: VoConfig, calibration: &StereoCalibration) -> Result<Self, VoError> {
+        let mut vo = Self::EMPTY;
+        vo.init(config, calibration)?;
+        Ok(vo)
+    }
+
+    /// A placeholder without calibration or keyframe (default tuning, zero camera): the
+    /// compile-time value of a statically allocated navigator's VO slot before [`Self::init`].
+    /// Not meant to run ([`Self::init`] first).
+    pub const EMPTY: Self = Self {
+        config: VoConfig::DEFAULT,
+        camera: PinholeStereo {
+            fx_px: 0.0,
+            fy_px: 0.0,
+            cx_px: 0.0,
+            cy_px: 0.0,
+            baseline_m: 0.0,
+        },
+        mount: CameraMount {
+            rot_rover_from_camera: crate::types::zero_matrix::<3, 3>(),
+            pos_camera_in_rover_m: crate::types::VEC3_ZERO,
+        },
+        key: [NO_KEY_FEATURE; N],
+        key_count: 0,
+        key_valid: false,
+        key_t_us: 0,
+        key_checksum: 0,
+        pairs: [ZERO_CORRESPONDENCE; N],
+        pair_count: 0,
+        inliers: [false; N],
+        scratch: [0.0; N],
+        selected: [(0, 0); N],
+        selected_count: 0,
+        detector: ForstnerDetector::EMPTY,
+        lmeds: Lmeds::new(0),
+        motion: RigidMotion::IDENTITY,
+        gating: Gating {
+            motion: RigidMotion::IDENTITY,
+            gate: 0.0,
+        },
+        kept: None,
+        rounds_reverted: 0,
+        estimate: None,
+        pending: None,
+        phase: Phase::Idle,
+        frame_t_us: 0,
+        frame_sequence: 0,
+        frame_checksum: 0,
+        quality: VoQuality::EMPTY,
+    };
+
+    /// [`Self::new`] in place: this VO becomes the one `new(config, calibration)` returns
+    /// (every field rewritten, the feature arrays in loops: no 93 KB temporary on the stack).
+    /// Errors as [`Self::new`]; on error nothing is changed.
+    pub fn init(
+        &mut self,
+        config: VoConfig,
+        calibration: &StereoCalibration,
+    ) -> Result<(), VoError> {
         if !config.is_valid() || N < 3 || N > usize::from(u16::MAX) {
             return Err(VoError::InvalidConfig);
         }
-        Ok(Self {
-            config,
-            camera: PinholeStereo::from_calibration(calibration)?,
-            mount: CameraMount::from_calibration(calibration)?,
-            key: [KeyFeature::default(); N],
-            key_count: 0,
-            key_valid: false,
-            key_t_us: 0,
-            key_checksum: 0,
-            pairs: [zero_correspondence(); N],
-            pair_count: 0,
-            inliers: [false; N],
-            scratch: [0.0; N],
-            selected: [(0, 0); N],
-            selected_count: 0,
-            detector: ForstnerDetector::default(),
-            lmeds: Lmeds::new(config.lmeds_seed),
-            motion: RigidMotion::identity(),
-            gating: Gating {
-                motion: RigidMotion::identity(),
-                gate: 0.0,
-            },
-            kept: None,
-            rounds_reverted: 0,
-            estimate: None,
-            pending: None,
-            phase: Phase::Idle,
-            frame_t_us: 0,
-            frame_sequence: 0,
-            frame_checksum: 0,
-            quality: VoQuality::default(),
-        })
+        let camera = PinholeStereo::from_calibration(calibration)?;
+        let mount = CameraMount::from_calibration(calibration)?;
+        self.config = config;
+        self.camera = camera;
+        self.mount = mount;
+        for k in self.key.iter_mut() {
+            *k = NO_KEY_FEATURE;
+        }
+        self.key_count = 0;
+        self.key_valid = false;
+        self.key_t_us = 0;
+        self.key_checksum = 0;
+        for p in self.pairs.iter_mut() {
+            *p = ZERO_CORRESPONDENCE;
+        }
+        self.pair_count = 0;
+        self.inliers.fill(false);
+        self.scratch.fill(0.0);
+        self.selected.fill((0, 0));
+        self.selected_count = 0;
+        self.detector.reset();
+        self.lmeds = Lmeds::new(config.lmeds_seed);
+        self.motion = RigidMotion::IDENTITY;
+        self.gating = Gating {
+            motion: RigidMotion::IDENTITY,
+            gate: 0.0,
+        };
+        self.kept = None;
+        self.rounds_reverted = 0;
+        self.estimate = None;
+        self.pending = None;
+        self.phase = Phase::Idle;
+        self.frame_t_us = 0;
+        self.frame_sequence = 0;
+        self.frame_checksum = 0;
+        self.quality = VoQuality::EMPTY;
+        Ok(())
     }
 
     /// True while an update is running.

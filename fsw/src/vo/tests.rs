@@ -768,3 +768,56 @@ fn vo_2_coarse_and_windowed_stereo_search_agree_with_the_full_scan() {
         Err(stereo::StereoReject::OutOfRange)
     );
 }
+
+/// Runs the rendered frames of `poses` through `vo` (a keyframe, then updates).
+fn run_rendered(vo: &mut VisualOdometry<150>, poses: &[RoverPose]) {
+    let cal = hazcam();
+    for (k, pose) in poses.iter().enumerate() {
+        let (l, r) = render_pair(&cal, pose);
+        let t = 1_000_000 * (k as u64 + 1);
+        let out = vo.run_to_completion(&frame(&l, &r, t, k as u32), None);
+        assert!(out.is_ok(), "{out:?}");
+    }
+}
+
+#[test]
+fn vo_19_in_place_init_equals_new() {
+    // The compile-time constants are the runtime values, bit for bit.
+    assert_eq!(crate::types::QUAT_IDENTITY, crate::types::Quat::identity());
+    assert_eq!(crate::types::VEC3_ZERO, Vec3::zeros());
+    assert_eq!(crate::types::zero_matrix::<6, 6>(), Mat6::zeros());
+    assert_eq!(
+        super::motion::RigidMotion::IDENTITY.rotation,
+        Mat3::identity()
+    );
+    let cal = hazcam();
+    let config = VoConfig::default();
+    let poses = [
+        RoverPose::new(0.0, 0.0, 0.0, Vec3::zeros()),
+        RoverPose::new(2f64.to_radians(), 0.0, 0.0, Vec3::new(0.25, 0.0, 0.0)),
+    ];
+    let fresh = Box::new(VisualOdometry::<150>::new(config, &cal).unwrap());
+    // A used VO (another seed, a keyframe and an update) initialised in place is the new one.
+    let other = VoConfig {
+        lmeds_seed: 7,
+        ..config
+    };
+    let mut used = Box::new(VisualOdometry::<150>::new(other, &cal).unwrap());
+    run_rendered(&mut used, &poses);
+    assert!(used.keyframe_features() > 0);
+    assert_ne!(format!("{used:?}"), format!("{fresh:?}"));
+    used.init(config, &cal).unwrap();
+    assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
+    // A refused configuration changes nothing.
+    let bad = VoConfig {
+        max_range_m: f64::NAN,
+        ..config
+    };
+    assert_eq!(used.init(bad, &cal), Err(VoError::InvalidConfig));
+    assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
+    // And it runs as the new one does.
+    let mut again = Box::new(VisualOdometry::<150>::new(config, &cal).unwrap());
+    run_rendered(&mut used, &poses);
+    run_rendered(&mut again, &poses);
+    assert_eq!(format!("{used:?}"), format!("{again:?}"));
+}

@@ -84,37 +84,46 @@ struct VoSummary {
     work_items_max: u32,
 }
 
-/// The EKF's static (its symbol names it in the memory map).
-fn ekf_static(ekf: Ekf) -> Option<&'static mut Ekf> {
-    super::take_static!(extram, Ekf, ekf)
+// The statics below live in `.extram` (not loaded, not zeroed): each is set to its type's
+// compile-time placeholder (`EMPTY`, copied from flash) and then built in place by its `init`,
+// so that no constructor passes the state through the stack.
+
+/// The EKF's static (its symbol names it in the memory map), built in place.
+fn ekf_static(start: NominalState, p0: &CoreCov) -> Option<&'static mut Ekf> {
+    let ekf = super::take_static!(extram, Ekf, Ekf::EMPTY)?;
+    ekf.init(EkfConfig::default(), start, p0).ok()?;
+    Some(ekf)
 }
 
-/// The visual odometry's static.
-fn vo_static(vo: VisualOdometry<VO_FEATURES>) -> Option<&'static mut VisualOdometry<VO_FEATURES>> {
-    super::take_static!(extram, VisualOdometry<VO_FEATURES>, vo)
+/// The visual odometry's static, built in place.
+fn vo_static(
+    config: fsw::vo::VoConfig,
+    calibration: &rover_hal::StereoCalibration,
+) -> Option<&'static mut VisualOdometry<VO_FEATURES>> {
+    let vo = super::take_static!(extram, VisualOdometry<VO_FEATURES>, VisualOdometry::EMPTY)?;
+    vo.init(config, calibration).ok()?;
+    Some(vo)
 }
 
-/// The bench's own static.
-/// The hazard mapper, built in its own frame (not inlined: its 34 KB temporary does not add to
-/// the VO's in `Bench::install`) and moved into its static in `.extram`.
-#[inline(never)]
+/// The hazard mapper's static, built in place.
 fn install_mapper(
     config: fsw::perception::PerceptionConfig,
     calibration: &rover_hal::StereoCalibration,
 ) -> Option<&'static mut HazardMapper> {
-    let m = HazardMapper::new(config, calibration).ok()?;
-    super::take_static!(extram, HazardMapper, m)
+    let m = super::take_static!(extram, HazardMapper, HazardMapper::EMPTY)?;
+    m.init(config, calibration).ok()?;
+    Some(m)
 }
 
-/// The RoverBug planner with its goal, built in its own frame and moved into its static.
-#[inline(never)]
+/// The RoverBug planner's static with its goal, built in place.
 fn install_planner(
     config: fsw::planning::PlannerConfig,
     goal: [f64; 2],
 ) -> Option<&'static mut Planner> {
-    let mut p = Planner::new(config).ok()?;
+    let p = super::take_static!(extram, Planner, Planner::EMPTY)?;
+    p.init(config).ok()?;
     p.set_goal(goal).ok()?;
-    super::take_static!(extram, Planner, p)
+    Some(p)
 }
 
 /// The stereo frame `f` names, borrowed from the loaded image buffers (`None` when a length
@@ -191,12 +200,10 @@ impl Bench {
         start.p_n = Vec3::new(n, e, d);
         start.q_nr = Quat::from_euler_angles(roll, pitch, yaw);
         let p0 = CoreCov::identity() * 1e-4;
-        let ekf = Ekf::new(EkfConfig::default(), start, &p0).ok()?;
-        let ekf = ekf_static(ekf)?;
+        let ekf = ekf_static(start, &p0)?;
         // The flight software's VO tuning (8 px tracking window with the EKF prior).
         let vo_config = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0).vo;
-        let vo = VisualOdometry::<VO_FEATURES>::new(vo_config, &header.calibration).ok()?;
-        let vo = vo_static(vo)?;
+        let vo = vo_static(vo_config, &header.calibration)?;
         // The flight software's hazard-navigation settings (obstacle growth margin, clearance).
         let nav = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0);
         let mapper = install_mapper(nav.perception, &header.calibration)?;

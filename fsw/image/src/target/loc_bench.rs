@@ -198,18 +198,21 @@ impl LocBench {
 
 #[inline(never)]
 fn install_global() -> Option<&'static mut GlobalMap> {
-    super::take_static!(extram, GlobalMap, GlobalMap::new())
+    const EMPTY: GlobalMap = GlobalMap::new();
+    super::take_static!(extram, GlobalMap, EMPTY)
 }
 
 #[inline(never)]
 fn install_localizer() -> Option<&'static mut Localizer> {
-    let localizer = Localizer::new(LocalizerConfig::default()).ok()?;
-    super::take_static!(extram, Localizer, localizer)
+    let localizer = super::take_static!(extram, Localizer, Localizer::EMPTY)?;
+    localizer.init(LocalizerConfig::default()).ok()?;
+    Some(localizer)
 }
 
 #[inline(never)]
 fn install_grid() -> Option<&'static mut TerrainGrid> {
-    super::take_static!(extram, TerrainGrid, TerrainGrid::new())
+    const EMPTY: TerrainGrid = TerrainGrid::new();
+    super::take_static!(extram, TerrainGrid, EMPTY)
 }
 
 #[inline(never)]

@@ -16,7 +16,6 @@ mod still;
 mod timing;
 
 use core::fmt::Write as _;
-use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hio};
@@ -41,43 +40,42 @@ fn report(args: core::fmt::Arguments<'_>) {
     }
 }
 
-/// The flight software: one static instance (its RAM shows in `.bss`, not on the stack).
-static mut FSW: MaybeUninit<Fsw<TargetPlatform>> = MaybeUninit::uninit();
+/// The flight software: one static instance, initialised at compile time with the placeholder
+/// [`Fsw::EMPTY`] (no code runs to build it, and it never passes through the stack); its RAM
+/// shows in `.data`/`.bss`, not on the stack. [`install_new_fsw`] builds it in place.
+static mut FSW: Fsw<TargetPlatform> = Fsw::EMPTY;
 static FSW_TAKEN: AtomicBool = AtomicBool::new(false);
 
-/// Move the flight software into its static slot (once; `None` afterwards).
-fn install_fsw(fsw: Fsw<TargetPlatform>) -> Option<&'static mut Fsw<TargetPlatform>> {
+/// The flight software's static (once; `None` afterwards).
+fn take_fsw() -> Option<&'static mut Fsw<TargetPlatform>> {
     if FSW_TAKEN.swap(true, Ordering::AcqRel) {
         return None;
     }
     // SAFETY: the flag above makes this the only reference ever made to FSW.
-    Some(unsafe { (*core::ptr::addr_of_mut!(FSW)).write(fsw) })
+    Some(unsafe { &mut *core::ptr::addr_of_mut!(FSW) })
 }
 
-/// Build the flight software for `setup` around `devices`, move it into its static and build its
-/// VO state there. Not inlined, so that the constructors' large temporaries live in this frame
-/// only and the frames that follow run on a shallow stack.
+/// Build the flight software for `setup` around `devices` in its static, then its VO and
+/// hazard navigation state: everything in place ([`Fsw::init`], [`Fsw::start_vo`]), so that
+/// the initialisation runs on a shallow stack (no constructor returns the large state by
+/// value).
 #[inline(never)]
 fn install_new_fsw(
     devices: fsw::flight::Devices<TargetPlatform>,
     setup: &fsw_image::flight_replay::FlightSetup,
 ) -> Option<&'static mut Fsw<TargetPlatform>> {
-    let fsw = match fsw_image::flight_replay::build_fsw(devices, setup) {
-        Ok(f) => f,
-        Err(e) => {
-            report(format_args!(
-                "fsw-image: flight software refused its configuration: {e:?}\n"
-            ));
-            return None;
-        }
-    };
-    let Some(fsw) = install_fsw(fsw) else {
+    let Some(fsw) = take_fsw() else {
         report(format_args!(
             "fsw-image: flight software already installed\n"
         ));
         return None;
     };
-    // The VO state is built in the static, not copied through the stack.
+    if let Err(e) = fsw_image::flight_replay::init_fsw(fsw, devices, setup) {
+        report(format_args!(
+            "fsw-image: flight software refused its configuration: {e:?}\n"
+        ));
+        return None;
+    }
     fsw.start_vo();
     Some(fsw)
 }

@@ -29,6 +29,20 @@ pub(super) struct Alignment {
 }
 
 impl Alignment {
+    /// No samples yet (as [`Default`], usable in a `const`).
+    pub(super) const EMPTY: Self = Self {
+        count: 0,
+        gyro: [0.0; 3],
+        accel: [0.0; 3],
+        gyro_sq: [0.0; 3],
+        accel_sq: [0.0; 3],
+        sun: [0.0; 3],
+        sun_count: 0,
+        sun_t_us: 0,
+    };
+}
+
+impl Alignment {
     /// Adds one sun reading in `R` (unit vector, finite; others are ignored).
     pub(super) fn add_sun(&mut self, reading: &SunReading) {
         let s = reading.sun_dir_rover;

@@ -37,6 +37,18 @@ pub(super) struct Trajectories {
 }
 
 impl Trajectories {
+    /// Placeholder at the origin, level, heading north (the compile-time value of a statically
+    /// allocated navigator before its initialisation writes [`Self::new`]'s).
+    pub const EMPTY: Self = Self {
+        kin3d: PoseEstimate::EMPTY,
+        kin2d: [0.0; 3],
+        dr: PoseEstimate::EMPTY,
+        dr_bias: crate::types::VEC3_ZERO,
+        dr_t_us: None,
+        dr_gaps: 0,
+        vo: None,
+    };
+
     /// All trajectories at `p0` (m, `N`) with heading `yaw0` (rad).
     pub fn new(p0: Vec3, yaw0: f64) -> Self {
         let q0 = Quat::from_euler_angles(0.0, 0.0, yaw0);

@@ -80,6 +80,35 @@ pub(super) struct HazardNav {
     counters: HazardCounters,
 }
 
+impl HazardNav {
+    /// Placeholder (mapper and planner placeholders, nothing planned): the compile-time value
+    /// of a statically allocated navigator's hazard navigation before
+    /// [`Navigator::start_vo`] builds it in place.
+    pub(super) const EMPTY: Self = Self {
+        mapper: HazardMapper::EMPTY,
+        planner: Planner::EMPTY,
+        last_map_xy: None,
+        map_wanted: false,
+        gaze_rad: None,
+        planned: false,
+        verdict: PlannerVerdict::Driving,
+        last_output: None,
+        counters: HazardCounters {
+            maps_started: 0,
+            maps: 0,
+            map_errors: 0,
+            last_obstacles: 0,
+            polygons_refused: 0,
+            plans: 0,
+            plan_errors: 0,
+            paths: 0,
+            gazes: 0,
+            holds: 0,
+            gazes_skipped: 0,
+        },
+    };
+}
+
 /// Margin over the rover half-width by which the visible wedge is eroded for the planner, m.
 pub const WEDGE_EROSION_MARGIN_M: f64 = 0.1;
 
@@ -119,26 +148,23 @@ impl Navigator {
         let Some(goal) = self.guidance.as_ref().map(|g| g.path().goal()) else {
             return;
         };
-        let planner = Planner::new(self.config.planner).and_then(|mut p| {
-            p.set_goal(goal)?;
-            Ok(p)
-        });
-        match (
-            HazardMapper::new(self.config.perception, &self.calibration),
-            planner,
-        ) {
-            (Ok(mapper), Ok(planner)) => {
-                self.hazard = Some(HazardNav {
-                    mapper,
-                    planner,
-                    last_map_xy: None,
-                    map_wanted: true,
-                    gaze_rad: None,
-                    planned: false,
-                    verdict: PlannerVerdict::Driving,
-                    last_output: None,
-                    counters: HazardCounters::default(),
-                });
+        // Built in its storage (no 68 KB value through the stack).
+        let h = &mut self.hazard.value;
+        let planner = h
+            .planner
+            .init(self.config.planner)
+            .and_then(|()| h.planner.set_goal(goal));
+        let mapper = h.mapper.init(self.config.perception, &self.calibration);
+        match (mapper, planner) {
+            (Ok(()), Ok(())) => {
+                h.last_map_xy = None;
+                h.map_wanted = true;
+                h.gaze_rad = None;
+                h.planned = false;
+                h.verdict = PlannerVerdict::Driving;
+                h.last_output = None;
+                h.counters = HazardCounters::default();
+                self.hazard.built = true;
             }
             // The drive holds without a hazard navigation (`guidance_cycle`).
             _ => self.counters.command_errors = self.counters.command_errors.saturating_add(1),

@@ -40,6 +40,7 @@
 mod align;
 mod boresight;
 mod diagnostics;
+mod empty;
 mod guidance_adapter;
 pub mod hazard_nav;
 mod kin_aiding;
@@ -385,6 +386,46 @@ impl PoseEstimate {
             q_nr: Quat::identity(),
         }
     }
+
+    /// At the origin, level, heading north (as `default()`, usable in a `const`).
+    pub const EMPTY: Self = Self {
+        p_n: crate::types::VEC3_ZERO,
+        q_nr: crate::types::QUAT_IDENTITY,
+    };
+}
+
+/// Storage of a large part of the navigator that is built in place after the navigator
+/// (visual odometry, hazard navigation): the value always exists (a placeholder until built,
+/// so that building it writes into this storage instead of moving a new value in), `built`
+/// says whether it is in use. Reads like an `Option`.
+struct InPlace<T> {
+    value: T,
+    built: bool,
+}
+
+impl<T> InPlace<T> {
+    /// `value` as the placeholder, not built.
+    const fn unbuilt(value: T) -> Self {
+        Self {
+            value,
+            built: false,
+        }
+    }
+
+    /// The part when built.
+    fn as_ref(&self) -> Option<&T> {
+        self.built.then_some(&self.value)
+    }
+
+    /// The part when built, mutable.
+    fn as_mut(&mut self) -> Option<&mut T> {
+        self.built.then_some(&mut self.value)
+    }
+
+    /// True when built.
+    fn is_some(&self) -> bool {
+        self.built
+    }
 }
 
 /// Period of the RG2 rate group that runs the kinematic and guidance cycles (20 Hz), s.
@@ -506,7 +547,7 @@ pub struct Navigator {
     gyro_since_joints: Option<crate::types::Quat>,
     /// Time stamp of the last IMU sample integrated into `gyro_since_joints`, us.
     gyro_t_us: Option<u64>,
-    vo: Option<VisualOdometry<VO_FEATURES>>,
+    vo: InPlace<VisualOdometry<VO_FEATURES>>,
     calibration: StereoCalibration,
     key_clone: Option<CloneHandle>,
     /// Filter operations since the pending capture, for the exact late VO update.
@@ -558,7 +599,7 @@ pub struct Navigator {
     /// The last EKF error (telemetry: what the `ekf_errors` counter counted last).
     last_ekf_error: Option<EstError>,
     /// Goal-directed driving with hazard avoidance (built in place by [`Self::start_vo`]).
-    hazard: Option<hazard_nav::HazardNav>,
+    hazard: InPlace<hazard_nav::HazardNav>,
 }
 
 /// Why the navigator could not be built.
@@ -580,14 +621,94 @@ pub(super) fn yaw_of(q: &Quat) -> f64 {
 
 impl Navigator {
     /// A navigator for `path` (waypoints north, east in `N`, m) with `config` and the camera
-    /// `calibration`. VO is not built here (see [`Self::start_vo`]). Inlined so that the
-    /// (large) navigator is built where its caller puts it, not copied through the stack.
-    #[inline(always)]
+    /// `calibration`: [`Self::EMPTY`] initialised by [`Self::init`]. VO is not built here (see
+    /// [`Self::start_vo`]). The value is about 210 KB: on the rover CPU use [`Self::init`] on
+    /// a static instead.
     pub fn new(
         config: NavConfig,
         path: &[Point2],
         calibration: &StereoCalibration,
     ) -> Result<Self, NavError> {
+        let mut nav = Self::EMPTY;
+        nav.init(&config, path, calibration)?;
+        Ok(nav)
+    }
+
+    /// A placeholder navigator (zero settings, no path, VO and hazard navigation not built):
+    /// the compile-time value of a statically allocated navigator before [`Self::init`]
+    /// (`crate::flight::Fsw::EMPTY`). Not meant to run: its mode is [`NavMode::Safed`].
+    pub const EMPTY: Self = Self {
+        config: empty::EMPTY_CONFIG,
+        mode: NavMode::Safed,
+        align: Alignment::EMPTY,
+        ekf: Ekf::EMPTY,
+        ekf_running: false,
+        odometry: KinematicOdometry::new(ROCKY8, empty::EMPTY_CONFIG.odometry),
+        interval: None,
+        last_joints: None,
+        gyro_since_joints: None,
+        gyro_t_us: None,
+        vo: InPlace::unbuilt(VisualOdometry::EMPTY),
+        calibration: empty::NO_CALIBRATION,
+        key_clone: None,
+        recorder: Recorder::EMPTY,
+        stereo: StereoStage::Idle,
+        guidance: None,
+        slip: SlipVector {
+            x_m: 0.0,
+            y_m: 0.0,
+            phi_rad: 0.0,
+        },
+        gate: empty::NO_GATE,
+        command: VehicleCommand {
+            x_dot_m_s: 0.0,
+            y_dot_m_s: 0.0,
+            yaw_rate_rad_s: 0.0,
+        },
+        last_guidance: None,
+        traj: Trajectories::EMPTY,
+        vo_quality: None,
+        vo_gate: empty::NO_VO_GATE,
+        last_capture: None,
+        counters: empty::NO_COUNTERS,
+        frames_without_imu: 0,
+        cycles_without_joints: 0,
+        reject_history: 0,
+        reject_streak: 0,
+        sun_rejections: 0,
+        vo_started: false,
+        protection: Protection::EMPTY,
+        radius_scale: RadiusScale::new(),
+        boresight: Boresight::new(),
+        fault_response: FaultResponse::None,
+        vo_fused_since_interval: false,
+        last_wheel_rates: [0.0; 6],
+        cycles_waiting_vo: 0,
+        cycles_since_vo: 0,
+        blind_travel_m: 0.0,
+        blind_hold_left: 0,
+        cycles_since_zupt: u32::MAX,
+        last_ekf_error: None,
+        hazard: InPlace::unbuilt(hazard_nav::HazardNav::EMPTY),
+    };
+
+    /// [`Self::new`] in place: this navigator becomes the one `new(*config, path,
+    /// calibration)` returns, for `path` (waypoints north, east in `N`, m) with `config` and
+    /// the camera `calibration`. Every field is rewritten, the large ones (filter, recorder)
+    /// in place; VO and hazard navigation are marked not built (their storage is kept for
+    /// [`Self::start_vo`]). Errors: [`NavError::BadConfig`] (non-finite start, no alignment
+    /// samples, a filter setting refused), [`NavError::Path`], [`NavError::Guidance`]; after an
+    /// error the navigator must not be used until an `init` succeeds (its mode is then
+    /// [`NavMode::Safed`]).
+    pub fn init(
+        &mut self,
+        config: &NavConfig,
+        path: &[Point2],
+        calibration: &StereoCalibration,
+    ) -> Result<(), NavError> {
+        self.mode = NavMode::Safed;
+        self.vo.built = false;
+        self.hazard.built = false;
         let start = [
             config.initial_position_n_m[0],
             config.initial_position_n_m[1],
@@ -600,61 +721,57 @@ impl Navigator {
             return Err(NavError::BadConfig);
         }
         let path = Path::<MAX_WAYPOINTS>::new(path).map_err(NavError::Path)?;
-        let ekf = Ekf::new(
-            config.ekf,
-            NominalState::at_rest(0),
-            &(CoreCov::identity() * 1.0e-6),
-        )
-        .map_err(|_| NavError::BadConfig)?;
+        self.ekf
+            .init(
+                config.ekf,
+                NominalState::at_rest(0),
+                &(CoreCov::identity() * 1.0e-6),
+            )
+            .map_err(|_| NavError::BadConfig)?;
         let guidance = Guidance::new(path, config.guidance).map_err(NavError::Guidance)?;
-        let counters = NavCounters::default();
         let p0 = Vec3::from(config.initial_position_n_m);
-        Ok(Self {
-            config,
-            mode: NavMode::Aligning,
-            align: Alignment::default(),
-            ekf,
-            ekf_running: false,
-            odometry: KinematicOdometry::new(config.geometry, config.odometry),
-            interval: None,
-            last_joints: None,
-            gyro_since_joints: None,
-            gyro_t_us: None,
-            vo: None,
-            calibration: *calibration,
-            key_clone: None,
-            recorder: Recorder::new(),
-            stereo: StereoStage::Idle,
-            guidance: Some(guidance),
-            slip: SlipVector::default(),
-            gate: GateStatus::default(),
-            command: VehicleCommand::default(),
-            last_guidance: None,
-            traj: Trajectories::new(p0, config.initial_yaw_rad),
-            vo_quality: None,
-            vo_gate: VoGateStatus::default(),
-            last_capture: None,
-            counters,
-            frames_without_imu: 0,
-            cycles_without_joints: 0,
-            reject_history: 0,
-            reject_streak: 0,
-            sun_rejections: 0,
-            vo_started: false,
-            protection: Protection::default(),
-            radius_scale: RadiusScale::new(),
-            boresight: Boresight::new(),
-            fault_response: FaultResponse::None,
-            vo_fused_since_interval: false,
-            last_wheel_rates: [0.0; 6],
-            cycles_waiting_vo: 0,
-            cycles_since_vo: 0,
-            blind_travel_m: 0.0,
-            blind_hold_left: 0,
-            cycles_since_zupt: u32::MAX,
-            last_ekf_error: None,
-            hazard: None,
-        })
+        self.config = *config;
+        self.mode = NavMode::Aligning;
+        self.align = Alignment::default();
+        self.ekf_running = false;
+        self.odometry = KinematicOdometry::new(config.geometry, config.odometry);
+        self.interval = None;
+        self.last_joints = None;
+        self.gyro_since_joints = None;
+        self.gyro_t_us = None;
+        self.calibration = *calibration;
+        self.key_clone = None;
+        self.recorder.reset();
+        self.stereo = StereoStage::Idle;
+        self.guidance = Some(guidance);
+        self.slip = SlipVector::default();
+        self.gate = GateStatus::default();
+        self.command = VehicleCommand::default();
+        self.last_guidance = None;
+        self.traj = Trajectories::new(p0, config.initial_yaw_rad);
+        self.vo_quality = None;
+        self.vo_gate = VoGateStatus::default();
+        self.last_capture = None;
+        self.counters = NavCounters::default();
+        self.frames_without_imu = 0;
+        self.cycles_without_joints = 0;
+        self.reject_history = 0;
+        self.reject_streak = 0;
+        self.sun_rejections = 0;
+        self.vo_started = false;
+        self.protection = Protection::default();
+        self.radius_scale = RadiusScale::new();
+        self.boresight = Boresight::new();
+        self.fault_response = FaultResponse::None;
+        self.vo_fused_since_interval = false;
+        self.last_wheel_rates = [0.0; 6];
+        self.cycles_waiting_vo = 0;
+        self.cycles_since_vo = 0;
+        self.blind_travel_m = 0.0;
+        self.blind_hold_left = 0;
+        self.cycles_since_zupt = u32::MAX;
+        self.last_ekf_error = None;
+        Ok(())
     }
 
     /// The current mode.

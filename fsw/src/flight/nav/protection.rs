@@ -102,6 +102,18 @@ pub(super) struct Protection {
 }
 
 impl Protection {
+    /// Nothing measured yet (as [`Default`], usable in a `const`).
+    pub(super) const EMPTY: Self = Self {
+        wheel_m: 0.0,
+        ekf_m: 0.0,
+        vo_in_window: false,
+        stall: [0; WHEEL_COUNT],
+        hold_cycles: 0,
+        last_slip: 0.0,
+    };
+}
+
+impl Protection {
     /// One kinematic interval: `wheel_step_m` of wheel travel (the kinematic translation) and
     /// `ekf_step_m` of EKF travel over it, `vo_fused` when a VO update was fused since the last
     /// call. Returns the slip response when a window closes over the limit.

@@ -32,8 +32,9 @@ impl Navigator {
         if !self.config.vo_enabled || self.vo.is_some() {
             return;
         }
-        match VisualOdometry::new(self.config.vo, &self.calibration) {
-            Ok(v) => self.vo = Some(v),
+        // Built in its storage (no 93 KB value through the stack).
+        match self.vo.value.init(self.config.vo, &self.calibration) {
+            Ok(()) => self.vo.built = true,
             Err(_) => self.counters.vo_failures = self.counters.vo_failures.saturating_add(1),
         }
     }
