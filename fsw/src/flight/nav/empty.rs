@@ -132,6 +132,7 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
         max_tilt_step_rad: 0.0,
         max_angle_rad: 0.0,
         max_sample_rad: 0.0,
+        min_samples: 0,
     },
     imu_timeout_frames: 0,
     joints_timeout_cycles: 0,
