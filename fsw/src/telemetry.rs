@@ -282,6 +282,7 @@ mod tests {
             sensor_holds: c,
             blind_stops: c,
             kin_imu_carried: c,
+            imu_shocks: c,
         };
         let record = NavTelemetry {
             tick: u64::MAX,

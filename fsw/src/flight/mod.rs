@@ -555,6 +555,10 @@ struct Work<'a, P: Platform> {
 /// Frame period of the schedule, us (200 Hz).
 const FRAME_PERIOD_US: u64 = 5_000;
 
+/// Fraction of the accelerometer's range at which a reading counts as saturated (clipped by
+/// the sensor): an IMU shock ([`nav::Navigator::imu_shock`]).
+const IMU_SATURATION: f64 = 0.999;
+
 /// Check a time stamp against the previous accepted one at minor frame `tick`: stale or
 /// backwards are faults; a stamp that leads the previous one by more than
 /// `stamp_lead_factor` frames per elapsed frame (plus a frame) is a leap, refused and counted,
@@ -660,11 +664,20 @@ impl<P: Platform> Work<'_, P> {
                 let in_range = |v: &[f64; 3], max: f64| {
                     all_finite(v) && v.iter().all(|x| libm::fabs(*x) <= max)
                 };
-                if !s.valid
-                    || !in_range(&s.gyro_rad_s, l.gyro_max_rad_s)
-                    || !in_range(&s.accel_m_s2, l.accel_max_m_s2)
-                {
+                let accel_ok = in_range(&s.accel_m_s2, l.accel_max_m_s2);
+                // A shock: an accelerometer axis at its range (clipped) or beyond it (refused
+                // below); that sample's velocity increment is unknown up to the range over one
+                // frame (`Navigator::imu_shock`).
+                let shock = all_finite(&s.accel_m_s2)
+                    && s.accel_m_s2
+                        .iter()
+                        .any(|a| libm::fabs(*a) >= IMU_SATURATION * l.accel_max_m_s2);
+                let shock_sigma_m_s = l.accel_max_m_s2 * FRAME_PERIOD_US as f64 * 1e-6;
+                if !s.valid || !in_range(&s.gyro_rad_s, l.gyro_max_rad_s) || !accel_ok {
                     count_invalid(health);
+                    if s.valid && shock {
+                        self.nav.imu_shock(shock_sigma_m_s);
+                    }
                     return;
                 }
                 health.good = health.good.saturating_add(1);
@@ -673,6 +686,9 @@ impl<P: Platform> Work<'_, P> {
                     // The filter's timeline restarts one frame before this sample.
                     self.nav
                         .imu_time_rebase(s.t_us.saturating_sub(FRAME_PERIOD_US));
+                }
+                if shock {
+                    self.nav.imu_shock(shock_sigma_m_s);
                 }
                 self.state.imu = Some(s);
                 self.fresh.imu = Some(s);

@@ -530,6 +530,8 @@ fn fp_3_implausible_values_and_time_leaps() {
     let h = s.health[DeviceId::Imu as usize];
     assert_eq!((h.good, h.invalid, h.time_jumps, h.resyncs), (4, 1, 1, 0));
     assert_eq!(s.imu.map(|i| i.t_us), Some(50));
+    // The refused specific force is beyond the accelerometer's range: an IMU shock (FP-8).
+    assert_eq!(fsw.nav().counters().imu_shocks, 1);
 
     // A persistent leap: the device's clock really moved on by an hour.
     let limits = Plausibility::default();

@@ -34,6 +34,10 @@ pub struct ImuParams {
     pub gyro_scale_rel: f64,
     /// Gyro axis misalignment, each off-diagonal term, degrees.
     pub gyro_misalignment_deg: f64,
+    /// Gyro measurement range, rad/s: readings saturate (clip) there.
+    pub gyro_range_rad_s: f64,
+    /// Accelerometer measurement range, m/s^2: readings saturate (clip) there.
+    pub accel_range_m_s2: f64,
     /// Accelerometer scale-factor error of each axis, relative.
     pub accel_scale_rel: f64,
     /// Accelerometer axis misalignment, each off-diagonal term, degrees.
@@ -63,6 +67,9 @@ impl Default for ImuParams {
             gyro_misalignment_deg: 0.05,
             accel_scale_rel: 0.002,
             accel_misalignment_deg: 0.05,
+            // ADIS16488A data sheet (Analog Devices): +-450 deg/s and +-18 g dynamic ranges.
+            gyro_range_rad_s: 450.0_f64.to_radians(),
+            accel_range_m_s2: 18.0 * 9.806_65,
         }
     }
 }
@@ -155,6 +162,9 @@ impl ImuModel {
         for k in 0..3 {
             g[k] = gyro_sensed[k] + self.gyro_bias[k] + p.gyro_noise_rad_s * normal(rng);
             a[k] = accel_sensed[k] + self.accel_bias[k] + p.accel_noise_m_s2 * normal(rng);
+            // A real sensor saturates at its range: it does not report values beyond it.
+            g[k] = g[k].clamp(-p.gyro_range_rad_s, p.gyro_range_rad_s);
+            a[k] = a[k].clamp(-p.accel_range_m_s2, p.accel_range_m_s2);
         }
         let sq = dt_s.sqrt();
         for k in 0..3 {
@@ -174,6 +184,32 @@ mod tests {
         let m = v.iter().sum::<f64>() / v.len() as f64;
         let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (v.len() - 1) as f64;
         (m, var.sqrt())
+    }
+
+    /// SIM-6: readings saturate at the ranges (the ADIS16488A's +-18 g and +-450 deg/s) and
+    /// are unchanged inside them.
+    #[test]
+    fn sim_6_imu_saturates_at_its_range() {
+        let params = ImuParams {
+            gyro_noise_rad_s: 0.0,
+            gyro_bias_rad_s: 0.0,
+            gyro_bias_walk_rad_s_sqrt_s: 0.0,
+            accel_noise_m_s2: 0.0,
+            accel_bias_m_s2: 0.0,
+            accel_bias_walk_m_s2_sqrt_s: 0.0,
+            gyro_scale_rel: 0.0,
+            gyro_misalignment_deg: 0.0,
+            accel_scale_rel: 0.0,
+            accel_misalignment_deg: 0.0,
+            ..ImuParams::default()
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut calib = ChaCha8Rng::seed_from_u64(4);
+        let mut imu = ImuModel::new(params, &mut rng, &mut calib);
+        let (g, a) = imu.sample([20.0, -0.5, 0.0], [-253.9, 94.8, -3.711], 0.005, &mut rng);
+        assert_eq!(g, [params.gyro_range_rad_s, -0.5, 0.0]);
+        assert_eq!(a, [-params.accel_range_m_s2, 94.8, -3.711]);
+        assert!((params.accel_range_m_s2 - 176.5197).abs() < 1e-3);
     }
 
     /// SIM-6: white-noise standard deviation, turn-on bias and bias random walk match the

@@ -177,6 +177,7 @@ pub(super) const NO_COUNTERS: NavCounters = NavCounters {
     sensor_holds: 0,
     blind_stops: 0,
     kin_imu_carried: 0,
+    imu_shocks: 0,
 };
 
 /// Placeholder camera calibration (zero; replaced by [`Navigator::init`]).

@@ -164,7 +164,11 @@ impl Navigator {
         // As `Navigator::vo_lost` (field by field: the filter is borrowed here).
         let vo_lost =
             !self.config.vo_enabled || self.cycles_since_vo > self.config.vo_timeout_cycles;
-        let holding = slip_holding(&self.config, self.reject_history);
+        // Intervals that span an IMU shock (`Navigator::imu_shock`): no hold, and a rejection
+        // is not slip.
+        let shock = self.shock_grace > 0;
+        self.shock_grace = self.shock_grace.saturating_sub(1);
+        let holding = slip_holding(&self.config, self.reject_history) && !shock;
         // The gate test (eq. 46) at the odometry's own covariance: the slip detector. With VO
         // alive an accepted interval is fused by the same call (unless holding); without VO the
         // interval is tested here and then fused with the slip allowance below.
@@ -180,25 +184,30 @@ impl Navigator {
             }
         };
         let allowance = [0.0, 0.0, 0.0, 0.0, crab, 0.0];
-        let result = if fusing {
+        // The interval as fused: the crab allowance added to its lateral variance.
+        let mut fused = rp;
+        if crab.is_finite() {
+            if let Some(v) = fused.covariance.get_mut((4, 4)) {
+                *v += crab;
+            }
+        } else if let Some(o) = fused.observed.get_mut(4) {
+            *o = false;
+        }
+        let result = if fusing && shock {
+            // Spanning an IMU shock the wheels are the reference: fused whatever the gate says
+            // (the shock inflated the velocity variance, so the update re-anchors it).
+            ekf.update_relative_pose(&fused, false)
+        } else if fusing {
             ekf.update_relative_pose_allowance(&rp, allowance)
         } else {
             ekf.gate_relative_pose(&rp)
         };
-        // The recorder (late VO replay) keeps the interval only when the live gate fused it: a
-        // replay on the VO-corrected filter gates it again, but never fuses an interval the
+        // The recorder (late VO replay) keeps the interval only when the live filter fused it:
+        // a replay on the VO-corrected filter gates it again, but never fuses an interval the
         // live gate rejected as slip (a rejected gated update left the filter unchanged). On a
         // crabbing slope the corrected filter otherwise let some crab-free intervals through
         // and moved the estimate uphill at every VO update (SIL-GNC-4).
-        if fusing && result.as_ref().is_ok_and(|d| d.accepted) {
-            let mut fused = rp;
-            if crab.is_finite() {
-                if let Some(v) = fused.covariance.get_mut((4, 4)) {
-                    *v += crab;
-                }
-            } else if let Some(o) = fused.observed.get_mut(4) {
-                *o = false;
-            }
+        if fusing && result.as_ref().is_ok_and(|d| d.applied) {
             self.recorder.relative_pose(&fused, false);
         }
         // The wheels' motion between captures, for VO's boresight (only intervals fused as
@@ -235,7 +244,8 @@ impl Navigator {
                         d.accepted && anchored,
                     );
                 }
-                self.reject_history = (self.reject_history << 1) | u32::from(!d.accepted);
+                let slip = !d.accepted && !shock;
+                self.reject_history = (self.reject_history << 1) | u32::from(slip);
                 if d.accepted {
                     self.reject_streak = 0;
                     // H04: no slip when the kinematics agrees with the estimate.

@@ -511,6 +511,9 @@ pub struct NavCounters {
     /// Kinematic intervals the gate rejected without VO while the IMU velocity was anchored
     /// by a recent zero-velocity update: not fused, the IMU carried the motion.
     pub kin_imu_carried: u32,
+    /// IMU shocks: accelerometer samples saturated at or refused beyond the sensor's range
+    /// ([`Navigator::imu_shock`]); the velocity variance was inflated.
+    pub imu_shocks: u32,
 }
 
 /// Result of the last kinematic interval.
@@ -572,6 +575,9 @@ pub struct Navigator {
     reject_history: u32,
     /// Gate rejections in a row with no VO fused meanwhile.
     reject_streak: u32,
+    /// Kinematic intervals still to come that overlap an IMU shock ([`Self::imu_shock`]):
+    /// their rejections are not slip (no hold, not in `reject_history`).
+    shock_grace: u8,
     /// Sun readings refused by the sun's gate in a row.
     sun_rejections: u32,
     /// VO has held a keyframe since the start (or its start wait timed out).
@@ -614,6 +620,10 @@ pub enum NavError {
 }
 
 /// Yaw (rad, from north towards east) of the attitude `q` (`R` to `N`).
+/// Kinematic intervals after an IMU shock whose rejections are not slip
+/// ([`Navigator::imu_shock`]): the one in progress and the next.
+const SHOCK_GRACE_INTERVALS: u8 = 2;
+
 pub(super) fn yaw_of(q: &Quat) -> f64 {
     let c = q.to_rotation_matrix().into_inner();
     libm::atan2(c[(1, 0)], c[(0, 0)])
@@ -675,6 +685,7 @@ impl Navigator {
         cycles_without_joints: 0,
         reject_history: 0,
         reject_streak: 0,
+        shock_grace: 0,
         sun_rejections: 0,
         vo_started: false,
         protection: Protection::EMPTY,
@@ -757,6 +768,7 @@ impl Navigator {
         self.cycles_without_joints = 0;
         self.reject_history = 0;
         self.reject_streak = 0;
+        self.shock_grace = 0;
         self.sun_rejections = 0;
         self.vo_started = false;
         self.protection = Protection::default();
@@ -915,6 +927,36 @@ impl Navigator {
         }
         if matches!(e, EstError::Faulted | EstError::CovarianceUnhealthy { .. }) {
             self.mode = NavMode::Safed;
+        }
+    }
+
+    /// An IMU shock (found on `cul-de-sac` seed 2: a wheel dropping off a rock edge): an
+    /// accelerometer sample saturated at the sensor's range or refused beyond it. The samples of
+    /// a shock sum to the small true velocity change only when every one of them is integrated
+    /// at its true value; a clipped or missing one leaves up to the range times the sample period
+    /// (0.88 m/s for 18 g0 over 5 ms) in the velocity, which the kinematic gate then reads as
+    /// slip and refuses to correct (the filter ran away at 1.5 m/s there). The velocity
+    /// variances grow by `velocity_sigma_m_s^2` (m/s; recorded for the late-VO replay) so that
+    /// the next kinematic interval or VO pose re-anchors the velocity; the rejections of the
+    /// intervals that span the shock are not taken as slip (no hold; a hold in progress ends).
+    /// Counted in [`NavCounters::imu_shocks`].
+    pub fn imu_shock(&mut self, velocity_sigma_m_s: f64) {
+        self.counters.imu_shocks = self.counters.imu_shocks.saturating_add(1);
+        // The interval in progress and the next one span the shock: the wheels and the IMU
+        // disagree because of it, not because of slip. A hold it already started ends.
+        self.shock_grace = SHOCK_GRACE_INTERVALS;
+        self.reject_history = 0;
+        self.reject_streak = 0;
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        if !(velocity_sigma_m_s.is_finite() && velocity_sigma_m_s > 0.0) {
+            return;
+        }
+        let result = ekf.inflate_velocity(velocity_sigma_m_s, 0.0);
+        self.recorder.inflate_velocity(velocity_sigma_m_s, 0.0);
+        if let Err(e) = result {
+            self.ekf_error(e);
         }
     }
 

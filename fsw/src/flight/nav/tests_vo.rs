@@ -442,3 +442,90 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
         "{learnt} from {samples}"
     );
 }
+
+/// FP-8 (issue 14, `cul-de-sac` seed 2): an IMU shock whose largest sample the accelerometer
+/// clips at its range leaves 0.39 m/s in the filter's velocity (the shock's samples no longer
+/// sum to the true change). Without the response the kinematic gate reads the difference as
+/// slip, refuses every interval and the velocity error stays; with [`Navigator::imu_shock`]
+/// (the executive calls it for a clipped sample) the next intervals re-anchor the velocity.
+#[test]
+fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
+    let run = |respond: bool| {
+        let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+        config.align_sun_wait_samples = 0;
+        // VO counts as alive (its fusion is not modelled here): the gate path of the drive.
+        config.vo_timeout_cycles = u32::MAX;
+        let range = 18.0 * 9.806_65;
+        let mut nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calibration()) {
+            Ok(n) => n,
+            Err(e) => panic!("navigator refused: {e:?}"),
+        };
+        let r = config.geometry.wheel_radius_m;
+        let (g, v_cruise, t_start, t_ramp) = (3.711, 0.1, 2.5, 0.5);
+        let (mut x, mut v) = (0.0_f64, 0.0_f64);
+        // The shock at 20 s: true specific forces that sum to no velocity change.
+        let shock = [94.8, -253.9, 145.0, 14.1];
+        let dt = 0.005;
+        let mut errors = std::vec::Vec::new();
+        for k in 1..=24 * 200u64 {
+            let t = k as f64 * dt;
+            let mut a = if t > t_start && t <= t_start + t_ramp {
+                v_cruise / t_ramp
+            } else {
+                0.0
+            };
+            let i = k as i64 - 20 * 200;
+            if (0..4).contains(&i) {
+                a = shock[i as usize];
+            }
+            v += a * dt;
+            x += v * dt;
+            let t_us = k * 5_000;
+            let measured = a.clamp(-range, range);
+            if respond && measured != a {
+                nav.imu_shock(range * dt);
+            }
+            nav.propagate(Some(&ImuSample {
+                t_us,
+                gyro_rad_s: [0.0; 3],
+                accel_m_s2: [measured, 0.0, -g],
+                valid: true,
+            }));
+            if k % 10 == 0 {
+                nav.kinematic_cycle(Some(&JointState {
+                    drive_angle_rad: [x / r; 6],
+                    drive_rate_rad_s: [v / r; 6],
+                    t_us,
+                    wheel_valid: [true; 6],
+                    suspension_valid: true,
+                    ..JointState::default()
+                }));
+                let _ = nav.guidance_cycle();
+            }
+            if i >= 0 && k % 20 == 0 {
+                errors.push((i, nav.ekf.state().v_n.x - v));
+            }
+        }
+        (errors, nav.counters().imu_shocks)
+    };
+    let (without, shocks_without) = run(false);
+    let (with, shocks_with) = run(true);
+    let at = |e: &[(i64, f64)], i: i64| e.iter().find(|(k, _)| *k >= i).map_or(f64::NAN, |p| p.1);
+    std::eprintln!(
+        "FP-8: velocity error 0.2 s / 1 s / 4 s after the shock: without the response {:.3} / \
+         {:.3} / {:.3} m/s, with it {:.4} / {:.4} / {:.4} m/s",
+        at(&without, 40),
+        at(&without, 200),
+        at(&without, 780),
+        at(&with, 40),
+        at(&with, 200),
+        at(&with, 780)
+    );
+    assert_eq!((shocks_without, shocks_with), (0, 1));
+    assert!(
+        at(&without, 200).abs() > 0.1,
+        "the clipped sample leaves its error"
+    );
+    assert!(at(&with, 40).abs() < 0.02 && at(&with, 200).abs() < 0.005);
+    assert!(at(&with, 780).abs() < 0.005);
+}
