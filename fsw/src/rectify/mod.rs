@@ -569,35 +569,51 @@ pub fn rectify_row(nodes: &[MapNode], row: usize, raw: &[u8], out: &mut [u8]) {
     let Ok(row_out) = <&mut [u8; W]>::try_from(out) else {
         return;
     };
-    // Column interpolation of node `i` (1/2048 px; wrapping like the i32 arithmetic of the
-    // module doc's formula in the flight build).
-    let c0 = LATTICE_STEP_PX as i32 - b;
-    let node = |i: usize| match (pair.get(i), pair.get(LATTICE_COLS + i)) {
-        (Some(p0), Some(p1)) => (
-            p0.u.wrapping_mul(c0).wrapping_add(p1.u.wrapping_mul(b)),
-            p0.v.wrapping_mul(c0).wrapping_add(p1.v.wrapping_mul(b)),
-        ),
-        _ => (-1, -1),
-    };
-    // Plan every cell, then run the plan: two short loops instead of one that runs out of
-    // registers on the rover CPU.
-    let mut left = node(0);
-    let plan: [CellPlan; LATTICE_COLS - 1] = core::array::from_fn(|cell| {
-        let right = node(cell + 1);
-        let slot = plan_cell(left, right).unwrap_or(CellPlan::CHECKED);
-        left = right;
-        slot
-    });
-    run_plan(image, &plan, row_out);
+    let plan = plan_row(pair, b);
+    if run_plan(image, &plan, row_out) == 0 {
+        return;
+    }
+    // The cells run_plan left alone: on the checked path.
     for (cell, (slot, out_cell)) in plan
         .iter()
         .zip(row_out.chunks_exact_mut(LATTICE_STEP_PX))
         .enumerate()
     {
-        if slot.offset == CellPlan::CHECKED.offset {
+        if slot.window(image).is_none() {
+            let node = |i: usize| match (pair.get(i), pair.get(LATTICE_COLS + i)) {
+                (Some(p0), Some(p1)) => column(p0, p1, b),
+                _ => (-1, -1),
+            };
             checked_cell(raw, out_cell, node(cell), node(cell + 1));
         }
     }
+}
+
+/// Column interpolation of the nodes `p0` (upper) and `p1` (lower) at row fraction `b`
+/// (1/2048 px; wrapping like the i32 arithmetic of the module doc's formula in the flight
+/// build).
+#[inline(always)]
+fn column(p0: &MapNode, p1: &MapNode, b: i32) -> (i32, i32) {
+    let c0 = LATTICE_STEP_PX as i32 - b;
+    (
+        p0.u.wrapping_mul(c0).wrapping_add(p1.u.wrapping_mul(b)),
+        p0.v.wrapping_mul(c0).wrapping_add(p1.v.wrapping_mul(b)),
+    )
+}
+
+/// The plan of every cell of a row ([`plan_cell`]) between the lattice rows of `pair` (upper
+/// row, then lower row) at row fraction `b`.
+#[inline(always)]
+fn plan_row(pair: &[MapNode; 2 * LATTICE_COLS], b: i32) -> [CellPlan; LATTICE_COLS - 1] {
+    let nodes: [(i32, i32); LATTICE_COLS] =
+        core::array::from_fn(|i| match (pair.get(i), pair.get(LATTICE_COLS + i)) {
+            (Some(p0), Some(p1)) => column(p0, p1, b),
+            _ => (-1, -1),
+        });
+    core::array::from_fn(|cell| match (nodes.get(cell), nodes.get(cell + 1)) {
+        (Some(&left), Some(&right)) => plan_cell(left, right).unwrap_or(CellPlan::CHECKED),
+        _ => CellPlan::CHECKED,
+    })
 }
 
 /// A planned cell of [`rectify_row`]: `a`, `d` of [`packed_cell`] and the offset of its
@@ -618,27 +634,40 @@ impl CellPlan {
     };
     /// Bit of `offset` marking a cell on two raw rows.
     const TWO_ROWS: u32 = 1 << 31;
+
+    /// The cell's window of `image` and whether it touches two rows; `None` for a checked
+    /// cell (and for a window that would reach past the image's end, so that such a cell,
+    /// next to the last rows, is left to the checked path as well).
+    #[inline(always)]
+    fn window<'a>(&self, image: &'a [u8; IMAGE_PIXELS]) -> Option<(&'a [u8; WINDOW_LEN], bool)> {
+        let offset = (self.offset & !Self::TWO_ROWS) as usize;
+        let window = image.get(offset..offset + WINDOW_LEN)?.try_into().ok()?;
+        Some((window, self.offset & Self::TWO_ROWS != 0))
+    }
 }
 
-/// The fast cells of a planned row ([`rectify_row`]); checked cells are left alone.
+/// The fast cells of a planned row ([`rectify_row`]); the others ([`CellPlan::window`]
+/// `None`) are left alone and counted.
 #[inline(never)]
-fn run_plan(image: &[u8; IMAGE_PIXELS], plan: &[CellPlan; LATTICE_COLS - 1], out: &mut [u8; W]) {
+fn run_plan(
+    image: &[u8; IMAGE_PIXELS],
+    plan: &[CellPlan; LATTICE_COLS - 1],
+    out: &mut [u8; W],
+) -> usize {
+    let mut checked = 0;
     // The rounding term 2^15 of the formula, opaque to the optimiser so that it stays in a
     // register and folds into the last multiply-accumulate (one instruction less per pixel).
     let rounding = core::hint::black_box(1 << 15);
     for (slot, out_cell) in plan.iter().zip(out.chunks_exact_mut(LATTICE_STEP_PX)) {
-        let offset = (slot.offset & !CellPlan::TWO_ROWS) as usize;
-        let window: Option<&[u8; WINDOW_LEN]> = image
-            .get(offset..offset + WINDOW_LEN)
-            .and_then(|s| s.try_into().ok());
-        match window {
-            Some(window) if slot.offset & CellPlan::TWO_ROWS == 0 => {
+        match slot.window(image) {
+            Some((window, false)) => {
                 packed_cell::<false>(window, out_cell, slot.a, slot.d, rounding)
             }
-            Some(window) => packed_cell::<true>(window, out_cell, slot.a, slot.d, rounding),
-            None => {}
+            Some((window, true)) => packed_cell::<true>(window, out_cell, slot.a, slot.d, rounding),
+            None => checked += 1,
         }
     }
+    checked
 }
 
 /// The plan of the cell between the column-interpolated nodes `(lu, lv)` and `(ru, rv)`
@@ -680,11 +709,8 @@ fn plan_cell((lu, lv): (i32, i32), (ru, rv): (i32, i32)) -> Option<CellPlan> {
     Some(CellPlan {
         a: (qu_frac << 15) | v0,
         d: (du << 15).wrapping_add(dv),
-        offset: if dy == 0 {
-            offset
-        } else {
-            offset | CellPlan::TWO_ROWS
-        },
+        // dy is -1, 0 or 1 here: bit 31 set exactly when the cell touches two rows.
+        offset: offset | (dy as u32) << 31,
     })
 }
 
@@ -715,13 +741,14 @@ fn packed_cell<const TWO_ROWS: bool>(
             *px = bilinear_rounded([i00, i10, i01, i11], wx, wy, rounding);
         }
         // Keeps the next pixel's loads after this store: eight interleaved pixels run out
-        // of registers on the rover CPU (no instruction is emitted).
+        // of registers on the rover CPU (a compiler-only barrier, no instruction is emitted).
         core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
         a = a.wrapping_add(d);
     }
 }
 
-/// The checked per-pixel path of [`rectify_row`] for all cells of `out`, lattice rows `upper`, `lower` at row fraction `b`.
+/// The checked per-pixel path of [`rectify_row`] for all cells of `out`, lattice rows `upper`,
+/// `lower` at row fraction `b`.
 fn checked_cells(upper: &[MapNode], lower: &[MapNode], b: i32, raw: &[u8], out: &mut [u8]) {
     let step = LATTICE_STEP_PX as i32;
     for (cell, out_cell) in out.chunks_mut(LATTICE_STEP_PX).enumerate() {

@@ -540,6 +540,47 @@ fn rect_7_row_kernel_matches_per_pixel_reference() {
             );
         }
     }
+    // Maps at the raw image's borders: every node (or a steep run of nodes) at the last
+    // columns and rows that still have a 2 x 2 neighbourhood, and just past them.
+    let raw: Vec<u8> = (0..IMAGE_PIXELS).map(|_| rng.random()).collect();
+    let edge = |x: f64, y: f64| MapNode {
+        u: (x * 256.0) as i32,
+        v: (y * 256.0) as i32,
+    };
+    let mut edge_maps: Vec<Vec<MapNode>> = Vec::new();
+    for (x, y) in [
+        (638.5, 477.5),
+        (638.99, 477.99),
+        (639.0, 477.5),
+        (638.5, 478.0),
+        (0.0, 0.0),
+        (-0.01, 0.5),
+        (0.5, -0.01),
+        (631.3, 476.7),
+        (632.7, 477.2),
+    ] {
+        edge_maps.push(vec![edge(x, y); LATTICE_NODES]);
+        // Rows and columns running into the corner: 1 px per lattice step across.
+        edge_maps.push(
+            (0..LATTICE_NODES)
+                .map(|n| {
+                    let (i, j) = ((n % LATTICE_COLS) as f64, (n / LATTICE_COLS) as f64);
+                    edge(x - 0.13 * (80.0 - i), y - 0.11 * (60.0 - j))
+                })
+                .collect(),
+        );
+    }
+    for (m, map) in edge_maps.iter().enumerate() {
+        for row in [0, 1, 7, 8, 240, 471, 472, 478, 479] {
+            let mut want = [0u8; W];
+            let mut got = [0xa5u8; W];
+            reference_row(map, row, &raw, &mut want);
+            rectify_row(map, row, &raw, &mut got);
+            assert_eq!(got, want, "edge map {m} row {row}");
+            compared += W;
+            zeros += want.iter().filter(|&&p| p == 0).count();
+        }
+    }
     println!("RECT-7 {compared} pixels compared, {zeros} outside (0), {fast_like} lens-like rows");
     // The maps really left the image somewhere, and most pixels were inside.
     assert!(
