@@ -31,6 +31,10 @@
 //! `(I00 (256 - wx)(256 - wy) + I10 wx (256 - wy) + I01 (256 - wx) wy + I11 wx wy + 2^15) >> 16`.
 //! Integer arithmetic only, so the host and the rover CPU give the same bytes. A pixel whose
 //! raw neighbourhood is outside the image (impossible with a map that passed the checks) is 0.
+//! [`rectify_row`] computes these bytes cell by cell (issue 18): a planned cell whose pixels
+//! stay inside the image, within 8 raw columns and 2 raw rows, runs on one window of the raw
+//! image with a packed position register and no per-pixel checks; other cells run the checked
+//! per-pixel code (`docs/vo.md`, RECT-7).
 //!
 //! Interpolating the map between nodes 8 px apart costs at most about 0.03 px against the
 //! exact lens model for the nominal lens (`rect_2_lattice_error`).
@@ -530,9 +534,11 @@ pub fn undistort(c: &RawCamera, xd: f64, yd: f64) -> Option<([f64; 2], u32)> {
 
 /// Fractional bits of a column-interpolated node (1/256 px x 8 = 1/2048 px).
 const NODE_BITS: u32 = Q_FRAC_BITS - 3;
-/// Bytes of a fast cell's window of the raw image: the 2 x 2 neighbourhoods at `x_rel <= 7`,
-/// `y_rel <= 1` from the cell's first raw pixel.
-const WINDOW_LEN: usize = 7 + W + W + 2;
+/// Bytes of a fast cell's window of the raw image: from one byte before the cell's first raw
+/// pixel (so that every load of [`packed_cell`] has a nonzero offset from one address, one
+/// instruction less per pixel on the rover CPU), the 2 x 2 neighbourhoods at `x_rel <= 7`,
+/// `y_rel <= 1` from that pixel.
+const WINDOW_LEN: usize = 1 + 7 + W + W + 2;
 
 /// Rectifies row `row` of one image: `nodes` is that camera's lattice ([`LATTICE_NODES`]),
 /// `raw` the raw image ([`IMAGE_PIXELS`] bytes), `out` the rectified row ([`IMAGE_WIDTH_PX`]
@@ -635,12 +641,13 @@ impl CellPlan {
     /// Bit of `offset` marking a cell on two raw rows.
     const TWO_ROWS: u32 = 1 << 31;
 
-    /// The cell's window of `image` and whether it touches two rows; `None` for a checked
-    /// cell (and for a window that would reach past the image's end, so that such a cell,
-    /// next to the last rows, is left to the checked path as well).
+    /// The cell's window of `image` ([`WINDOW_LEN`]) and whether it touches two rows; `None`
+    /// for a checked cell, and for a window that would start before the image (a cell at the
+    /// first pixel) or reach past its end (next to the last rows): such cells are left to the
+    /// checked path as well.
     #[inline(always)]
     fn window<'a>(&self, image: &'a [u8; IMAGE_PIXELS]) -> Option<(&'a [u8; WINDOW_LEN], bool)> {
-        let offset = (self.offset & !Self::TWO_ROWS) as usize;
+        let offset = ((self.offset & !Self::TWO_ROWS) as usize).checked_sub(1)?;
         let window = image.get(offset..offset + WINDOW_LEN)?.try_into().ok()?;
         Some((window, self.offset & Self::TWO_ROWS != 0))
     }
@@ -729,7 +736,7 @@ fn packed_cell<const TWO_ROWS: bool>(
     rounding: i32,
 ) {
     for px in out.iter_mut() {
-        let x = (a >> 29) as usize;
+        let x = 1 + (a >> 29) as usize;
         let o = if TWO_ROWS {
             x + ((a >> Q_FRAC_BITS) & 1) as usize * W
         } else {
