@@ -575,22 +575,35 @@ pub fn rectify_row(nodes: &[MapNode], row: usize, raw: &[u8], out: &mut [u8]) {
     let Ok(row_out) = <&mut [u8; W]>::try_from(out) else {
         return;
     };
-    let plan = plan_row(pair, b);
-    if run_plan(image, &plan, row_out) == 0 {
-        return;
-    }
-    // The cells run_plan left alone: on the checked path.
-    for (cell, (slot, out_cell)) in plan
-        .iter()
-        .zip(row_out.chunks_exact_mut(LATTICE_STEP_PX))
-        .enumerate()
-    {
-        if slot.window(image).is_none() {
-            let node = |i: usize| match (pair.get(i), pair.get(LATTICE_COLS + i)) {
-                (Some(p0), Some(p1)) => column(p0, p1, b),
-                _ => (-1, -1),
-            };
-            checked_cell(raw, out_cell, node(cell), node(cell + 1));
+    let nodes: [(i32, i32); LATTICE_COLS] =
+        core::array::from_fn(|i| match (pair.get(i), pair.get(LATTICE_COLS + i)) {
+            (Some(p0), Some(p1)) => column(p0, p1, b),
+            _ => (-1, -1),
+        });
+    run_row(image, &nodes, row_out);
+}
+
+/// The cells of a row between the column-interpolated `nodes`: planned ([`plan_cell`]) and run
+/// on their window ([`packed_cell`]), or on the checked path.
+#[inline(never)]
+fn run_row(image: &[u8; IMAGE_PIXELS], nodes: &[(i32, i32); LATTICE_COLS], out: &mut [u8; W]) {
+    // The rounding term 2^15 of the formula, opaque to the optimiser so that it stays in a
+    // register and folds into the last multiply-accumulate (one instruction less per pixel).
+    let rounding = core::hint::black_box(1 << 15);
+    for (cell, out_cell) in out.chunks_exact_mut(LATTICE_STEP_PX).enumerate() {
+        let (Some(&left), Some(&right)) = (nodes.get(cell), nodes.get(cell + 1)) else {
+            continue;
+        };
+        let fast = plan_cell(left, right).and_then(|plan| Some((plan, plan.window(image)?)));
+        match (fast, <&mut [u8; LATTICE_STEP_PX]>::try_from(&mut *out_cell)) {
+            (Some((plan, (window, false))), Ok(cell_out)) => {
+                packed_cell::<false>(window, cell_out, plan.a, plan.d, rounding)
+            }
+            (Some((plan, (window, true))), Ok(cell_out)) => {
+                packed_cell::<true>(window, cell_out, plan.a, plan.d, rounding)
+            }
+            // The raw image's first IMAGE_PIXELS bytes are all the checked path can read.
+            _ => checked_cell(image, out_cell, left, right),
         }
     }
 }
@@ -607,23 +620,8 @@ fn column(p0: &MapNode, p1: &MapNode, b: i32) -> (i32, i32) {
     )
 }
 
-/// The plan of every cell of a row ([`plan_cell`]) between the lattice rows of `pair` (upper
-/// row, then lower row) at row fraction `b`.
-#[inline(always)]
-fn plan_row(pair: &[MapNode; 2 * LATTICE_COLS], b: i32) -> [CellPlan; LATTICE_COLS - 1] {
-    let nodes: [(i32, i32); LATTICE_COLS] =
-        core::array::from_fn(|i| match (pair.get(i), pair.get(LATTICE_COLS + i)) {
-            (Some(p0), Some(p1)) => column(p0, p1, b),
-            _ => (-1, -1),
-        });
-    core::array::from_fn(|cell| match (nodes.get(cell), nodes.get(cell + 1)) {
-        (Some(&left), Some(&right)) => plan_cell(left, right).unwrap_or(CellPlan::CHECKED),
-        _ => CellPlan::CHECKED,
-    })
-}
-
-/// A planned cell of [`rectify_row`]: `a`, `d` of [`packed_cell`] and the offset of its
-/// window in the raw image (bit 31: the cell touches two raw rows), or [`CellPlan::CHECKED`].
+/// A planned fast cell of [`rectify_row`]: `a`, `d` of [`packed_cell`] and the offset of its
+/// first raw pixel in the raw image (bit 31: the cell touches two raw rows).
 #[derive(Clone, Copy)]
 struct CellPlan {
     a: u32,
@@ -632,49 +630,18 @@ struct CellPlan {
 }
 
 impl CellPlan {
-    /// A cell on the checked per-pixel path.
-    const CHECKED: Self = Self {
-        a: 0,
-        d: 0,
-        offset: u32::MAX,
-    };
     /// Bit of `offset` marking a cell on two raw rows.
     const TWO_ROWS: u32 = 1 << 31;
 
     /// The cell's window of `image` ([`WINDOW_LEN`]) and whether it touches two rows; `None`
-    /// for a checked cell, and for a window that would start before the image (a cell at the
-    /// first pixel) or reach past its end (next to the last rows): such cells are left to the
-    /// checked path as well.
+    /// for a window that would start before the image (a cell at the first pixel) or reach
+    /// past its end (next to the last rows): such cells are left to the checked path.
     #[inline(always)]
-    fn window<'a>(&self, image: &'a [u8; IMAGE_PIXELS]) -> Option<(&'a [u8; WINDOW_LEN], bool)> {
+    fn window(self, image: &[u8; IMAGE_PIXELS]) -> Option<(&[u8; WINDOW_LEN], bool)> {
         let offset = ((self.offset & !Self::TWO_ROWS) as usize).checked_sub(1)?;
         let window = image.get(offset..offset + WINDOW_LEN)?.try_into().ok()?;
         Some((window, self.offset & Self::TWO_ROWS != 0))
     }
-}
-
-/// The fast cells of a planned row ([`rectify_row`]); the others ([`CellPlan::window`]
-/// `None`) are left alone and counted.
-#[inline(never)]
-fn run_plan(
-    image: &[u8; IMAGE_PIXELS],
-    plan: &[CellPlan; LATTICE_COLS - 1],
-    out: &mut [u8; W],
-) -> usize {
-    let mut checked = 0;
-    // The rounding term 2^15 of the formula, opaque to the optimiser so that it stays in a
-    // register and folds into the last multiply-accumulate (one instruction less per pixel).
-    let rounding = core::hint::black_box(1 << 15);
-    for (slot, out_cell) in plan.iter().zip(out.chunks_exact_mut(LATTICE_STEP_PX)) {
-        match slot.window(image) {
-            Some((window, false)) => {
-                packed_cell::<false>(window, out_cell, slot.a, slot.d, rounding)
-            }
-            Some((window, true)) => packed_cell::<true>(window, out_cell, slot.a, slot.d, rounding),
-            None => checked += 1,
-        }
-    }
-    checked
 }
 
 /// The plan of the cell between the column-interpolated nodes `(lu, lv)` and `(ru, rv)`
