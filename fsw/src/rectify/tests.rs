@@ -393,3 +393,198 @@ fn rect_5_items_are_quantum_independent() {
         RectifyProgress::Finished(Err(RectifyError::FrameChanged))
     );
 }
+
+/// The per-pixel row kernel as it was before the cell fast path (issue 18), kept verbatim as
+/// the oracle of RECT-7 (checked arithmetic: the test maps stay far from i32 overflow).
+fn reference_row(nodes: &[MapNode], row: usize, raw: &[u8], out: &mut [u8]) {
+    let step = LATTICE_STEP_PX as i32;
+    let j = row / LATTICE_STEP_PX;
+    let b = (row % LATTICE_STEP_PX) as i32;
+    let lattice_row = |jj: usize| nodes.get(jj * LATTICE_COLS..(jj + 1) * LATTICE_COLS);
+    let (Some(upper), Some(lower)) = (lattice_row(j), lattice_row(j + 1)) else {
+        out.fill(0);
+        return;
+    };
+    for (cell, out_cell) in out.chunks_mut(LATTICE_STEP_PX).enumerate() {
+        let corners = (upper.get(cell..cell + 2), lower.get(cell..cell + 2));
+        let (Some(&[p00, p10]), Some(&[p01, p11])) = corners else {
+            out_cell.fill(0);
+            continue;
+        };
+        let lu = p00.u * (step - b) + p01.u * b;
+        let lv = p00.v * (step - b) + p01.v * b;
+        let ru = p10.u * (step - b) + p11.u * b;
+        let rv = p10.v * (step - b) + p11.v * b;
+        let (mut qu, mut qv) = (lu * step, lv * step);
+        let (du, dv) = (ru - lu, rv - lv);
+        for px in out_cell.iter_mut() {
+            *px = reference_sample(raw, qu, qv);
+            qu += du;
+            qv += dv;
+        }
+    }
+}
+
+/// The per-pixel sample of [`reference_row`] (verbatim).
+fn reference_sample(raw: &[u8], qu: i32, qv: i32) -> u8 {
+    if qu < 0 || qv < 0 {
+        return 0;
+    }
+    let (x, y) = ((qu >> Q_FRAC_BITS) as usize, (qv >> Q_FRAC_BITS) as usize);
+    if x + 1 >= W || y + 1 >= H {
+        return 0;
+    }
+    let wx = ((qu >> (Q_FRAC_BITS - 8)) & 0xff) as u32;
+    let wy = ((qv >> (Q_FRAC_BITS - 8)) & 0xff) as u32;
+    let top = y * W + x;
+    let Some(window) = raw.get(top..top + W + 2) else {
+        return 0;
+    };
+    let (Some(&i00), Some(&i10), Some(&i01), Some(&i11)) = (
+        window.first(),
+        window.get(1),
+        window.get(W),
+        window.get(W + 1),
+    ) else {
+        return 0;
+    };
+    let (wx, wy) = (wx as i32, wy as i32);
+    let upper = (i32::from(i00) << 8) + (i32::from(i10) - i32::from(i00)) * wx;
+    let lower = (i32::from(i01) << 8) + (i32::from(i11) - i32::from(i01)) * wx;
+    (((upper << 8) + (lower - upper) * wy + (1 << 15)) >> 16) as u8
+}
+
+/// A random map of one camera for RECT-7: `kind` 0 a smooth lens-like map well inside the
+/// raw image, 1 the same shifted and scaled so that parts of the field leave the image (any
+/// side, near the borders and far out), 2 every node uniform in +-2^23 (1/256 px).
+fn random_map(rng: &mut impl rand::Rng, kind: u32) -> Vec<MapNode> {
+    let mut map = vec![MapNode::default(); LATTICE_NODES];
+    let (su, sv) = (rng.random_range(0.8..1.2), rng.random_range(0.8..1.2));
+    let (ou, ov) = match kind {
+        0 => (rng.random_range(-4.0..4.0), rng.random_range(-4.0..4.0)),
+        _ => (rng.random_range(-60.0..60.0), rng.random_range(-60.0..60.0)),
+    };
+    let (shear, k1) = (rng.random_range(-0.1..0.1), rng.random_range(-0.3..0.05));
+    for (n, node) in map.iter_mut().enumerate() {
+        let x = ((n % LATTICE_COLS) * LATTICE_STEP_PX) as f64;
+        let y = ((n / LATTICE_COLS) * LATTICE_STEP_PX) as f64;
+        *node = if kind == 2 {
+            MapNode {
+                u: rng.random_range(-(1 << 23)..1 << 23),
+                v: rng.random_range(-(1 << 23)..1 << 23),
+            }
+        } else {
+            // Barrel-like: positions pulled towards the centre, scaled, sheared, shifted.
+            let (dx, dy) = ((x - 319.5) / 320.0, (y - 239.5) / 320.0);
+            let g = 1.0 + k1 * (dx * dx + dy * dy);
+            let u = 319.5 + su * 300.0 * dx * g + shear * 300.0 * dy * g + ou;
+            let v = 239.5 + sv * 300.0 * dy * g + ov;
+            let jitter = rng.random_range(-64..64);
+            MapNode {
+                u: (u * 256.0) as i32 + jitter,
+                v: (v * 256.0) as i32 - jitter,
+            }
+        };
+    }
+    map
+}
+
+/// RECT-7: the row kernel with the cell fast path (issue 18) is bit-identical to the per-pixel
+/// reference for random maps (inside the image, partly outside, random nodes anywhere), random
+/// raw images and every row (including rows past the lattice), and for short or long raw and
+/// output buffers.
+#[test]
+fn rect_7_row_kernel_matches_per_pixel_reference() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(18);
+    let (mut fast_like, mut zeros, mut compared) = (0usize, 0usize, 0usize);
+    for case in 0..24u32 {
+        let kind = case % 3;
+        let map = random_map(&mut rng, kind);
+        let raw: Vec<u8> = (0..IMAGE_PIXELS).map(|_| rng.random()).collect();
+        let rows: Vec<usize> = if case < 3 {
+            (0..=H + 1).collect()
+        } else {
+            (0..40).map(|_| rng.random_range(0..=H + 1)).collect()
+        };
+        for row in rows {
+            let mut want = [0u8; W];
+            let mut got = [0xa5u8; W];
+            reference_row(&map, row, &raw, &mut want);
+            rectify_row(&map, row, &raw, &mut got);
+            assert_eq!(got, want, "case {case} kind {kind} row {row}");
+            compared += W;
+            zeros += want.iter().filter(|&&p| p == 0).count();
+            fast_like += usize::from(kind == 0);
+        }
+        // Odd buffers: a raw image cut short, an output row shorter or longer than W, a map
+        // cut short.
+        let row = rng.random_range(0..H);
+        let cut = rng.random_range(0..IMAGE_PIXELS);
+        for (raw_len, out_len, map_len) in [
+            (cut, W, LATTICE_NODES),
+            (IMAGE_PIXELS, rng.random_range(0..W), LATTICE_NODES),
+            (IMAGE_PIXELS, W + rng.random_range(1..20), LATTICE_NODES),
+            (IMAGE_PIXELS + 7, W, rng.random_range(0..LATTICE_NODES)),
+        ] {
+            let raw_long: Vec<u8> = raw.iter().copied().chain([9u8; 7]).collect();
+            let raw = &raw_long[..raw_len];
+            let map = &map[..map_len];
+            let mut want = vec![0u8; out_len];
+            let mut got = vec![0x5au8; out_len];
+            reference_row(map, row, raw, &mut want);
+            rectify_row(map, row, raw, &mut got);
+            assert_eq!(
+                got, want,
+                "case {case} row {row} raw {raw_len} out {out_len}"
+            );
+        }
+    }
+    // Maps at the raw image's borders: every node (or a steep run of nodes) at the last
+    // columns and rows that still have a 2 x 2 neighbourhood, and just past them.
+    let raw: Vec<u8> = (0..IMAGE_PIXELS).map(|_| rng.random()).collect();
+    let edge = |x: f64, y: f64| MapNode {
+        u: (x * 256.0) as i32,
+        v: (y * 256.0) as i32,
+    };
+    let mut edge_maps: Vec<Vec<MapNode>> = Vec::new();
+    for (x, y) in [
+        (638.5, 477.5),
+        (638.99, 477.99),
+        (639.0, 477.5),
+        (638.5, 478.0),
+        (0.0, 0.0),
+        (-0.01, 0.5),
+        (0.5, -0.01),
+        (631.3, 476.7),
+        (632.7, 477.2),
+    ] {
+        edge_maps.push(vec![edge(x, y); LATTICE_NODES]);
+        // Rows and columns running into the corner: 1 px per lattice step across.
+        edge_maps.push(
+            (0..LATTICE_NODES)
+                .map(|n| {
+                    let (i, j) = ((n % LATTICE_COLS) as f64, (n / LATTICE_COLS) as f64);
+                    edge(x - 0.13 * (80.0 - i), y - 0.11 * (60.0 - j))
+                })
+                .collect(),
+        );
+    }
+    for (m, map) in edge_maps.iter().enumerate() {
+        for row in [0, 1, 7, 8, 240, 471, 472, 478, 479] {
+            let mut want = [0u8; W];
+            let mut got = [0xa5u8; W];
+            reference_row(map, row, &raw, &mut want);
+            rectify_row(map, row, &raw, &mut got);
+            assert_eq!(got, want, "edge map {m} row {row}");
+            compared += W;
+            zeros += want.iter().filter(|&&p| p == 0).count();
+        }
+    }
+    println!("RECT-7 {compared} pixels compared, {zeros} outside (0), {fast_like} lens-like rows");
+    // The maps really left the image somewhere, and most pixels were inside.
+    assert!(
+        zeros > compared / 50 && zeros < compared / 2,
+        "{zeros} of {compared}"
+    );
+}
