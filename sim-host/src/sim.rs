@@ -226,6 +226,8 @@ pub struct RunResult {
     /// VO yaw boresight learnt by the flight software at the end (rad, positive: VO's
     /// translation turned towards `+y` of `R`) and the samples it learnt from.
     pub vo_boresight: (f64, u32),
+    /// The error of the flight software's last failed VO update, if any.
+    pub vo_last_error: Option<String>,
     /// Every VO relative pose checked against the truth.
     pub vo_checks: Vec<VoCheck>,
     /// Rocks of the terrain `[north, east, radius]` for the top view.
@@ -466,6 +468,7 @@ pub fn run_with<H: RunHooks>(
         vo_mean_features: (vo_seen > 0).then(|| vo_features / f64::from(vo_seen)),
         vo_mean_inliers: (vo_seen > 0).then(|| vo_inliers / f64::from(vo_seen)),
         vo_boresight: fsw.nav().vo_boresight(),
+        vo_last_error: fsw.nav().last_vo_error().map(|e| format!("{e:?}")),
         vo_checks,
         rocks: w
             .terrain

@@ -91,6 +91,8 @@ pub struct VoSummary {
     pub boresight_mrad: f64,
     /// Samples the boresight was learnt from.
     pub boresight_samples: u32,
+    /// The last VO failure's reason (`fsw::vo::VoError`), if VO failed.
+    pub last_error: Option<String>,
 }
 
 /// Timing of one rate group.
@@ -447,6 +449,7 @@ pub fn summarise(run: &RunResult) -> Summary {
             mean_inliers: run.vo_mean_inliers,
             boresight_mrad: run.vo_boresight.0 * 1e3,
             boresight_samples: run.vo_boresight.1,
+            last_error: run.vo_last_error.clone(),
         },
         timing,
         device_faults: run.device_faults,

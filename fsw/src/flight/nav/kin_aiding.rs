@@ -193,11 +193,7 @@ impl Navigator {
         } else if let Some(o) = fused.observed.get_mut(4) {
             *o = false;
         }
-        let result = if fusing && shock {
-            // Spanning an IMU shock the wheels are the reference: fused whatever the gate says
-            // (the shock inflated the velocity variance, so the update re-anchors it).
-            ekf.update_relative_pose(&fused, false)
-        } else if fusing {
+        let result = if fusing {
             ekf.update_relative_pose_allowance(&rp, allowance)
         } else {
             ekf.gate_relative_pose(&rp)

@@ -564,6 +564,8 @@ pub struct Navigator {
     /// Diagnostic trajectories (kin2d, kin3d, dead reckoning, VO-only).
     traj: Trajectories,
     vo_quality: Option<VoOutput>,
+    /// The error of the last VO update that failed (telemetry; `None` before any failure).
+    last_vo_error: Option<crate::vo::VoError>,
     /// The VO gate's last verdict and rejection streak.
     vo_gate: VoGateStatus,
     /// EKF pose and time of the last capture (the capture policy's reference).
@@ -678,6 +680,7 @@ impl Navigator {
         last_guidance: None,
         traj: Trajectories::EMPTY,
         vo_quality: None,
+        last_vo_error: None,
         vo_gate: empty::NO_VO_GATE,
         last_capture: None,
         counters: empty::NO_COUNTERS,
@@ -761,6 +764,7 @@ impl Navigator {
         self.last_guidance = None;
         self.traj = Trajectories::new(p0, config.initial_yaw_rad);
         self.vo_quality = None;
+        self.last_vo_error = None;
         self.vo_gate = VoGateStatus::default();
         self.last_capture = None;
         self.counters = NavCounters::default();
@@ -919,6 +923,11 @@ impl Navigator {
         self.vo_quality.as_ref()
     }
 
+    /// The error of the last failed VO update ([`NavCounters::vo_failures`]), if any.
+    pub fn last_vo_error(&self) -> Option<crate::vo::VoError> {
+        self.last_vo_error
+    }
+
     fn ekf_error(&mut self, e: EstError) {
         self.counters.ekf_errors = self.counters.ekf_errors.saturating_add(1);
         // `Faulted` only repeats that an earlier error faulted the filter: keep the cause.
@@ -937,8 +946,9 @@ impl Navigator {
     /// (0.88 m/s for 18 g0 over 5 ms) in the velocity, which the kinematic gate then reads as
     /// slip and refuses to correct (the filter ran away at 1.5 m/s there). The velocity
     /// variances grow by `velocity_sigma_m_s^2` (m/s; recorded for the late-VO replay) so that
-    /// the next kinematic interval or VO pose re-anchors the velocity; the rejections of the
-    /// intervals that span the shock are not taken as slip (no hold; a hold in progress ends).
+    /// the next kinematic interval or VO pose re-anchors the velocity; the intervals that span
+    /// the shock are gated at that covariance without a slip hold (a hold in progress ends) and
+    /// their rejections are not counted as slip.
     /// Counted in [`NavCounters::imu_shocks`].
     pub fn imu_shock(&mut self, velocity_sigma_m_s: f64) {
         self.counters.imu_shocks = self.counters.imu_shocks.saturating_add(1);

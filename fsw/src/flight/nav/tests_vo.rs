@@ -447,7 +447,8 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
 /// clips at its range leaves 0.39 m/s in the filter's velocity (the shock's samples no longer
 /// sum to the true change). Without the response the kinematic gate reads the difference as
 /// slip, refuses every interval and the velocity error stays; with [`Navigator::imu_shock`]
-/// (the executive calls it for a clipped sample) the next intervals re-anchor the velocity.
+/// (the executive calls it for a clipped sample) the next intervals, gated at the inflated
+/// covariance without a hold, re-anchor the velocity.
 #[test]
 fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
     let run = |respond: bool| {

@@ -263,9 +263,10 @@ impl Navigator {
                     None => self.traj.vo = None,
                 }
             }
-            Err(_) => {
+            Err(e) => {
                 if had_key {
                     self.counters.vo_failures = self.counters.vo_failures.saturating_add(1);
+                    self.last_vo_error = Some(e);
                 }
             }
         }
