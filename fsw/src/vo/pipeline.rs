@@ -9,7 +9,9 @@
 //! (chunks of 64 candidates), stereo match one new feature (1 each), finish (1).
 //! The sequence of items depends only on the input, so the number of steps is deterministic.
 
-use super::features::{select_more, ForstnerDetector, CELL_COUNT, END_ROW, FIRST_ROW};
+use super::features::{
+    select_more, ForstnerDetector, BORDER_PX, CELL_COUNT, END_ROW, FIRST_ROW,
+};
 use super::image::{CheckSums, Image, Template, CHECK_BANDS};
 use super::motion::{
     finish_estimate, mark_inliers, ml_iteration, relative_pose, residual_median, robust_gate,
@@ -28,7 +30,11 @@ const SORT_CHUNK: usize = 64;
 /// Iterations of the maximum-likelihood rounds are capped at this many per round.
 const MAX_ML_ITERATIONS: u8 = 50;
 
-/// A keyframe feature: its stereo pixels and its left template.
+/// A keyframe feature: its stereo pixels and its left template. The template is centred on the
+/// integer pixel nearest the left position (`round(pixels[0]), round(pixels[1])`): a newly
+/// detected feature sits on that pixel, a carried one (tracked into this keyframe, see
+/// `Phase::Seed`) keeps its sub-pixel position, so its offset from the template centre is at
+/// most half a pixel along each axis.
 #[derive(Debug, Clone, Copy)]
 struct KeyFeature {
     pixels: [f32; 4],
@@ -67,6 +73,9 @@ enum Phase {
         round: u8,
         iteration: u8,
     },
+    Seed {
+        next: usize,
+    },
     Detect {
         row: usize,
     },
@@ -78,6 +87,9 @@ enum Phase {
         end: usize,
     },
     Choose {
+        next: usize,
+    },
+    Carry {
         next: usize,
     },
     StereoNew {
@@ -188,6 +200,12 @@ pub struct VisualOdometry<const N: usize> {
     frame_sequence: u32,
     frame_checksum: u64,
     quality: VoQuality,
+    /// Left and right pixels in the new pair of each stored correspondence (`pairs` index);
+    /// after the motion, the first `carried` hold the inliers carried into the next keyframe.
+    current_px: [[f32; 4]; N],
+    /// Inliers carried into the next keyframe (the first `carried` entries of `selected` and
+    /// `current_px`).
+    carried: usize,
 }
 
 fn zero_correspondence() -> Correspondence {
@@ -245,6 +263,8 @@ impl<const N: usize> VisualOdometry<N> {
             frame_sequence: 0,
             frame_checksum: 0,
             quality: VoQuality::default(),
+            current_px: [[0.0; 4]; N],
+            carried: 0,
         })
     }
 
@@ -306,6 +326,7 @@ impl<const N: usize> VisualOdometry<N> {
         self.quality = VoQuality::default();
         self.pair_count = 0;
         self.selected_count = 0;
+        self.carried = 0;
         self.estimate = None;
         self.kept = None;
         self.rounds_reverted = 0;
@@ -327,10 +348,12 @@ impl<const N: usize> VisualOdometry<N> {
             Phase::Hypotheses { .. } => WorkKind::Hypothesis,
             Phase::Refine { .. } => WorkKind::Refine,
             Phase::Detect { .. } => WorkKind::Detect,
-            Phase::Select
+            Phase::Seed { .. }
+            | Phase::Select
             | Phase::Heapify { .. }
             | Phase::SortDown { .. }
-            | Phase::Choose { .. } => WorkKind::Select,
+            | Phase::Choose { .. }
+            | Phase::Carry { .. } => WorkKind::Select,
             Phase::StereoNew { .. } => WorkKind::Stereo,
             Phase::Finish => WorkKind::Finish,
         })
@@ -399,6 +422,8 @@ impl<const N: usize> VisualOdometry<N> {
     /// Records a failure of the motion stage and goes on to build the new keyframe.
     fn fail_motion(&mut self, error: VoError) {
         self.pending = Some(error);
+        self.carried = 0;
+        self.selected_count = 0;
         self.phase = Phase::Detect { row: FIRST_ROW };
     }
 
@@ -498,6 +523,17 @@ impl<const N: usize> VisualOdometry<N> {
                 }
             }
             Phase::Refine { round, iteration } => self.refine_item(round, iteration),
+            Phase::Seed { next } => {
+                let stop = (next + SORT_CHUNK).min(self.pair_count.min(N));
+                for index in next..stop {
+                    self.seed_carried(index);
+                }
+                self.phase = if stop < self.pair_count.min(N) {
+                    Phase::Seed { next: stop }
+                } else {
+                    Phase::Detect { row: FIRST_ROW }
+                };
+            }
             Phase::Detect { row } => {
                 if row < END_ROW {
                     self.detector.process_row(left, row, &self.config);
@@ -510,7 +546,7 @@ impl<const N: usize> VisualOdometry<N> {
                 // Sort and select in bounded chunks (at most SORT_CHUNK heap steps or
                 // candidates per item), the same operations in the same order as one sort.
                 let n = self.detector.compact_candidates();
-                self.selected_count = 0;
+                self.selected_count = self.carried.min(N);
                 self.phase = Phase::Heapify { next: n / 2 };
             }
             Phase::Heapify { next } => {
@@ -561,7 +597,19 @@ impl<const N: usize> VisualOdometry<N> {
                     };
                     return Some(Err(self.pending.unwrap_or(e)));
                 }
-                self.phase = Phase::StereoNew { next: 0 };
+                self.phase = Phase::Carry { next: 0 };
+            }
+            Phase::Carry { next } => {
+                let end = self.carried.min(self.selected_count).min(N);
+                let stop = (next + SORT_CHUNK).min(end);
+                for index in next..stop {
+                    self.carry_feature(index, left);
+                }
+                self.phase = if stop < end {
+                    Phase::Carry { next: stop }
+                } else {
+                    Phase::StereoNew { next: end }
+                };
             }
             Phase::StereoNew { next } => {
                 if next < self.selected_count.min(N) {
@@ -585,6 +633,9 @@ impl<const N: usize> VisualOdometry<N> {
         let Ok(previous) = triangulate_config(&self.camera, [xl, yl, xr, yr], &self.config) else {
             return;
         };
+        // The feature's offset from its template centre (0 for a detected feature, at most half
+        // a pixel for a carried one): template coordinates (du, dv) of eq. 9.
+        let (du, dv) = (xl - libm::round(xl), yl - libm::round(yl));
         // Projection with the motion prior (eq. 11 without noise).
         let predicted = self.motion.rotation * previous.position_m + self.motion.translation_m;
         let Some((xp, yp)) = self.camera.project_left(&predicted) else {
@@ -594,7 +645,7 @@ impl<const N: usize> VisualOdometry<N> {
             return;
         }
         let radius = i32::from(self.config.search_radius_px);
-        let (x0, y0) = (libm::round(xp) as i32, libm::round(yp) as i32);
+        let (x0, y0) = (libm::round(xp - du) as i32, libm::round(yp - dv) as i32);
         let Some((xs, ys, score)) = search_window(&feature.template, left, x0, y0, radius) else {
             return;
         };
@@ -606,8 +657,8 @@ impl<const N: usize> VisualOdometry<N> {
         let Some(refined) = refine_warp(&template_f, left, init, WarpModel::Affine, 10) else {
             return;
         };
-        let (xt, yt) = (refined.warp.c, refined.warp.f);
-        let shift = libm::hypot(xt - f64::from(xs), yt - f64::from(ys));
+        let (xt, yt) = refined.warp.apply(du, dv);
+        let shift = libm::hypot(refined.warp.c - f64::from(xs), refined.warp.f - f64::from(ys));
         if !(shift <= self.config.max_refine_shift_px) {
             return;
         }
@@ -615,7 +666,7 @@ impl<const N: usize> VisualOdometry<N> {
         // window around it (the prior already placed the feature within the tracking radius).
         let predicted_disparity = self.camera.fx_px * self.camera.baseline_m / predicted.z;
         let window = (self.config.track_disparity_margin_px > 0).then_some(predicted_disparity);
-        let current = match match_and_triangulate(
+        let (current, (xr1, yr1)) = match match_and_triangulate(
             &self.camera,
             left,
             right,
@@ -623,7 +674,7 @@ impl<const N: usize> VisualOdometry<N> {
             window,
             &self.config,
         ) {
-            Ok((current, _)) => current,
+            Ok(matched) => matched,
             Err(reason) => return self.quality.stereo_rejects.count(reason),
         };
         let pair = Correspondence::new(
@@ -633,9 +684,76 @@ impl<const N: usize> VisualOdometry<N> {
             current.covariance,
             &self.motion.rotation,
         );
-        if let (Some(pair), Some(slot)) = (pair, self.pairs.get_mut(self.pair_count)) {
+        if let (Some(pair), Some(slot), Some(px)) = (
+            pair,
+            self.pairs.get_mut(self.pair_count),
+            self.current_px.get_mut(self.pair_count),
+        ) {
             *slot = pair;
+            *px = [xt as f32, yt as f32, xr1 as f32, yr1 as f32];
             self.pair_count += 1;
+        }
+    }
+
+    /// Feature persistence: correspondence `index`, when it is an inlier of the motion, becomes a
+    /// feature of the next keyframe at its tracked position in the new pair (its stereo match
+    /// there, from the tracking item, is kept), unless its template centre is within the border
+    /// or it is closer than `min_distance_px` to a feature carried before it. Carried features
+    /// fill `selected` and `current_px` from the front, so the detector only adds new features
+    /// away from them ([`select_more`]).
+    fn seed_carried(&mut self, index: usize) {
+        if !self.inliers.get(index).copied().unwrap_or(false) {
+            return;
+        }
+        let Some(&px) = self.current_px.get(index) else {
+            return;
+        };
+        let (xc, yc) = (
+            libm::round(f64::from(px[0])),
+            libm::round(f64::from(px[1])),
+        );
+        let border = BORDER_PX as f64;
+        let inside = xc >= border
+            && xc < (rover_hal::IMAGE_WIDTH_PX - BORDER_PX) as f64
+            && yc >= border
+            && yc < (rover_hal::IMAGE_HEIGHT_PX - BORDER_PX) as f64;
+        if !inside {
+            return;
+        }
+        let candidate = super::features::Candidate {
+            interest: 1.0,
+            x: xc as u16,
+            y: yc as u16,
+        };
+        let count = self.carried.min(N);
+        let kept = select_more(
+            core::slice::from_ref(&candidate),
+            self.config.min_distance_px,
+            &mut self.selected,
+            count,
+        );
+        if kept > count {
+            // `count <= index`: the slot was read (or is this one) already.
+            if let Some(slot) = self.current_px.get_mut(count) {
+                *slot = px;
+            }
+            self.carried = kept;
+        }
+    }
+
+    /// Writes carried feature `index` (see [`Self::seed_carried`]) into the new keyframe: its
+    /// pixels in this pair and the template around its nearest integer pixel.
+    fn carry_feature(&mut self, index: usize, left: &Image) {
+        let (Some(&(x, y)), Some(&pixels)) = (self.selected.get(index), self.current_px.get(index))
+        else {
+            return;
+        };
+        let Some(template) = left.template(i32::from(x), i32::from(y)) else {
+            return;
+        };
+        if let Some(slot) = self.key.get_mut(self.key_count) {
+            *slot = KeyFeature { pixels, template };
+            self.key_count += 1;
         }
     }
 
@@ -711,7 +829,8 @@ impl<const N: usize> VisualOdometry<N> {
                     self.quality.covariance_scale = estimate.covariance_scale;
                     self.quality.rounds_reverted = estimate.rounds_reverted;
                     self.estimate = Some(estimate);
-                    self.phase = Phase::Detect { row: FIRST_ROW };
+                    self.carried = 0;
+                    self.phase = Phase::Seed { next: 0 };
                 }
                 Err(e) => self.fail_motion(e),
             }
