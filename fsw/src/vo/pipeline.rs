@@ -10,7 +10,7 @@
 //! The sequence of items depends only on the input, so the number of steps is deterministic.
 
 use super::features::{
-    select_more, ForstnerDetector, BORDER_PX, CELL_COUNT, END_ROW, FIRST_ROW,
+    select_more, ForstnerDetector, BORDER_PX, CELL_COUNT, END_ROW, FIRST_ROW, GRID_COLS, GRID_PX,
 };
 use super::image::{CheckSums, Image, Template, CHECK_BANDS};
 use super::motion::{
@@ -206,6 +206,10 @@ pub struct VisualOdometry<const N: usize> {
     /// Inliers carried into the next keyframe (the first `carried` entries of `selected` and
     /// `current_px`).
     carried: usize,
+    /// Grid cells of the current grid row the detector skips (bit per grid column): cells
+    /// entirely within `min_distance_px` of one carried feature, where no candidate could be
+    /// selected ([`Self::skip_mask`]).
+    skip_cells: u64,
 }
 
 fn zero_correspondence() -> Correspondence {
@@ -265,6 +269,7 @@ impl<const N: usize> VisualOdometry<N> {
             quality: VoQuality::default(),
             current_px: [[0.0; 4]; N],
             carried: 0,
+            skip_cells: 0,
         })
     }
 
@@ -536,7 +541,12 @@ impl<const N: usize> VisualOdometry<N> {
             }
             Phase::Detect { row } => {
                 if row < END_ROW {
-                    self.detector.process_row(left, row, &self.config);
+                    if row == FIRST_ROW || row % GRID_PX == 0 {
+                        self.skip_cells = self.skip_mask(row / GRID_PX);
+                    }
+                    let skip = self.skip_cells;
+                    self.detector
+                        .process_row_masked(left, row, &self.config, skip);
                     self.phase = Phase::Detect { row: row + 1 };
                 } else {
                     self.phase = Phase::Select;
@@ -658,7 +668,10 @@ impl<const N: usize> VisualOdometry<N> {
             return;
         };
         let (xt, yt) = refined.warp.apply(du, dv);
-        let shift = libm::hypot(refined.warp.c - f64::from(xs), refined.warp.f - f64::from(ys));
+        let shift = libm::hypot(
+            refined.warp.c - f64::from(xs),
+            refined.warp.f - f64::from(ys),
+        );
         if !(shift <= self.config.max_refine_shift_px) {
             return;
         }
@@ -708,10 +721,7 @@ impl<const N: usize> VisualOdometry<N> {
         let Some(&px) = self.current_px.get(index) else {
             return;
         };
-        let (xc, yc) = (
-            libm::round(f64::from(px[0])),
-            libm::round(f64::from(px[1])),
-        );
+        let (xc, yc) = (libm::round(f64::from(px[0])), libm::round(f64::from(px[1])));
         let border = BORDER_PX as f64;
         let inside = xc >= border
             && xc < (rover_hal::IMAGE_WIDTH_PX - BORDER_PX) as f64
@@ -739,6 +749,41 @@ impl<const N: usize> VisualOdometry<N> {
             }
             self.carried = kept;
         }
+    }
+
+    /// The grid cells of grid row `cell_row` (bit per grid column) that lie entirely (all four
+    /// corner pixels) closer than `min_distance_px` to one carried feature: the greedy selection
+    /// ([`select_more`]) would drop any candidate there, so the detector need not score them and
+    /// the selection is the same as with every cell scored.
+    fn skip_mask(&self, cell_row: usize) -> u64 {
+        let min_d = f64::from(self.config.min_distance_px);
+        let min_d2 = min_d * min_d;
+        let side = (GRID_PX - 1) as f64;
+        let (top, bottom) = (
+            (cell_row * GRID_PX) as f64,
+            (cell_row * GRID_PX) as f64 + side,
+        );
+        let reach = libm::ceil(min_d).min(1e4) as usize;
+        let mut mask = 0u64;
+        for &(x, y) in self.selected.get(..self.carried.min(N)).unwrap_or(&[]) {
+            let (fx, fy) = (f64::from(x), f64::from(y));
+            let dy = (fy - top).abs().max((fy - bottom).abs());
+            let dy2 = dy * dy;
+            if !(dy2 < min_d2) {
+                continue;
+            }
+            // Only the columns within min_d of the feature can be covered.
+            let first = usize::from(x).saturating_sub(reach) / GRID_PX;
+            let last = ((usize::from(x) + reach) / GRID_PX).min(GRID_COLS - 1);
+            for c in first..=last {
+                let left_x = (c * GRID_PX) as f64;
+                let dx = (fx - left_x).abs().max((fx - left_x - side).abs());
+                if dx * dx + dy2 < min_d2 && c < u64::BITS as usize {
+                    mask |= 1u64 << c;
+                }
+            }
+        }
+        mask
     }
 
     /// Writes carried feature `index` (see [`Self::seed_carried`]) into the new keyframe: its
