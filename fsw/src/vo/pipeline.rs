@@ -19,7 +19,7 @@ use super::motion::{
     RigidMotion, ML_ROUNDS,
 };
 use super::stereo::{match_and_triangulate, triangulate_config, PinholeStereo};
-use super::track::{refine_warp, search_window, Affine2, WarpModel};
+use super::track::{refine_warp, search_near, Affine2, WarpModel};
 use super::{VoConfig, VoError, VoOutput, VoQuality, TEMPLATE_PIXELS};
 use crate::types::{Mat3, RelativePose, Vec3};
 use rover_hal::{StereoCalibration, StereoFrame};
@@ -210,6 +210,9 @@ pub struct VisualOdometry<const N: usize> {
     /// entirely within `min_distance_px` of one carried feature, where no candidate could be
     /// selected ([`Self::skip_mask`]).
     skip_cells: u64,
+    /// Offset of the last tracked feature from its predicted position in this update, pixels
+    /// (added to the next prediction: the prior's error is mostly common to all features).
+    flow_px: (i32, i32),
 }
 
 fn zero_correspondence() -> Correspondence {
@@ -270,6 +273,7 @@ impl<const N: usize> VisualOdometry<N> {
             current_px: [[0.0; 4]; N],
             carried: 0,
             skip_cells: 0,
+            flow_px: (0, 0),
         })
     }
 
@@ -332,6 +336,7 @@ impl<const N: usize> VisualOdometry<N> {
         self.pair_count = 0;
         self.selected_count = 0;
         self.carried = 0;
+        self.flow_px = (0, 0);
         self.estimate = None;
         self.kept = None;
         self.rounds_reverted = 0;
@@ -656,12 +661,27 @@ impl<const N: usize> VisualOdometry<N> {
         }
         let radius = i32::from(self.config.search_radius_px);
         let (x0, y0) = (libm::round(xp - du) as i32, libm::round(yp - dv) as i32);
-        let Some((xs, ys, score)) = search_window(&feature.template, left, x0, y0, radius) else {
+        let (x0, y0) = (
+            x0.saturating_add(self.flow_px.0),
+            y0.saturating_add(self.flow_px.1),
+        );
+        let Some((xs, ys, score)) = search_near(
+            &feature.template,
+            left,
+            x0,
+            y0,
+            radius,
+            self.config.min_correlation,
+        ) else {
             return;
         };
         if score < self.config.min_correlation {
             return;
         }
+        self.flow_px = (
+            (xs - x0 + self.flow_px.0).clamp(-radius, radius),
+            (ys - y0 + self.flow_px.1).clamp(-radius, radius),
+        );
         let template_f = feature.template.map(f32::from);
         let init = Affine2::translation(f64::from(xs), f64::from(ys));
         let Some(refined) = refine_warp(&template_f, left, init, WarpModel::Affine, 10) else {
