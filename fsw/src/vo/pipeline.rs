@@ -771,36 +771,54 @@ impl<const N: usize> VisualOdometry<N> {
         }
     }
 
-    /// The grid cells of grid row `cell_row` (bit per grid column) that lie entirely (all four
-    /// corner pixels) closer than `min_distance_px` to one carried feature: the greedy selection
-    /// ([`select_more`]) would drop any candidate there, so the detector need not score them and
-    /// the selection is the same as with every cell scored.
+    /// The grid cells of grid row `cell_row` (bit per grid column) that are covered by the
+    /// carried features' exclusion disks: each of 9 sample pixels of the cell (a 3x3 lattice:
+    /// corners, edge midpoints, centre) is closer than `min_distance_px` to some carried feature.
+    /// The greedy selection ([`select_more`]) drops every candidate within those disks, so the
+    /// detector need not score these cells (it could only miss a candidate in a sliver of a
+    /// cell between the samples).
     fn skip_mask(&self, cell_row: usize) -> u64 {
+        const OFFSETS: [usize; 3] = [0, GRID_PX / 2, GRID_PX - 1];
         let min_d = f64::from(self.config.min_distance_px);
         let min_d2 = min_d * min_d;
-        let side = (GRID_PX - 1) as f64;
-        let (top, bottom) = (
-            (cell_row * GRID_PX) as f64,
-            (cell_row * GRID_PX) as f64 + side,
-        );
+        let top = cell_row * GRID_PX;
         let reach = libm::ceil(min_d).min(1e4) as usize;
-        let mut mask = 0u64;
+        let mut covered = [0u16; GRID_COLS];
         for &(x, y) in self.selected.get(..self.carried.min(N)).unwrap_or(&[]) {
             let (fx, fy) = (f64::from(x), f64::from(y));
-            let dy = (fy - top).abs().max((fy - bottom).abs());
-            let dy2 = dy * dy;
-            if !(dy2 < min_d2) {
+            // Rows of the samples closer than min_d.
+            let mut row_dy2 = [f64::INFINITY; 3];
+            let mut any = false;
+            for (slot, off) in row_dy2.iter_mut().zip(OFFSETS) {
+                let dy = fy - (top + off) as f64;
+                if dy * dy < min_d2 {
+                    *slot = dy * dy;
+                    any = true;
+                }
+            }
+            if !any {
                 continue;
             }
-            // Only the columns within min_d of the feature can be covered.
             let first = usize::from(x).saturating_sub(reach) / GRID_PX;
             let last = ((usize::from(x) + reach) / GRID_PX).min(GRID_COLS - 1);
             for c in first..=last {
-                let left_x = (c * GRID_PX) as f64;
-                let dx = (fx - left_x).abs().max((fx - left_x - side).abs());
-                if dx * dx + dy2 < min_d2 && c < u64::BITS as usize {
-                    mask |= 1u64 << c;
+                let Some(bits) = covered.get_mut(c) else {
+                    continue;
+                };
+                for (i, off_x) in OFFSETS.iter().enumerate() {
+                    let dx = fx - (c * GRID_PX + off_x) as f64;
+                    for (j, dy2) in row_dy2.iter().enumerate() {
+                        if dx * dx + dy2 < min_d2 {
+                            *bits |= 1 << (3 * j + i);
+                        }
+                    }
                 }
+            }
+        }
+        let mut mask = 0u64;
+        for (c, &bits) in covered.iter().enumerate() {
+            if bits == 0x1ff && c < u64::BITS as usize {
+                mask |= 1u64 << c;
             }
         }
         mask
