@@ -21,11 +21,6 @@ pub const GRID_COLS: usize = IMAGE_WIDTH_PX / GRID_PX;
 pub const GRID_ROWS: usize = IMAGE_HEIGHT_PX / GRID_PX;
 /// Grid cells.
 pub const CELL_COUNT: usize = GRID_COLS * GRID_ROWS;
-/// The operator scores every this many image rows from [`FIRST_ROW`] (the window sums are
-/// kept for every row): candidates on every second row, at half the scoring work. A feature
-/// is then within a pixel of the row of its cell's best corner, which its template contains
-/// all the same (tracking and stereo match the template wherever its centre is).
-pub const SCORE_ROW_STEP: usize = 2;
 /// Half side of the Forstner window (5x5).
 pub const WINDOW_HALF: usize = 2;
 /// Features keep this distance from the image border, pixels (template plus refinement room).
@@ -228,9 +223,6 @@ impl ForstnerDetector {
                 y - WINDOW_HALF - 1,
                 &mut self.columns,
             );
-        }
-        if (y - FIRST_ROW) % SCORE_ROW_STEP != 0 {
-            return;
         }
         let cell_row = y / GRID_PX;
         let (min_interest, min_roundness) = (
