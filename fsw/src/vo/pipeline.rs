@@ -4,9 +4,11 @@
 //!
 //! Work items (each bounded, see `docs/vo.md`): image check (2: left, right), track and stereo
 //! match one previous feature (1 each), one least-median-of-squares hypothesis (1 each), one
-//! maximum-likelihood iteration (1 each), one image row of the Forstner operator (1 each, 464
-//! rows), compact the candidates (1), sort them (chunks of 64 heap steps), select the features
-//! (chunks of 64 candidates), stereo match one new feature (1 each), finish (1).
+//! maximum-likelihood iteration (1 each), carry the motion's inliers into the next keyframe
+//! (chunks of 64: feature persistence, `docs/vo.md`), one image row of the Forstner operator (1
+//! each, 464 rows; cells covered by the carried features skipped), compact the candidates (1),
+//! sort them (chunks of 64 heap steps), select the features (chunks of 64 candidates), write the
+//! carried features' templates (chunks of 64), stereo match one new feature (1 each), finish (1).
 //! The sequence of items depends only on the input, so the number of steps is deterministic.
 
 use super::features::{
