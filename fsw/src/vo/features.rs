@@ -136,6 +136,67 @@ fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
     }
 }
 
+/// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
+/// columns `first - WINDOW_HALF .. first + n + WINDOW_HALF` for the `n` centres
+/// `first..first + n`; keeps the best pixel passing the thresholds in `cell`.
+#[inline(always)]
+fn score_cell(
+    span: &[[i32; 3]],
+    first: usize,
+    y: usize,
+    cell: &mut Candidate,
+    min_interest: f64,
+    min_roundness: f64,
+) {
+    const W: usize = 2 * WINDOW_HALF;
+    // Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
+    // window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
+    // and trace are exact in f64.
+    let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
+    for &[a, b, c] in span.iter().take(W) {
+        nxx += a;
+        nyy += b;
+        nxy += c;
+    }
+    // w = det / trace <= trace / 4 (det <= (trace / 2)^2 for a 2x2 normal matrix): a pixel
+    // whose trace is at most four times the cell's best cannot beat it. In integers (traces are
+    // integers, interests non-negative): trace > 4 w  <=>  trace > floor(4 w).
+    let bound = |interest: f32| (4.0 * f64::from(interest)) as i32;
+    let mut min_trace = bound(cell.interest);
+    for (k, (&[a, b, c], &[oa, ob, oc])) in span.iter().skip(W).zip(span.iter()).enumerate() {
+        // Window over the columns centre-2..=centre+2.
+        nxx += a;
+        nyy += b;
+        nxy += c;
+        let trace = nxx + nyy;
+        if trace > min_trace && trace > 0 {
+            let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
+            let det_f = fxx * fyy - fxy * fxy;
+            let trace_f = f64::from(trace);
+            // Thresholds without divisions; the test against the cell's best comes first (most
+            // pixels fail it), the division runs only for a new best.
+            if det_f > 0.0
+                && det_f > f64::from(cell.interest) * trace_f
+                && !(det_f < min_interest * trace_f)
+                && !(4.0 * det_f < min_roundness * trace_f * trace_f)
+            {
+                let interest = (det_f / trace_f) as f32;
+                if interest > cell.interest {
+                    *cell = Candidate {
+                        interest,
+                        x: (first + k) as u16,
+                        y: y as u16,
+                    };
+                    min_trace = bound(interest);
+                }
+            }
+        }
+        nxx -= oa;
+        nyy -= ob;
+        nxy -= oc;
+    }
+}
+
 impl ForstnerDetector {
     /// Clears the cells and the running sums (in place: the detector becomes
     /// [`Self::EMPTY`]); the next row to score is [`FIRST_ROW`].
@@ -149,6 +210,20 @@ impl ForstnerDetector {
     /// call each) and keeps the best pixel of each grid cell whose interest and roundness pass
     /// the thresholds of `config`.
     pub fn process_row(&mut self, image: &Image, y: usize, config: &VoConfig) {
+        self.process_row_masked(image, y, config, 0);
+    }
+
+    /// [`Self::process_row`] that skips the grid cells of this row's grid row whose bit is set
+    /// in `skip_cells` (bit `c` for grid column `c`): they are not scored and stay as they are
+    /// (empty after the first row of the pass). The running column sums are kept for every
+    /// column, so the other cells get exactly the scores of the unmasked operator.
+    pub fn process_row_masked(
+        &mut self,
+        image: &Image,
+        y: usize,
+        config: &VoConfig,
+        skip_cells: u64,
+    ) {
         if y == FIRST_ROW {
             self.reset();
             for r in (FIRST_ROW - WINDOW_HALF)..=(FIRST_ROW + WINDOW_HALF) {
@@ -163,7 +238,6 @@ impl ForstnerDetector {
             );
         }
         let cell_row = y / GRID_PX;
-        let window = 2 * WINDOW_HALF + 1;
         let (min_interest, min_roundness) = (
             f64::from(config.min_interest),
             f64::from(config.min_roundness),
@@ -172,60 +246,22 @@ impl ForstnerDetector {
             .cells
             .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
             .unwrap_or(&mut []);
-        // Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
-        // window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so
-        // det and trace are exact in f64.
-        let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
-        // The window sums over columns x-4..=x (centred on x-2): first columns 0..=3, then per
-        // pixel column x in and column x-5 out (the window at x = 4 is centred on column 2,
-        // inside the border, and is not scored).
-        let end = IMAGE_WIDTH_PX - BORDER_PX;
-        for &[a, b, c] in self.columns.iter().take(window) {
-            nxx += a;
-            nyy += b;
-            nxy += c;
-        }
-        let entering = self.columns.get(window..end).unwrap_or(&[]);
-        let leaving = self.columns.get(..end - window).unwrap_or(&[]);
-        for (x, (&[a, b, c], &[oa, ob, oc])) in (window..).zip(entering.iter().zip(leaving)) {
-            nxx += a - oa;
-            nyy += b - ob;
-            nxy += c - oc;
-            let centre = x - WINDOW_HALF;
-            if centre < BORDER_PX {
+        // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
+        // last one ends inside the border), cell by cell.
+        let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
+        for (c, cell) in cells.iter_mut().enumerate() {
+            if c < u64::BITS as usize && skip_cells & (1u64 << c) != 0 {
                 continue;
             }
-            let Some(cell) = cells.get_mut(centre / GRID_PX) else {
+            let first = (c * GRID_PX).max(BORDER_PX);
+            let stop = (c * GRID_PX + GRID_PX).min(end);
+            if first >= stop {
+                continue;
+            }
+            let Some(span) = self.columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) else {
                 continue;
             };
-            // w = det / trace <= trace / 4 (det <= (trace / 2)^2 for a 2x2 normal matrix): a
-            // pixel whose trace is at most four times the cell's best cannot beat it.
-            let trace = nxx + nyy;
-            if !(trace > 0 && f64::from(trace) > 4.0 * f64::from(cell.interest)) {
-                continue;
-            }
-            let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
-            let trace_f = fxx + fyy;
-            let det_f = fxx * fyy - fxy * fxy;
-            if !(det_f > 0.0) {
-                continue;
-            }
-            // Thresholds without divisions; the test against the cell's best comes first (most
-            // pixels fail it), the division runs only for a new best.
-            if !(det_f > f64::from(cell.interest) * trace_f)
-                || det_f < min_interest * trace_f
-                || 4.0 * det_f < min_roundness * trace_f * trace_f
-            {
-                continue;
-            }
-            let interest = (det_f / trace_f) as f32;
-            if interest > cell.interest {
-                *cell = Candidate {
-                    interest,
-                    x: centre as u16,
-                    y: y as u16,
-                };
-            }
+            score_cell(span, first, y, cell, min_interest, min_roundness);
         }
     }
 

@@ -4,12 +4,16 @@
 //!
 //! Work items (each bounded, see `docs/vo.md`): image check (2: left, right), track and stereo
 //! match one previous feature (1 each), one least-median-of-squares hypothesis (1 each), one
-//! maximum-likelihood iteration (1 each), one image row of the Forstner operator (1 each, 464
-//! rows), compact the candidates (1), sort them (chunks of 64 heap steps), select the features
-//! (chunks of 64 candidates), stereo match one new feature (1 each), finish (1).
+//! maximum-likelihood iteration (1 each), carry the motion's inliers into the next keyframe
+//! (chunks of 64: feature persistence, `docs/vo.md`), one image row of the Forstner operator (1
+//! each, 464 rows; cells covered by the carried features skipped), compact the candidates (1),
+//! sort them (chunks of 64 heap steps), select the features (chunks of 64 candidates), write the
+//! carried features' templates (chunks of 64), stereo match one new feature (1 each), finish (1).
 //! The sequence of items depends only on the input, so the number of steps is deterministic.
 
-use super::features::{select_more, ForstnerDetector, CELL_COUNT, END_ROW, FIRST_ROW};
+use super::features::{
+    select_more, ForstnerDetector, BORDER_PX, CELL_COUNT, END_ROW, FIRST_ROW, GRID_COLS, GRID_PX,
+};
 use super::image::{CheckSums, Image, Template, CHECK_BANDS};
 use super::motion::{
     finish_estimate, mark_inliers, ml_iteration, relative_pose, residual_median, robust_gate,
@@ -17,7 +21,7 @@ use super::motion::{
     RigidMotion, ML_ROUNDS,
 };
 use super::stereo::{match_and_triangulate, triangulate_config, PinholeStereo};
-use super::track::{refine_warp, search_window, Affine2, WarpModel};
+use super::track::{refine_warp, search_near, Affine2, WarpModel};
 use super::{VoConfig, VoError, VoOutput, VoQuality, TEMPLATE_PIXELS};
 use crate::types::RelativePose;
 use rover_hal::{StereoCalibration, StereoFrame};
@@ -28,7 +32,11 @@ const SORT_CHUNK: usize = 64;
 /// Iterations of the maximum-likelihood rounds are capped at this many per round.
 const MAX_ML_ITERATIONS: u8 = 50;
 
-/// A keyframe feature: its stereo pixels and its left template.
+/// A keyframe feature: its stereo pixels and its left template. The template is centred on the
+/// integer pixel nearest the left position (`round(pixels[0]), round(pixels[1])`): a newly
+/// detected feature sits on that pixel, a carried one (tracked into this keyframe, see
+/// `Phase::Seed`) keeps its sub-pixel position, so its offset from the template centre is at
+/// most half a pixel along each axis.
 #[derive(Debug, Clone, Copy)]
 struct KeyFeature {
     pixels: [f32; 4],
@@ -70,6 +78,9 @@ enum Phase {
         round: u8,
         iteration: u8,
     },
+    Seed {
+        next: usize,
+    },
     Detect {
         row: usize,
     },
@@ -81,6 +92,9 @@ enum Phase {
         end: usize,
     },
     Choose {
+        next: usize,
+    },
+    Carry {
         next: usize,
     },
     StereoNew {
@@ -191,6 +205,19 @@ pub struct VisualOdometry<const N: usize> {
     frame_sequence: u32,
     frame_checksum: u64,
     quality: VoQuality,
+    /// Left and right pixels in the new pair of each stored correspondence (`pairs` index);
+    /// after the motion, the first `carried` hold the inliers carried into the next keyframe.
+    current_px: [[f32; 4]; N],
+    /// Inliers carried into the next keyframe (the first `carried` entries of `selected` and
+    /// `current_px`).
+    carried: usize,
+    /// Grid cells of the current grid row the detector skips (bit per grid column): cells
+    /// entirely within `min_distance_px` of one carried feature, where no candidate could be
+    /// selected ([`Self::skip_mask`]).
+    skip_cells: u64,
+    /// Offset of the last tracked feature from its predicted position in this update, pixels
+    /// (added to the next prediction: the prior's error is mostly common to all features).
+    flow_px: (i32, i32),
 }
 
 /// An unused correspondence slot (zero points and covariances, usable in a `const`).
@@ -261,6 +288,10 @@ impl<const N: usize> VisualOdometry<N> {
         frame_sequence: 0,
         frame_checksum: 0,
         quality: VoQuality::EMPTY,
+        current_px: [[0.0; 4]; N],
+        carried: 0,
+        skip_cells: 0,
+        flow_px: (0, 0),
     };
 
     /// [`Self::new`] in place: this VO becomes the one `new(config, calibration)` returns
@@ -310,6 +341,12 @@ impl<const N: usize> VisualOdometry<N> {
         self.frame_sequence = 0;
         self.frame_checksum = 0;
         self.quality = VoQuality::EMPTY;
+        for c in self.current_px.iter_mut() {
+            *c = [0.0; 4];
+        }
+        self.carried = 0;
+        self.skip_cells = 0;
+        self.flow_px = (0, 0);
         Ok(())
     }
 
@@ -371,6 +408,8 @@ impl<const N: usize> VisualOdometry<N> {
         self.quality = VoQuality::default();
         self.pair_count = 0;
         self.selected_count = 0;
+        self.carried = 0;
+        self.flow_px = (0, 0);
         self.estimate = None;
         self.kept = None;
         self.rounds_reverted = 0;
@@ -392,10 +431,12 @@ impl<const N: usize> VisualOdometry<N> {
             Phase::Hypotheses { .. } => WorkKind::Hypothesis,
             Phase::Refine { .. } => WorkKind::Refine,
             Phase::Detect { .. } => WorkKind::Detect,
-            Phase::Select
+            Phase::Seed { .. }
+            | Phase::Select
             | Phase::Heapify { .. }
             | Phase::SortDown { .. }
-            | Phase::Choose { .. } => WorkKind::Select,
+            | Phase::Choose { .. }
+            | Phase::Carry { .. } => WorkKind::Select,
             Phase::StereoNew { .. } => WorkKind::Stereo,
             Phase::Finish => WorkKind::Finish,
         })
@@ -464,6 +505,8 @@ impl<const N: usize> VisualOdometry<N> {
     /// Records a failure of the motion stage and goes on to build the new keyframe.
     fn fail_motion(&mut self, error: VoError) {
         self.pending = Some(error);
+        self.carried = 0;
+        self.selected_count = 0;
         self.phase = Phase::Detect { row: FIRST_ROW };
     }
 
@@ -563,9 +606,25 @@ impl<const N: usize> VisualOdometry<N> {
                 }
             }
             Phase::Refine { round, iteration } => self.refine_item(round, iteration),
+            Phase::Seed { next } => {
+                let stop = (next + SORT_CHUNK).min(self.pair_count.min(N));
+                for index in next..stop {
+                    self.seed_carried(index);
+                }
+                self.phase = if stop < self.pair_count.min(N) {
+                    Phase::Seed { next: stop }
+                } else {
+                    Phase::Detect { row: FIRST_ROW }
+                };
+            }
             Phase::Detect { row } => {
                 if row < END_ROW {
-                    self.detector.process_row(left, row, &self.config);
+                    if row == FIRST_ROW || row % GRID_PX == 0 {
+                        self.skip_cells = self.skip_mask(row / GRID_PX);
+                    }
+                    let skip = self.skip_cells;
+                    self.detector
+                        .process_row_masked(left, row, &self.config, skip);
                     self.phase = Phase::Detect { row: row + 1 };
                 } else {
                     self.phase = Phase::Select;
@@ -575,7 +634,7 @@ impl<const N: usize> VisualOdometry<N> {
                 // Sort and select in bounded chunks (at most SORT_CHUNK heap steps or
                 // candidates per item), the same operations in the same order as one sort.
                 let n = self.detector.compact_candidates();
-                self.selected_count = 0;
+                self.selected_count = self.carried.min(N);
                 self.phase = Phase::Heapify { next: n / 2 };
             }
             Phase::Heapify { next } => {
@@ -626,7 +685,19 @@ impl<const N: usize> VisualOdometry<N> {
                     };
                     return Some(Err(self.pending.unwrap_or(e)));
                 }
-                self.phase = Phase::StereoNew { next: 0 };
+                self.phase = Phase::Carry { next: 0 };
+            }
+            Phase::Carry { next } => {
+                let end = self.carried.min(self.selected_count).min(N);
+                let stop = (next + SORT_CHUNK).min(end);
+                for index in next..stop {
+                    self.carry_feature(index, left);
+                }
+                self.phase = if stop < end {
+                    Phase::Carry { next: stop }
+                } else {
+                    Phase::StereoNew { next: end }
+                };
             }
             Phase::StereoNew { next } => {
                 if next < self.selected_count.min(N) {
@@ -650,6 +721,9 @@ impl<const N: usize> VisualOdometry<N> {
         let Ok(previous) = triangulate_config(&self.camera, [xl, yl, xr, yr], &self.config) else {
             return;
         };
+        // The feature's offset from its template centre (0 for a detected feature, at most half
+        // a pixel for a carried one): template coordinates (du, dv) of eq. 9.
+        let (du, dv) = (xl - libm::round(xl), yl - libm::round(yl));
         // Projection with the motion prior (eq. 11 without noise).
         let predicted = self.motion.rotation * previous.position_m + self.motion.translation_m;
         let Some((xp, yp)) = self.camera.project_left(&predicted) else {
@@ -659,20 +733,38 @@ impl<const N: usize> VisualOdometry<N> {
             return;
         }
         let radius = i32::from(self.config.search_radius_px);
-        let (x0, y0) = (libm::round(xp) as i32, libm::round(yp) as i32);
-        let Some((xs, ys, score)) = search_window(&feature.template, left, x0, y0, radius) else {
+        let (x0, y0) = (libm::round(xp - du) as i32, libm::round(yp - dv) as i32);
+        let (x0, y0) = (
+            x0.saturating_add(self.flow_px.0),
+            y0.saturating_add(self.flow_px.1),
+        );
+        let Some((xs, ys, score)) = search_near(
+            &feature.template,
+            left,
+            x0,
+            y0,
+            radius,
+            self.config.min_correlation,
+        ) else {
             return;
         };
         if score < self.config.min_correlation {
             return;
         }
+        self.flow_px = (
+            (xs - x0 + self.flow_px.0).clamp(-radius, radius),
+            (ys - y0 + self.flow_px.1).clamp(-radius, radius),
+        );
         let template_f = feature.template.map(f32::from);
         let init = Affine2::translation(f64::from(xs), f64::from(ys));
         let Some(refined) = refine_warp(&template_f, left, init, WarpModel::Affine, 10) else {
             return;
         };
-        let (xt, yt) = (refined.warp.c, refined.warp.f);
-        let shift = libm::hypot(xt - f64::from(xs), yt - f64::from(ys));
+        let (xt, yt) = refined.warp.apply(du, dv);
+        let shift = libm::hypot(
+            refined.warp.c - f64::from(xs),
+            refined.warp.f - f64::from(ys),
+        );
         if !(shift <= self.config.max_refine_shift_px) {
             return;
         }
@@ -680,7 +772,7 @@ impl<const N: usize> VisualOdometry<N> {
         // window around it (the prior already placed the feature within the tracking radius).
         let predicted_disparity = self.camera.fx_px * self.camera.baseline_m / predicted.z;
         let window = (self.config.track_disparity_margin_px > 0).then_some(predicted_disparity);
-        let current = match match_and_triangulate(
+        let (current, (xr1, yr1)) = match match_and_triangulate(
             &self.camera,
             left,
             right,
@@ -688,7 +780,7 @@ impl<const N: usize> VisualOdometry<N> {
             window,
             &self.config,
         ) {
-            Ok((current, _)) => current,
+            Ok(matched) => matched,
             Err(reason) => return self.quality.stereo_rejects.count(reason),
         };
         let pair = Correspondence::new(
@@ -698,9 +790,126 @@ impl<const N: usize> VisualOdometry<N> {
             current.covariance,
             &self.motion.rotation,
         );
-        if let (Some(pair), Some(slot)) = (pair, self.pairs.get_mut(self.pair_count)) {
+        if let (Some(pair), Some(slot), Some(px)) = (
+            pair,
+            self.pairs.get_mut(self.pair_count),
+            self.current_px.get_mut(self.pair_count),
+        ) {
             *slot = pair;
+            *px = [xt as f32, yt as f32, xr1 as f32, yr1 as f32];
             self.pair_count += 1;
+        }
+    }
+
+    /// Feature persistence: correspondence `index`, when it is an inlier of the motion, becomes a
+    /// feature of the next keyframe at its tracked position in the new pair (its stereo match
+    /// there, from the tracking item, is kept), unless its template centre is within the border
+    /// or it is closer than `min_distance_px` to a feature carried before it. Carried features
+    /// fill `selected` and `current_px` from the front, so the detector only adds new features
+    /// away from them ([`select_more`]).
+    fn seed_carried(&mut self, index: usize) {
+        if !self.inliers.get(index).copied().unwrap_or(false) {
+            return;
+        }
+        let Some(&px) = self.current_px.get(index) else {
+            return;
+        };
+        let (xc, yc) = (libm::round(f64::from(px[0])), libm::round(f64::from(px[1])));
+        let border = BORDER_PX as f64;
+        let inside = xc >= border
+            && xc < (rover_hal::IMAGE_WIDTH_PX - BORDER_PX) as f64
+            && yc >= border
+            && yc < (rover_hal::IMAGE_HEIGHT_PX - BORDER_PX) as f64;
+        if !inside {
+            return;
+        }
+        let candidate = super::features::Candidate {
+            interest: 1.0,
+            x: xc as u16,
+            y: yc as u16,
+        };
+        let count = self.carried.min(N);
+        let kept = select_more(
+            core::slice::from_ref(&candidate),
+            self.config.min_distance_px,
+            &mut self.selected,
+            count,
+        );
+        if kept > count {
+            // `count <= index`: the slot was read (or is this one) already.
+            if let Some(slot) = self.current_px.get_mut(count) {
+                *slot = px;
+            }
+            self.carried = kept;
+        }
+    }
+
+    /// The grid cells of grid row `cell_row` (bit per grid column) that are covered by the
+    /// carried features' exclusion disks: each of 9 sample pixels of the cell (a 3x3 lattice:
+    /// corners, edge midpoints, centre) is closer than `min_distance_px` to some carried feature.
+    /// The greedy selection ([`select_more`]) drops every candidate within those disks, so the
+    /// detector need not score these cells (it could only miss a candidate in a sliver of a
+    /// cell between the samples).
+    fn skip_mask(&self, cell_row: usize) -> u64 {
+        const OFFSETS: [usize; 3] = [0, GRID_PX / 2, GRID_PX - 1];
+        let min_d = f64::from(self.config.min_distance_px);
+        let min_d2 = min_d * min_d;
+        let top = cell_row * GRID_PX;
+        let reach = libm::ceil(min_d).min(1e4) as usize;
+        let mut covered = [0u16; GRID_COLS];
+        for &(x, y) in self.selected.get(..self.carried.min(N)).unwrap_or(&[]) {
+            let (fx, fy) = (f64::from(x), f64::from(y));
+            // Rows of the samples closer than min_d.
+            let mut row_dy2 = [f64::INFINITY; 3];
+            let mut any = false;
+            for (slot, off) in row_dy2.iter_mut().zip(OFFSETS) {
+                let dy = fy - (top + off) as f64;
+                if dy * dy < min_d2 {
+                    *slot = dy * dy;
+                    any = true;
+                }
+            }
+            if !any {
+                continue;
+            }
+            let first = usize::from(x).saturating_sub(reach) / GRID_PX;
+            let last = ((usize::from(x) + reach) / GRID_PX).min(GRID_COLS - 1);
+            for c in first..=last {
+                let Some(bits) = covered.get_mut(c) else {
+                    continue;
+                };
+                for (i, off_x) in OFFSETS.iter().enumerate() {
+                    let dx = fx - (c * GRID_PX + off_x) as f64;
+                    for (j, dy2) in row_dy2.iter().enumerate() {
+                        if dx * dx + dy2 < min_d2 {
+                            *bits |= 1 << (3 * j + i);
+                        }
+                    }
+                }
+            }
+        }
+        let mut mask = 0u64;
+        for (c, &bits) in covered.iter().enumerate() {
+            if bits == 0x1ff && c < u64::BITS as usize {
+                mask |= 1u64 << c;
+            }
+        }
+        mask
+    }
+
+    /// Writes carried feature `index` (see [`Self::seed_carried`]) into the new keyframe: its
+    /// pixels in this pair and the template around its nearest integer pixel.
+    fn carry_feature(&mut self, index: usize, left: &Image) {
+        let (Some(&(x, y)), Some(&pixels)) = (self.selected.get(index), self.current_px.get(index))
+        else {
+            return;
+        };
+        let Some(template) = left.template(i32::from(x), i32::from(y)) else {
+            return;
+        };
+        if let Some(slot) = self.key.get_mut(self.key_count) {
+            *slot = KeyFeature { pixels, template };
+            self.key_count += 1;
         }
     }
 
@@ -776,7 +985,8 @@ impl<const N: usize> VisualOdometry<N> {
                     self.quality.covariance_scale = estimate.covariance_scale;
                     self.quality.rounds_reverted = estimate.rounds_reverted;
                     self.estimate = Some(estimate);
-                    self.phase = Phase::Detect { row: FIRST_ROW };
+                    self.carried = 0;
+                    self.phase = Phase::Seed { next: 0 };
                 }
                 Err(e) => self.fail_motion(e),
             }

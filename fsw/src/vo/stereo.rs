@@ -280,7 +280,7 @@ pub fn match_along_row(
 
 /// [`match_along_row`] over the disparities within `config.track_disparity_margin_px` of a
 /// predicted disparity `predicted_px` (pixels, from the motion prior; clipped to the configured
-/// range), every disparity scanned. [`StereoReject::OutOfRange`] when the prediction is not
+/// range), scanned every `stereo_coarse_step`-th disparity like the full range. [`StereoReject::OutOfRange`] when the prediction is not
 /// finite or the window misses the configured range.
 pub fn match_along_row_near(
     left: &Image,
@@ -299,7 +299,15 @@ pub fn match_along_row_near(
     // Both ends are finite and within [d_min, d_max] after the clamps.
     let lo = libm::floor(lo).max(f64::from(d_min)) as u16;
     let hi = libm::ceil(hi).min(f64::from(d_max)) as u16;
-    match_in_range(left, right, xl, yl, (lo, hi), 1, config)
+    match_in_range(
+        left,
+        right,
+        xl,
+        yl,
+        (lo, hi),
+        config.stereo_coarse_step,
+        config,
+    )
 }
 
 /// Matching over the disparities `range.0..=range.1` scanned every `step` (then the two
