@@ -21,6 +21,9 @@ pub(super) enum StereoStage {
     Mapping { items: u32 },
 }
 
+/// VO poses after which the VO-only trajectory starts even without a sun update.
+const VO_ANCHOR_MAX_POSES: u32 = 30;
+
 impl Navigator {
     /// Build the visual odometry state (about 96 KB) in place, when [`NavConfig::vo_enabled`].
     /// Call once after the navigator has reached its final location (a static on the rover
@@ -302,14 +305,23 @@ impl Navigator {
         else {
             return;
         };
-        // VO-only dead reckoning, started at the first keyframe's EKF pose. It chains every VO
+        // VO-only dead reckoning, started at the EKF pose of a keyframe. It chains every VO
         // pose, rejected ones too: it is the diagnostic of VO alone, independent of the gate
-        // (whose verdicts are in the counters and telemetry).
-        let anchor = ekf
-            .clone_pose(key)
-            .ok()
-            .map(|(q, p)| PoseEstimate { p_n: p, q_nr: q });
-        self.traj.vo_step(anchor, rp);
+        // (whose verdicts are in the counters and telemetry). It starts once the EKF heading
+        // has had its first sun update (or the drive has no sun sensor, or after
+        // `VO_ANCHOR_MAX_POSES` poses): anchored before it, the trajectory carries the
+        // alignment's heading error (25 mrad on `flat-firm`, 0.36 m across 20 m) for good, which
+        // looked like a VO drift once VO results came in before the first sun update (5 s).
+        let heading_ready = self.config.ekf.sun.is_none()
+            || self.counters.sun_applied > 0
+            || self.counters.vo_updates >= VO_ANCHOR_MAX_POSES;
+        if heading_ready || self.traj.vo.is_some() {
+            let anchor = ekf
+                .clone_pose(key)
+                .ok()
+                .map(|(q, p)| PoseEstimate { p_n: p, q_nr: q });
+            self.traj.vo_step(anchor, rp);
+        }
         // The VO gate (vo_gate.rs) decides once, before anything is applied, on the filter the
         // pose is applied to: the recorder's snapshot at capture time when the result is
         // replayed (so the decision is the one an instantaneous VO would have had), the live
