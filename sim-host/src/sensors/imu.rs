@@ -186,22 +186,30 @@ mod tests {
         (m, var.sqrt())
     }
 
-    /// SIM-6: readings saturate at the ranges (the ADIS16488A's +-18 g and +-450 deg/s) and
-    /// are unchanged inside them.
-    #[test]
-    fn sim_6_imu_saturates_at_its_range() {
-        let params = ImuParams {
+    /// The default IMU without noise, biases or bias walks (scale factors and misalignments
+    /// kept).
+    fn noiseless() -> ImuParams {
+        ImuParams {
             gyro_noise_rad_s: 0.0,
             gyro_bias_rad_s: 0.0,
             gyro_bias_walk_rad_s_sqrt_s: 0.0,
             accel_noise_m_s2: 0.0,
             accel_bias_m_s2: 0.0,
             accel_bias_walk_m_s2_sqrt_s: 0.0,
+            ..ImuParams::default()
+        }
+    }
+
+    /// SIM-6: readings saturate at the ranges (the ADIS16488A's +-18 g and +-450 deg/s) and
+    /// are unchanged inside them.
+    #[test]
+    fn sim_6_imu_saturates_at_its_range() {
+        let params = ImuParams {
             gyro_scale_rel: 0.0,
             gyro_misalignment_deg: 0.0,
             accel_scale_rel: 0.0,
             accel_misalignment_deg: 0.0,
-            ..ImuParams::default()
+            ..noiseless()
         };
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let mut calib = ChaCha8Rng::seed_from_u64(4);
@@ -274,15 +282,7 @@ mod tests {
     /// only (the noise stream's draws are unchanged).
     #[test]
     fn sim_6_imu_scale_and_misalignment() {
-        let params = ImuParams {
-            gyro_noise_rad_s: 0.0,
-            gyro_bias_rad_s: 0.0,
-            gyro_bias_walk_rad_s_sqrt_s: 0.0,
-            accel_noise_m_s2: 0.0,
-            accel_bias_m_s2: 0.0,
-            accel_bias_walk_m_s2_sqrt_s: 0.0,
-            ..ImuParams::default()
-        };
+        let params = noiseless();
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let mut calib = ChaCha8Rng::seed_from_u64(4);
         let mut imu = ImuModel::new(params, &mut rng, &mut calib);

@@ -297,6 +297,30 @@ fn nav_vo_4_capture_by_distance_heading_and_time() {
     assert_eq!(nav.capture_due(), Some(CaptureReason::Time));
 }
 
+/// One 5 ms frame of a rover driving straight ahead: the IMU sample `accel_m_s2` (m/s^2, `R`)
+/// at frame `k`, and every 10th frame the joints of a rover at `x` m with speed `v` m/s on
+/// wheels of radius `r` m, then guidance.
+fn straight_frame(nav: &mut Navigator, k: u64, accel_m_s2: [f64; 3], (x, v, r): (f64, f64, f64)) {
+    let t_us = k * 5_000;
+    nav.propagate(Some(&ImuSample {
+        t_us,
+        gyro_rad_s: [0.0; 3],
+        accel_m_s2,
+        valid: true,
+    }));
+    if k % 10 == 0 {
+        nav.kinematic_cycle(Some(&JointState {
+            drive_angle_rad: [x / r; 6],
+            drive_rate_rad_s: [v / r; 6],
+            t_us,
+            wheel_valid: [true; 6],
+            suspension_valid: true,
+            ..JointState::default()
+        }));
+        let _ = nav.guidance_cycle();
+    }
+}
+
 /// NAV-VO-5 (issue 14, the learnt gyro bias): a rover driving straight north at 0.1 m/s on
 /// firm level ground with a perfect IMU (no bias) and perfect wheels, VO every second (0.3 s
 /// latency, replayed at capture time), VO exact except that its translation is rotated by
@@ -339,23 +363,7 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
             x += v * dt;
             let t_us = k * 5_000;
             x_at.insert(t_us, x);
-            nav.propagate(Some(&ImuSample {
-                t_us,
-                gyro_rad_s: [0.0; 3],
-                accel_m_s2: [a, 0.0, -g],
-                valid: true,
-            }));
-            if k % 10 == 0 {
-                nav.kinematic_cycle(Some(&JointState {
-                    drive_angle_rad: [x / r; 6],
-                    drive_rate_rad_s: [v / r; 6],
-                    t_us,
-                    wheel_valid: [true; 6],
-                    suspension_valid: true,
-                    ..JointState::default()
-                }));
-                let _ = nav.guidance_cycle();
-            }
+            straight_frame(&mut nav, k, [a, 0.0, -g], (x, v, r));
             nav.replay_step();
             if k == 20 * 200 {
                 yaw_20s = yaw_of(&nav.ekf.state().q_nr);
@@ -486,23 +494,7 @@ fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
             if respond && measured != a {
                 nav.imu_shock(range * dt);
             }
-            nav.propagate(Some(&ImuSample {
-                t_us,
-                gyro_rad_s: [0.0; 3],
-                accel_m_s2: [measured, 0.0, -g],
-                valid: true,
-            }));
-            if k % 10 == 0 {
-                nav.kinematic_cycle(Some(&JointState {
-                    drive_angle_rad: [x / r; 6],
-                    drive_rate_rad_s: [v / r; 6],
-                    t_us,
-                    wheel_valid: [true; 6],
-                    suspension_valid: true,
-                    ..JointState::default()
-                }));
-                let _ = nav.guidance_cycle();
-            }
+            straight_frame(&mut nav, k, [measured, 0.0, -g], (x, v, r));
             if i >= 0 && k % 20 == 0 {
                 errors.push((i, nav.ekf.state().v_n.x - v));
             }
