@@ -489,7 +489,6 @@ fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
             }
             v += a * dt;
             x += v * dt;
-            let t_us = k * 5_000;
             let measured = a.clamp(-range, range);
             if respond && measured != a {
                 nav.imu_shock(range * dt);
