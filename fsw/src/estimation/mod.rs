@@ -127,6 +127,28 @@ pub struct EkfConfig {
     pub max_position_var_m2: f64,
 }
 
+impl EkfConfig {
+    /// A placeholder configuration (every noise, limit and sigma zero, no sun): the value of
+    /// statically allocated filters and navigators before their `init` writes the real one.
+    pub const EMPTY: Self = Self {
+        imu_noise: ImuNoise {
+            gyro_rad_s_sqrt_hz: 0.0,
+            gyro_bias_rad_s2_sqrt_hz: 0.0,
+            accel_m_s2_sqrt_hz: 0.0,
+            accel_bias_m_s3_sqrt_hz: 0.0,
+        },
+        gravity_n_m_s2: crate::types::VEC3_ZERO,
+        max_imu_dt_us: 0,
+        max_measurement_skew_us: 0,
+        sun: None,
+        sun_sigma_rad: 0.0,
+        zupt_sigma_m_s: 0.0,
+        zero_rate_sigma_rad_s: 0.0,
+        max_attitude_var_rad2: 0.0,
+        max_position_var_m2: 0.0,
+    };
+}
+
 impl Default for EkfConfig {
     fn default() -> Self {
         Self {
@@ -264,23 +286,7 @@ impl Ekf {
     /// compile-time value a statically allocated navigator starts from before
     /// [`Self::init`] writes the real filter in place. Not meant to be run.
     pub const EMPTY: Self = Self {
-        config: EkfConfig {
-            imu_noise: ImuNoise {
-                gyro_rad_s_sqrt_hz: 0.0,
-                gyro_bias_rad_s2_sqrt_hz: 0.0,
-                accel_m_s2_sqrt_hz: 0.0,
-                accel_bias_m_s3_sqrt_hz: 0.0,
-            },
-            gravity_n_m_s2: crate::types::VEC3_ZERO,
-            max_imu_dt_us: 0,
-            max_measurement_skew_us: 0,
-            sun: None,
-            sun_sigma_rad: 0.0,
-            zupt_sigma_m_s: 0.0,
-            zero_rate_sigma_rad_s: 0.0,
-            max_attitude_var_rad2: 0.0,
-            max_position_var_m2: 0.0,
-        },
+        config: EkfConfig::EMPTY,
         x: NominalState {
             t_us: 0,
             q_nr: crate::types::QUAT_IDENTITY,

@@ -5,7 +5,6 @@
 
 use super::vo_gate::VoGateVerdict;
 use super::*;
-use crate::estimation::ImuNoise;
 use crate::kinematics::ContactConfig;
 
 /// Placeholder settings (zero everywhere; replaced by [`Navigator::init`]).
@@ -19,23 +18,7 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
     align_max_gyro_std_rad_s: 0.0,
     align_max_accel_std_m_s2: 0.0,
     align_sun_wait_samples: 0,
-    ekf: EkfConfig {
-        imu_noise: ImuNoise {
-            gyro_rad_s_sqrt_hz: 0.0,
-            gyro_bias_rad_s2_sqrt_hz: 0.0,
-            accel_m_s2_sqrt_hz: 0.0,
-            accel_bias_m_s3_sqrt_hz: 0.0,
-        },
-        gravity_n_m_s2: crate::types::VEC3_ZERO,
-        max_imu_dt_us: 0,
-        max_measurement_skew_us: 0,
-        sun: None,
-        sun_sigma_rad: 0.0,
-        zupt_sigma_m_s: 0.0,
-        zero_rate_sigma_rad_s: 0.0,
-        max_attitude_var_rad2: 0.0,
-        max_position_var_m2: 0.0,
-    },
+    ekf: EkfConfig::EMPTY,
     gyro_bias_sigma_rad_s: 0.0,
     accel_bias_sigma_m_s2: 0.0,
     odometry: OdometryConfig {
