@@ -374,20 +374,7 @@ impl Planner {
             last_position: None,
             committed: Vec::new(),
             consecutive_gazes: 0,
-            counters: PlannerCounters {
-                calls: 0,
-                replans: 0,
-                gazes: 0,
-                follow_entries: 0,
-                follow_resumes: 0,
-                follow_exits: 0,
-                follow_restarts: 0,
-                escapes: 0,
-                local_overflows: 0,
-                ltg_solves: 0,
-                max_segment_checks: 0,
-                max_ltg_pairs: 0,
-            },
+            counters: Self::EMPTY_COUNTERS,
         }
     }
 
