@@ -112,15 +112,35 @@ pub struct Rock {
 /// Parameters of a procedural rock field.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct RockField {
-    /// Rocks per square metre.
+    /// Rocks per square metre (the power-law field; ignored with `abundance_k`).
+    #[serde(default)]
     pub density_per_m2: f64,
-    /// Largest rock height, m (heights are drawn with a power law towards small rocks).
+    /// Largest rock height, m (heights are drawn with a power law towards small rocks; ignored
+    /// with `abundance_k`).
+    #[serde(default)]
     pub max_height_m: f64,
+    /// Total fractional area covered by rocks `k` of the Golombek & Rapp (1997) size-frequency
+    /// model of the Viking and Pathfinder sites, `F_k(D) = k exp(-q(k) D)`,
+    /// `q(k) = 1.79 + 0.152 / k` (cumulative fractional area of rocks of diameter `D` or
+    /// larger; Golombek et al. 2003, JGR 108(E12) 8086). Viking Lander 1: 0.07, Viking Lander
+    /// 2: 0.16-0.18, Pathfinder: 0.19. When positive, rocks of diameter at least
+    /// `min_diameter_m` (up to 3 m) are drawn from it with height half the diameter, and
+    /// `density_per_m2` and `max_height_m` are ignored (`docs/simulator.md`). 0 (the
+    /// default): the power-law field of `density_per_m2` and `max_height_m`.
+    #[serde(default)]
+    pub abundance_k: f64,
+    /// Smallest rock diameter of the `abundance_k` model, m (default 0.1).
+    #[serde(default = "default_min_diameter")]
+    pub min_diameter_m: f64,
     /// Half-size of the square area that gets rocks, m (centred on the origin).
     pub half_extent_m: f64,
     /// Disc around each listed point that stays free of rocks (the path), m.
     #[serde(default)]
     pub keep_clear_m: f64,
+}
+
+fn default_min_diameter() -> f64 {
+    0.1
 }
 
 /// Terrain description as it appears in a scenario file.
@@ -237,6 +257,69 @@ pub struct Terrain {
     plane_gradient: [f64; 2],
 }
 
+/// The Golombek & Rapp (1997) rock size-frequency model (as written in Golombek et al. 2003,
+/// JGR 108(E12) 8086): the cumulative fractional area covered by rocks of diameter `D` or
+/// larger is `F_k(D) = k exp(-q D)`, `q = 1.79 + 0.152 / k`, so the number of rocks per m^2 per
+/// metre of diameter is `n(D) = -F'(D) / (pi D^2 / 4) = 4 k q exp(-q D) / (pi D^2)`. Rocks
+/// between `min_diameter_m` and 3 m are drawn from `n` by its tabulated inverse distribution.
+#[derive(Debug, Clone)]
+struct GolombekRapp {
+    /// Diameters of the table, m.
+    d: Vec<f64>,
+    /// Cumulative number per m^2 from the smallest diameter up to each `d`.
+    cum: Vec<f64>,
+}
+
+impl GolombekRapp {
+    /// Height over diameter of a rock: about one half at the Viking sites (the ratio of the
+    /// MER landing-hazard models built on Golombek & Rapp's height-diameter data, Golombek et
+    /// al. 2003).
+    const HEIGHT_RATIO: f64 = 0.5;
+    const MAX_DIAMETER_M: f64 = 3.0;
+    const STEPS: usize = 4000;
+
+    fn new(k: f64, min_diameter_m: f64) -> Self {
+        let k = k.clamp(1e-3, 0.9);
+        let q = 1.79 + 0.152 / k;
+        let d0 = min_diameter_m.clamp(0.01, 1.0);
+        let n = |d: f64| 4.0 * k * q * (-q * d).exp() / (std::f64::consts::PI * d * d);
+        let h = (Self::MAX_DIAMETER_M - d0) / Self::STEPS as f64;
+        let mut d = Vec::with_capacity(Self::STEPS + 1);
+        let mut cum = Vec::with_capacity(Self::STEPS + 1);
+        let mut acc = 0.0;
+        for i in 0..=Self::STEPS {
+            let x = d0 + i as f64 * h;
+            if i > 0 {
+                acc += 0.5 * h * (n(x - h) + n(x));
+            }
+            d.push(x);
+            cum.push(acc);
+        }
+        Self { d, cum }
+    }
+
+    /// Rocks per m^2 between the smallest and the largest diameter.
+    fn density_per_m2(&self) -> f64 {
+        self.cum.last().copied().unwrap_or(0.0)
+    }
+
+    /// The diameter at the fraction `u` (0-1) of the number distribution, m.
+    fn diameter(&self, u: f64) -> f64 {
+        let target = u.clamp(0.0, 1.0) * self.density_per_m2();
+        let i = self
+            .cum
+            .partition_point(|c| *c < target)
+            .clamp(1, self.d.len() - 1);
+        let (c0, c1) = (self.cum[i - 1], self.cum[i]);
+        let t = if c1 > c0 {
+            (target - c0) / (c1 - c0)
+        } else {
+            0.0
+        };
+        self.d[i - 1] + t * (self.d[i] - self.d[i - 1])
+    }
+}
+
 impl Terrain {
     /// Build the terrain of `spec` for `seed`; `clear_path` are points (north, east, m) around
     /// which the rock field keeps `keep_clear_m` free.
@@ -256,14 +339,27 @@ impl Terrain {
         let (mut grid_origin_m, mut grid_n) = (0.0, 0);
         if let Some(field) = &spec.rocks {
             let half = field.half_extent_m.max(0.0);
-            let count = (field.density_per_m2 * 4.0 * half * half).round() as u64;
+            let golombek = (field.abundance_k > 0.0)
+                .then(|| GolombekRapp::new(field.abundance_k, field.min_diameter_m));
+            let density = golombek
+                .as_ref()
+                .map_or(field.density_per_m2, |g| g.density_per_m2());
+            let count = (density * 4.0 * half * half).round() as u64;
             for k in 0..count {
                 let u = |j: i64| lattice(k as i64, j, seed ^ 0x5EED_0F0C);
                 let x = (2.0 * u(0) - 1.0) * half;
                 let y = (2.0 * u(1) - 1.0) * half;
-                // Power law: many small rocks, few large ones.
-                let height = field.max_height_m * u(2).powi(3).max(0.02);
-                let radius = height * (1.5 + 1.5 * u(3));
+                let (height, radius) = match &golombek {
+                    Some(g) => {
+                        let d = g.diameter(u(2));
+                        (GolombekRapp::HEIGHT_RATIO * d, 0.5 * d)
+                    }
+                    None => {
+                        // Power law: many small rocks, few large ones.
+                        let height = field.max_height_m * u(2).powi(3).max(0.02);
+                        (height, height * (1.5 + 1.5 * u(3)))
+                    }
+                };
                 let clear = clear_path.windows(2).all(|w| {
                     point_segment_distance([x, y], w[0], w[1]) > field.keep_clear_m + radius
                 });
@@ -463,6 +559,8 @@ mod tests {
                 max_height_m: 0.2,
                 half_extent_m: 10.0,
                 keep_clear_m: 0.8,
+                abundance_k: 0.0,
+                min_diameter_m: 0.1,
             }),
             obstacles: Vec::new(),
         };
@@ -476,5 +574,63 @@ mod tests {
         }
         let r = a.rocks()[0];
         assert!((a.height_m(r.x_m, r.y_m) - r.height_m).abs() < 1e-12);
+    }
+
+    /// The Golombek & Rapp field reproduces its model: the number of rocks per m^2 of at
+    /// least 0.1, 0.3 and 0.5 m diameter (closed-form integral of `n(D)`, 0.1-3 m, for the
+    /// Viking Lander 2 abundance k = 0.17) within the Poisson scatter of a 40 m square.
+    #[test]
+    fn golombek_rapp_field_follows_its_size_frequency_model() {
+        let k = 0.17;
+        let spec = TerrainSpec {
+            base: BaseShape::Flat,
+            roughness_m: 0.0,
+            roughness_wavelength_m: 2.0,
+            rocks: Some(RockField {
+                density_per_m2: 0.0,
+                max_height_m: 0.0,
+                half_extent_m: 20.0,
+                keep_clear_m: 0.0,
+                abundance_k: k,
+                min_diameter_m: 0.1,
+            }),
+            obstacles: Vec::new(),
+        };
+        let t = Terrain::new(spec, 3, &[]);
+        let area = 1600.0;
+        // Reference: Simpson's rule on n(D) = 4 k q exp(-q D) / (pi D^2), independent of the
+        // generator's trapezoid table.
+        let q = 1.79 + 0.152 / k;
+        let n = |d: f64| 4.0 * k * q * (-q * d).exp() / (std::f64::consts::PI * d * d);
+        let cumulative = |d0: f64| {
+            let m = 20_000;
+            let h = (3.0 - d0) / m as f64;
+            (0..=m)
+                .map(|i| {
+                    let w = if i == 0 || i == m {
+                        1.0
+                    } else if i % 2 == 1 {
+                        4.0
+                    } else {
+                        2.0
+                    };
+                    w * n(d0 + i as f64 * h)
+                })
+                .sum::<f64>()
+                * h
+                / 3.0
+        };
+        for d0 in [0.1, 0.3, 0.5] {
+            let expected = cumulative(d0) * area;
+            let got = t.rocks().iter().filter(|r| 2.0 * r.radius_m >= d0).count() as f64;
+            assert!(
+                (got - expected).abs() <= 4.0 * expected.sqrt() + 1.0,
+                "D >= {d0}: {got} rocks, model {expected:.1}"
+            );
+        }
+        // Height half the diameter.
+        for r in t.rocks() {
+            assert!((r.height_m - r.radius_m).abs() < 1e-12);
+        }
     }
 }

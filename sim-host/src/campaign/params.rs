@@ -143,6 +143,7 @@ pub const PARAMS: &[Param] = &[
     p!("terrain.roughness_wavelength_m", "m", "longest roughness wavelength", s => &mut s.terrain.roughness_wavelength_m),
     p!("terrain.rocks.density_per_m2", "1/m^2", "rock density", s => &mut rocks(s)?.density_per_m2),
     p!("terrain.rocks.max_height_m", "m", "largest rock height", s => &mut rocks(s)?.max_height_m),
+    p!("terrain.rocks.abundance_k", "-", "rock area fraction k of the Golombek-Rapp model (0: power law)", s => &mut rocks(s)?.abundance_k),
     // Start pose: the true start minus the planned one (`Scenario::start_offset`).
     p!("start.north_m", "m", "true start north of the planned start", s => &mut s.start_offset.north_m),
     p!("start.east_m", "m", "true start east of the planned start", s => &mut s.start_offset.east_m),
