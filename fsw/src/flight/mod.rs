@@ -537,6 +537,15 @@ impl<P: Platform> Fsw<P> {
         &self.nav
     }
 
+    /// Ground command: uplink the global map of terrain-map localization (V99 sec. 5):
+    /// occupied world points `[x north, y east]` (`N`, m) in a 38.4 m square centred on
+    /// `centre_m` ([`Navigator::uplink_global_map`]; call after [`Self::start_vo`], while the
+    /// rover stands: the distance transform takes about 13.5 M rover-CPU instructions).
+    /// Returns the points inserted; `None` when localization is off.
+    pub fn uplink_global_map(&mut self, centre_m: [f64; 2], points: &[[f64; 2]]) -> Option<usize> {
+        self.nav.uplink_global_map(centre_m, points)
+    }
+
     /// The clock (for drivers that need the time base); `None` before [`Self::init`].
     pub fn clock_mut(&mut self) -> Option<&mut P::Clock> {
         self.devices.as_mut().map(|a| &mut a.clock)

@@ -107,21 +107,29 @@ pub struct LocalizerConfig {
 
 impl Default for LocalizerConfig {
     fn default() -> Self {
-        Self {
-            sigma_m: 0.15,
-            outlier_distance_m: 0.45,
-            window_sigmas: 3.0,
-            min_window_m: 0.4,
-            min_yaw_window_rad: 0.02,
-            max_nodes: 20_000,
-            min_points: 10,
-            min_inliers: 8,
-            min_inlier_fraction: 0.3,
-            ambiguity_nats: 3.0,
-            neighbourhood_steps: 2,
-            covariance_scale: 1.0,
-        }
+        Self::DEFAULT
     }
+}
+
+impl LocalizerConfig {
+    /// The defaults as a constant (a statically allocated navigator's configuration):
+    /// `sigma` 0.15 m, outlier distance 0.45 m, 3-sigma window (at least 0.4 m and 0.02 rad),
+    /// 20,000 nodes, at least 10 points and 8 inliers (30 %), 3 nats of ambiguity over +-2
+    /// steps, covariance scale 1 (reasons in `docs/localization.md`).
+    pub const DEFAULT: Self = Self {
+        sigma_m: 0.15,
+        outlier_distance_m: 0.45,
+        window_sigmas: 3.0,
+        min_window_m: 0.4,
+        min_yaw_window_rad: 0.02,
+        max_nodes: 20_000,
+        min_points: 10,
+        min_inliers: 8,
+        min_inlier_fraction: 0.3,
+        ambiguity_nats: 3.0,
+        neighbourhood_steps: 2,
+        covariance_scale: 1.0,
+    };
 }
 
 impl LocalizerConfig {

@@ -164,8 +164,8 @@ impl LocalizationFix {
     }
 }
 
-/// `J P J'` for 3x3 matrices.
-fn congruence(j: &[[f64; 3]; 3], p: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+/// `J P J'` for 3x3 matrices (also the navigator's lever-arm transfer).
+pub(crate) fn congruence(j: &[[f64; 3]; 3], p: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
     let mut out = [[0.0; 3]; 3];
     for (r, row) in out.iter_mut().enumerate() {
         for (c, v) in row.iter_mut().enumerate() {

@@ -68,6 +68,7 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
     perception: crate::perception::PerceptionConfig::DEFAULT,
     planner: crate::planning::PlannerConfig::DEFAULT,
     map_interval_m: 0.0,
+    localization: super::LocalizationSettings::DEFAULT,
     blind_stop_interval_m: 0.0,
     blind_stop_cycles: 0,
     blind_anchor_cycles: 0,

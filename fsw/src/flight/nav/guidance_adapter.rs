@@ -3,6 +3,10 @@
 
 use super::*;
 
+/// Fraction of fault protection's position-sigma limit at which a stop of the stop-and-go
+/// drive without VO is due whatever the wheel travel.
+pub const BLIND_SIGMA_FRACTION: f64 = 0.5;
+
 impl Navigator {
     /// RG2, after [`Self::kinematic_cycle`]: guidance and inverse kinematics. Returns the motor
     /// command, or `None` when the rover must be stopped (aligning, arrived, safed, a sensor
@@ -58,6 +62,15 @@ impl Navigator {
         }
         if self.blind_stop_due() {
             return None;
+        }
+        // A localization stop (path drives, V99 sec. 5): hold, or turn in place to a view.
+        match self.loc_command() {
+            Some(None) => return None,
+            Some(Some(turn)) => {
+                let joints = self.last_joints?;
+                return self.motor_command(turn, &joints);
+            }
+            None => {}
         }
         // Goal-directed driving: hold for a map, or turn in place for a gaze (V99 sec. 4).
         if self.config.hazard_avoidance && !self.hazard_on() {
@@ -162,7 +175,8 @@ impl Navigator {
         }
     }
 
-    /// Stop-and-go without VO ([`NavConfig::blind_stop_interval_m`]): counts the wheels'
+    /// Stop-and-go without VO ([`NavConfig::blind_stop_interval_m`], or when the position
+    /// sigma reaches [`BLIND_SIGMA_FRACTION`] of fault protection's limit): counts the wheels'
     /// travel while VO is off or lost and returns `true` while the rover must stand
     /// (a stop of [`NavConfig::blind_stop_cycles`] after each interval; zero-velocity updates
     /// apply meanwhile, `kin_aiding`). With VO alive the count restarts.
@@ -192,7 +206,18 @@ impl Navigator {
                 self.blind_travel_m += d;
             }
         }
-        if self.blind_travel_m >= c.blind_stop_interval_m {
+        // A stop is also due when the IMU-carried position sigma reaches half of fault
+        // protection's limit: the stop's zero-velocity updates bring it back (the position
+        // error between stops is mostly the integrated velocity error, which they observe),
+        // rather than the drive stopping for good (`PositionUncertain`). Measured on
+        // `marsyard-25m` without VO: the sigma reached the 1 m limit 0.98 m into the first
+        // 1 m interval and fell to 0.06 m at the stop.
+        // (At least a fifth of the interval after the last stop: a sigma the stop did not
+        // bring down must not hold the rover for good.)
+        let sigma_due = self.horizontal_sigma_m()
+            > BLIND_SIGMA_FRACTION * c.protection.max_position_sigma_m
+            && self.blind_travel_m >= 0.2 * c.blind_stop_interval_m;
+        if self.blind_travel_m >= c.blind_stop_interval_m || sigma_due {
             self.blind_travel_m = 0.0;
             self.blind_hold_left = c.blind_stop_cycles;
             self.counters.blind_stops = self.counters.blind_stops.saturating_add(1);

@@ -65,7 +65,10 @@ pub enum PlannerVerdict {
 
 /// State of the goal-directed drive.
 pub(super) struct HazardNav {
-    mapper: HazardMapper,
+    /// Goal-directed driving (the planner's paths replace the guidance path). False: the
+    /// mapper serves terrain-map localization on a path drive alone ([`super::loc_nav`]).
+    planning: bool,
+    pub(super) mapper: HazardMapper,
     planner: Planner,
     /// EKF position `[x, y]` (`N`, m) where the last map was started.
     last_map_xy: Option<[f64; 2]>,
@@ -85,6 +88,7 @@ impl HazardNav {
     /// of a statically allocated navigator's hazard navigation before
     /// [`Navigator::start_vo`] builds it in place.
     pub(super) const EMPTY: Self = Self {
+        planning: false,
         mapper: HazardMapper::EMPTY,
         planner: Planner::EMPTY,
         last_map_xy: None,
@@ -113,9 +117,9 @@ impl HazardNav {
 pub const WEDGE_EROSION_MARGIN_M: f64 = 0.1;
 
 /// Largest heading error of a gaze turn before the rover maps again, rad.
-const GAZE_TOLERANCE_RAD: f64 = 0.05;
+pub(super) const GAZE_TOLERANCE_RAD: f64 = 0.05;
 /// Yaw rate of a gaze turn, rad/s.
-const GAZE_RATE_RAD_S: f64 = 0.1;
+pub(super) const GAZE_RATE_RAD_S: f64 = 0.1;
 /// Clearance kept between the circle the rover's footprint sweeps turning in place and a
 /// remembered obstacle's hazard outline, m: the outline is the hull of 0.1 m hazard cells above
 /// the step limit, smaller than the rock's base, and the position is the EKF's. From the
@@ -138,11 +142,13 @@ pub fn turn_sweep_radius(geometry: &RoverGeometry) -> f64 {
 
 impl Navigator {
     /// Build the hazard mapper and the planner in place (about 68 KB) when
-    /// [`NavConfig::hazard_avoidance`] is on; the goal is the last waypoint of the plan. A
-    /// configuration the mapper refuses leaves the drive held (counted in
+    /// [`NavConfig::hazard_avoidance`] is on, or the mapper alone for terrain-map localization
+    /// on a path drive ([`LocalizationSettings::enabled`]); the goal is the last waypoint of
+    /// the plan. A configuration the mapper refuses leaves the drive held (counted in
     /// [`NavCounters::command_errors`]) rather than driving blind.
     pub(super) fn start_hazard_nav(&mut self) {
-        if !self.config.hazard_avoidance || self.hazard.is_some() {
+        let planning = self.config.hazard_avoidance;
+        if !(planning || self.loc_on()) || self.hazard.is_some() {
             return;
         }
         let Some(goal) = self.guidance.as_ref().map(|g| g.path().goal()) else {
@@ -157,10 +163,13 @@ impl Navigator {
         let mapper = h.mapper.init(self.config.perception, &self.calibration);
         match (mapper, planner) {
             (Ok(()), Ok(())) => {
+                h.planning = planning;
                 h.last_map_xy = None;
-                h.map_wanted = true;
+                // A path drive does not wait for maps: they come every
+                // `LocalizationSettings::map_interval_m` of travel.
+                h.map_wanted = planning;
                 h.gaze_rad = None;
-                h.planned = false;
+                h.planned = !planning;
                 h.verdict = PlannerVerdict::Driving;
                 h.last_output = None;
                 h.counters = HazardCounters::default();
@@ -183,7 +192,10 @@ impl Navigator {
 
     /// The planner's counters (replans, gazes, boundary following), if hazard avoidance is on.
     pub fn planner_counters(&self) -> Option<crate::planning::PlannerCounters> {
-        self.hazard.as_ref().map(|h| h.planner.counters())
+        self.hazard
+            .as_ref()
+            .filter(|h| h.planning)
+            .map(|h| h.planner.counters())
     }
 
     /// The last planner output, if any.
@@ -199,6 +211,13 @@ impl Navigator {
     /// True when hazard avoidance is on (the mapper and planner were built).
     pub(super) fn hazard_on(&self) -> bool {
         self.hazard.is_some()
+    }
+
+    /// A hazard map is wanted from the next capture (a localization stop's view).
+    pub(super) fn request_map(&mut self) {
+        if let Some(h) = self.hazard.as_mut() {
+            h.map_wanted = true;
+        }
     }
 
     /// True when a hazard map should be made from the next frame.
@@ -217,8 +236,13 @@ impl Navigator {
             None => true,
             Some(q) => {
                 let d = libm::sqrt((p.x - q[0]) * (p.x - q[0]) + (p.y - q[1]) * (p.y - q[1]));
+                let interval = if h.planning {
+                    self.config.map_interval_m
+                } else {
+                    self.config.localization.map_interval_m
+                };
                 // A non-finite distance (a diverged estimate) asks for a map too.
-                d >= self.config.map_interval_m || !d.is_finite()
+                d >= interval || !d.is_finite()
             }
         }
     }
@@ -286,7 +310,14 @@ impl Navigator {
                 match result {
                     Ok(()) => {
                         h.counters.maps = h.counters.maps.saturating_add(1);
-                        self.plan_step();
+                        if h.planning {
+                            self.plan_step();
+                        }
+                        // Terrain-map localization on the same map: its search keeps the
+                        // pipeline busy.
+                        if self.loc_after_map() {
+                            return (quantum.max(1), false);
+                        }
                     }
                     Err(_) => {
                         h.counters.map_errors = h.counters.map_errors.saturating_add(1);
@@ -421,7 +452,7 @@ impl Navigator {
         let sweep = turn_sweep_radius(&self.config.geometry);
         let grown = crate::perception::ROVER_HALF_WIDTH_M + self.config.perception.grow_margin_m;
         let h = self.hazard.as_mut()?;
-        if h.verdict != PlannerVerdict::Driving {
+        if !h.planning || h.verdict != PlannerVerdict::Driving {
             return None;
         }
         if let (Some(target), Some(yaw)) = (h.gaze_rad, heading) {
@@ -477,7 +508,7 @@ impl Navigator {
         let Some(h) = self.hazard.as_mut() else {
             return false;
         };
-        if h.verdict != PlannerVerdict::Driving {
+        if !h.planning || h.verdict != PlannerVerdict::Driving {
             return false;
         }
         h.map_wanted = true;

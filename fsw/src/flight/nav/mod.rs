@@ -44,6 +44,7 @@ mod empty;
 mod guidance_adapter;
 pub mod hazard_nav;
 mod kin_aiding;
+pub mod loc_nav;
 pub mod protection;
 mod radius;
 #[cfg(test)]
@@ -54,6 +55,7 @@ mod vo_sched;
 use align::Alignment;
 pub use boresight::{Boresight, BoresightConfig};
 use diagnostics::Trajectories;
+pub use loc_nav::{LocCounters, LocFixReport, LocalizationSettings};
 use protection::{FaultResponse, Protection, ProtectionConfig};
 pub use radius::{RadiusScale, RadiusScaleConfig};
 use vo_gate::{CaptureMark, VoGateStatus};
@@ -206,6 +208,9 @@ pub struct NavConfig {
     /// EKF travel between hazard maps while driving a planned path, m (the hazcams see about
     /// 0.3-2.8 m ahead, so a map each metre keeps the next obstacle in view twice).
     pub map_interval_m: f64,
+    /// Terrain-map localization against an uplinked global map (V99 sec. 5, [`loc_nav`]).
+    /// Off by default.
+    pub localization: LocalizationSettings,
     /// Stop-and-go without VO (RB sec. 5, H04 sec. 2): while VO is off or lost, the rover stops
     /// after every `blind_stop_interval_m` of wheel travel for [`Self::blind_stop_cycles`], so
     /// that zero-velocity updates re-anchor the IMU velocity; between stops a kinematic
@@ -334,6 +339,7 @@ impl NavConfig {
                 ..crate::planning::PlannerConfig::default()
             },
             map_interval_m: 1.0,
+            localization: LocalizationSettings::DEFAULT,
             blind_stop_interval_m: 1.0,
             blind_stop_cycles: 60,
             blind_anchor_cycles: 300,
@@ -608,6 +614,8 @@ pub struct Navigator {
     last_ekf_error: Option<EstError>,
     /// Goal-directed driving with hazard avoidance (built in place by [`Self::start_vo`]).
     hazard: InPlace<hazard_nav::HazardNav>,
+    /// Terrain-map localization (built in place by [`Self::start_vo`]).
+    loc: InPlace<loc_nav::LocNav>,
 }
 
 /// Why the navigator could not be built.
@@ -704,6 +712,7 @@ impl Navigator {
         cycles_since_zupt: u32::MAX,
         last_ekf_error: None,
         hazard: InPlace::unbuilt(hazard_nav::HazardNav::EMPTY),
+        loc: InPlace::unbuilt(loc_nav::LocNav::EMPTY),
     };
 
     /// [`Self::new`] in place: this navigator becomes the one `new(*config, path,
@@ -723,6 +732,7 @@ impl Navigator {
         self.mode = NavMode::Safed;
         self.vo.built = false;
         self.hazard.built = false;
+        self.loc.built = false;
         let start = [
             config.initial_position_n_m[0],
             config.initial_position_n_m[1],

@@ -19,6 +19,9 @@ pub(super) enum StereoStage {
     },
     /// A hazard map running on the held frame ([`super::hazard_nav`]); `items` work items done.
     Mapping { items: u32 },
+    /// Terrain-map localization searching after a map ([`super::loc_nav`]); the frame stays
+    /// held so that no capture starts meanwhile.
+    Localizing,
 }
 
 /// VO poses after which the VO-only trajectory starts even without a sun update.
@@ -31,6 +34,7 @@ impl Navigator {
     /// A calibration VO refuses leaves VO off (counted in [`NavCounters::vo_failures`]).
     /// Also builds the hazard navigation ([`NavConfig::hazard_avoidance`], about 68 KB).
     pub fn start_vo(&mut self) {
+        self.start_localization();
         self.start_hazard_nav();
         if !self.config.vo_enabled || self.vo.is_some() {
             return;
@@ -51,7 +55,7 @@ impl Navigator {
     pub fn vo_busy(&self) -> bool {
         matches!(
             self.stereo,
-            StereoStage::Processing { .. } | StereoStage::Mapping { .. }
+            StereoStage::Processing { .. } | StereoStage::Mapping { .. } | StereoStage::Localizing
         )
     }
 
@@ -134,6 +138,10 @@ impl Navigator {
         let clone = match self.stereo {
             StereoStage::Capturing { clone } | StereoStage::Processing { clone, .. } => clone,
             StereoStage::Idle | StereoStage::Mapping { .. } => None,
+            StereoStage::Localizing => {
+                self.loc_abandon();
+                None
+            }
         };
         self.release(clone);
         if let Some(vo) = self.vo.as_mut() {
@@ -155,14 +163,20 @@ impl Navigator {
         };
         let prior = self.ekf_relative_pose(self.key_clone, clone);
         let Some(vo) = self.vo.as_mut() else {
-            // VO off: the frame serves the hazard map alone (if one is due).
+            // VO off: the frame serves the hazard map alone (if one is due); localization
+            // keeps the capture's clone of a map to apply its fix there.
             let pose = self.clone_pose_of(clone);
-            self.release(clone);
             self.stereo = StereoStage::Idle;
             if !self.recorder.replaying() {
                 self.recorder.end();
             }
-            return self.start_map(frame, pose);
+            let started = self.start_map(frame, pose);
+            if started && self.loc_on() {
+                self.loc_keep_clone(clone);
+            } else {
+                self.release(clone);
+            }
+            return started;
         };
         match vo.start(frame, prior.as_ref()) {
             Ok(()) => {
@@ -217,6 +231,9 @@ impl Navigator {
     pub fn vo_step(&mut self, frame: &StereoFrame, quantum: u32) -> (u32, bool) {
         if let StereoStage::Mapping { items } = self.stereo {
             return self.map_step(frame, items, quantum);
+        }
+        if self.stereo == StereoStage::Localizing {
+            return self.loc_step(quantum);
         }
         let StereoStage::Processing { clone, items } = self.stereo else {
             return (0, true);
