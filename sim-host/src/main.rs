@@ -111,6 +111,11 @@ enum Command {
         /// model, no rectification in the flight software), for comparison.
         #[arg(long)]
         ideal_lens: bool,
+        /// Terrain-map localization on (V99 sec. 5): the simulator uplinks a global map of its
+        /// rocks as a MARDI descent image from 150 m shows them; the flight software matches
+        /// its hazard maps against it (docs/localization.md).
+        #[arg(long)]
+        localization: bool,
     },
     /// Record the HAL call tape of a scenario segment (with rendered stereo images) for replay
     /// on the host or the rover CPU (docs/timing.md).
@@ -241,6 +246,7 @@ struct RunRequest {
     exact_dimensions: bool,
     slip_model: Option<String>,
     ideal_lens: bool,
+    localization: bool,
     quiet: bool,
 }
 
@@ -278,6 +284,7 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
             exact_dimensions: false,
             slip_model: None,
             ideal_lens: false,
+            localization: false,
             quiet: true,
         })?;
         results.push((label, dir, summary, result));
@@ -356,6 +363,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
         exact_dimensions,
         slip_model,
         ideal_lens,
+        localization,
         quiet,
     } = req;
     let mut scenario = Scenario::load(&path)?;
@@ -410,6 +418,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
             no_slip_comp,
             reference_driver,
             no_vo,
+            localization,
             counter: if sim_counter {
                 CounterMode::SimTime
             } else {
@@ -618,6 +627,7 @@ fn main() -> anyhow::Result<()> {
             exact_dimensions,
             slip_model,
             ideal_lens,
+            localization,
         }) => run_scenario(RunRequest {
             path: scenario,
             seed,
@@ -632,6 +642,7 @@ fn main() -> anyhow::Result<()> {
             exact_dimensions,
             slip_model,
             ideal_lens,
+            localization,
             quiet: false,
         })
         .map(|_| ()),

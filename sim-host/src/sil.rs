@@ -74,9 +74,11 @@ pub struct Variant {
     /// constant), whatever the scenario says: a reference against the default per-wheel
     /// rigid-wheel terramechanics.
     pub lumped: bool,
-    /// Visual odometry off in the flight software (the images are then not rendered: nothing
-    /// uses them).
+    /// Visual odometry off in the flight software (the images are then not rendered unless
+    /// `localization` uses them).
     pub no_vo: bool,
+    /// Terrain-map localization on, against the MARDI map the simulator uplinks (issue 17).
+    pub localization: bool,
 }
 
 impl Variant {
@@ -109,6 +111,9 @@ impl Variant {
         if self.no_vo {
             parts.push("no VO");
         }
+        if self.localization {
+            parts.push("localization");
+        }
         parts.join(", ")
     }
 }
@@ -118,11 +123,19 @@ const BASE: Variant = Variant {
     exact_dimensions: false,
     lumped: false,
     no_vo: false,
+    localization: false,
 };
 
 /// No slip, with the per-seed dimension and calibration errors (the gate's false alarms).
 const NO_SLIP: Variant = Variant {
     no_slip: true,
+    ..BASE
+};
+
+/// VO off, terrain-map localization on (V99 sec. 5, issue 17).
+const LOCALIZATION: Variant = Variant {
+    no_vo: true,
+    localization: true,
     ..BASE
 };
 
@@ -299,7 +312,7 @@ const EKF_HALF_PERCENT: Check = goal(
 );
 
 /// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
-pub const CASES: [Case; 26] = [
+pub const CASES: [Case; 27] = [
     Case {
         id: "SIL-GNC-1",
         scenario: "slope-10-cross",
@@ -706,6 +719,44 @@ pub const CASES: [Case; 26] = [
         ],
     },
     Case {
+        id: "SIL-LOC-1",
+        scenario: "marsyard-25m",
+        no_slip_comp: false,
+        variant: LOCALIZATION,
+        title: "Mars Yard without VO, terrain-map localization against a MARDI map (V99 sec. 5)",
+        checks: &[
+            GOAL_REACHED,
+            req(
+                "EKF error / distance",
+                |s| s.error_pct.ekf,
+                Compare::AtMost,
+                1.0,
+                "%",
+            ),
+            req(
+                "localization fixes fused",
+                |s| s.localization.as_ref().map(|l| f64::from(l.updates)),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            req(
+                "fix NEES mean (3 dof; not overconfident: 95 % chi-square)",
+                |s| s.localization.as_ref().and_then(|l| l.nees_mean),
+                Compare::AtMost,
+                7.815,
+                "",
+            ),
+            goal(
+                "fused fix position error max",
+                |s| s.localization.as_ref().and_then(|l| l.fused_error_max_m),
+                Compare::AtMost,
+                0.3,
+                "m",
+            ),
+        ],
+    },
+    Case {
         id: "SIL-SLIP-2",
         scenario: "marsyard-25m",
         no_slip_comp: false,
@@ -881,18 +932,20 @@ pub fn run_case(case: Case, scenarios_dir: &Path) -> anyhow::Result<CaseResult> 
     let mut scenario = Scenario::load(&scenarios_dir.join(format!("{}.toml", case.scenario)))?;
     case.variant.apply(&mut scenario);
     let sun = scenario.site.sun_w(0.0);
-    let renderer: Option<Box<dyn StereoRenderer>> = (!case.variant.no_vo).then(|| {
-        Box::new(TexturedRenderer::new(
-            hazcam_calibration(),
-            scenario.seed,
-            [sun.x, sun.y, sun.z],
-        )) as Box<dyn StereoRenderer>
-    });
+    let renderer: Option<Box<dyn StereoRenderer>> =
+        (!case.variant.no_vo || case.variant.localization).then(|| {
+            Box::new(TexturedRenderer::new(
+                hazcam_calibration(),
+                scenario.seed,
+                [sun.x, sun.y, sun.z],
+            )) as Box<dyn StereoRenderer>
+        });
     let result = run(
         &scenario,
         RunOptions {
             no_slip_comp: case.no_slip_comp,
             no_vo: case.variant.no_vo,
+            localization: case.variant.localization,
             counter: CounterMode::SimTime,
             renderer,
             ..RunOptions::default()

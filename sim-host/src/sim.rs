@@ -45,6 +45,10 @@ pub struct RunOptions {
     pub reference_driver: bool,
     /// Visual odometry off in the flight software (the cameras still capture).
     pub no_vo: bool,
+    /// Terrain-map localization on in the flight software (V99 sec. 5), against a global map
+    /// the simulator makes from its own rocks as a MARDI descent image from 150 m shows them
+    /// ([`crate::descent_map`]) and uplinks before the drive.
+    pub localization: bool,
     /// Execution counter of the flight clock.
     pub counter: CounterMode,
     /// Stereo renderer (default: [`FlatGreyRenderer`]).
@@ -65,6 +69,7 @@ impl Default for RunOptions {
             no_slip_comp: false,
             reference_driver: false,
             no_vo: false,
+            localization: false,
             counter: CounterMode::Host,
             renderer: None,
             progress: None,
@@ -243,8 +248,96 @@ pub struct RunResult {
     pub hazard_min_distance_m: Option<f64>,
     /// The goal-directed drive (hazard maps and RoverBug), when the scenario asked for it.
     pub planner: Option<PlannerRun>,
+    /// Terrain-map localization, when the run asked for it.
+    pub localization: Option<LocalizationRun>,
     /// Wall-clock seconds of the run.
     pub wall_time_s: f64,
+}
+
+/// What terrain-map localization did in a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalizationRun {
+    /// The flight software's counters.
+    pub counters: fsw::flight::nav::LocCounters,
+    /// Points of the uplinked global map the flight software inserted.
+    pub map_points: usize,
+    /// Rocks and blocks the descent image mapped.
+    pub map_features: usize,
+    /// Every fix offered to the EKF, checked against the truth.
+    pub checks: Vec<LocCheck>,
+    /// Why the last search failed, if one did.
+    pub last_error: Option<String>,
+}
+
+/// One localization fix against the truth at its capture time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocCheck {
+    /// Capture time, s.
+    pub t_s: f64,
+    /// Fix minus truth: north, east (m), heading (rad, wrapped).
+    pub error: [f64; 3],
+    /// Normalised estimation error squared of the fix (3 dof: chi-square mean 3).
+    pub nees: f64,
+    /// The EKF's estimate before the fix minus truth: north, east (m).
+    pub prior_error_m: [f64; 2],
+    /// The EKF's gate distance of the fix.
+    pub d2: f64,
+    /// Fused.
+    pub applied: bool,
+}
+
+/// The global map the ground uplinks: the rocks a MARDI frame from 150 m shows
+/// ([`crate::descent_map::DescentImage::mardi`]) in the flight map's 38.4 m square centred on
+/// the middle of the waypoints' bounding box.
+fn uplink_map(
+    terrain: &crate::terrain::Terrain,
+    waypoints: &[[f64; 2]],
+    seed: u64,
+) -> ([f64; 2], crate::descent_map::DescentMap) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for w in waypoints {
+        for k in 0..2 {
+            lo[k] = lo[k].min(w[k]);
+            hi[k] = hi[k].max(w[k]);
+        }
+    }
+    let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+    let side = fsw::localization::MAP_SIDE as f64 * fsw::localization::MAP_CELL_M;
+    let image = crate::descent_map::DescentImage::mardi(50.0);
+    (
+        centre,
+        crate::descent_map::descent_map(terrain, &image, centre, side, seed),
+    )
+}
+
+fn loc_check(
+    fix: &fsw::flight::nav::LocFixReport,
+    history: &std::collections::VecDeque<(u64, BodyPose)>,
+) -> Option<LocCheck> {
+    let truth = history
+        .iter()
+        .find(|(t, _)| *t == fix.t_us)
+        .map(|(_, p)| *p)?;
+    let r = truth.rot_w_from_r();
+    let yaw = r[(1, 0)].atan2(r[(0, 0)]);
+    let wrap = |a: f64| {
+        (a + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI) - std::f64::consts::PI
+    };
+    let e = nalgebra::Vector3::new(
+        fix.pose[0] - truth.pos_m[0],
+        fix.pose[1] - truth.pos_m[1],
+        wrap(fix.pose[2] - yaw),
+    );
+    let c = nalgebra::Matrix3::from_fn(|i, j| fix.covariance[i][j]);
+    let nees = c.try_inverse().map(|ci| (e.transpose() * ci * e)[(0, 0)])?;
+    Some(LocCheck {
+        t_s: fix.t_us as f64 * 1e-6,
+        error: [e.x, e.y, e.z],
+        nees,
+        prior_error_m: [fix.prior[0] - truth.pos_m[0], fix.prior[1] - truth.pos_m[1]],
+        d2: fix.d2,
+        applied: fix.applied,
+    })
 }
 
 /// What the flight software's hazard maps and RoverBug planner did in a run.
@@ -323,12 +416,27 @@ pub fn run_with<H: RunHooks>(
             vo_enabled: !options.no_vo,
         },
     );
+    config.nav.localization.enabled = options.localization;
     if let Some(configure) = options.configure {
         configure(&mut config);
     }
     let mut fsw = Fsw::new(hooks.wrap(devices), &config, &scenario.waypoints)
         .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
     fsw.start_vo();
+    let uplinked = if options.localization {
+        let map = {
+            let w = world.borrow();
+            uplink_map(&w.terrain, &scenario.waypoints, seed)
+        };
+        let inserted = fsw
+            .uplink_global_map(map.0, &map.1.points)
+            .ok_or_else(|| anyhow::anyhow!("the flight software refused the global map"))?;
+        Some((map.1, inserted))
+    } else {
+        None
+    };
+    let mut loc_seen = 0u32;
+    let mut loc_checks: Vec<LocCheck> = Vec::new();
     let mut source = if options.reference_driver {
         let mode = if options.no_slip_comp {
             DriverMode::OpenLoop
@@ -385,6 +493,14 @@ pub fn run_with<H: RunHooks>(
                         .vo_pose()
                         .map(|v| ([v.p_n.x, v.p_n.y, v.p_n.z], quat_xyzw(&v.q_nr)));
                     vo_checks.push(check);
+                }
+            }
+        }
+        if let Some(fix) = nav.last_localization() {
+            if fix.search != loc_seen {
+                loc_seen = fix.search;
+                if let Some(check) = loc_check(&fix, &history) {
+                    loc_checks.push(check);
                 }
             }
         }
@@ -483,6 +599,16 @@ pub fn run_with<H: RunHooks>(
             .min_distance_m
             .is_finite()
             .then_some(hazard_monitor.min_distance_m),
+        localization: uplinked.map(|(map, inserted)| LocalizationRun {
+            counters: fsw.nav().localization_counters(),
+            map_points: inserted,
+            map_features: map.features_mapped,
+            checks: loc_checks,
+            last_error: fsw
+                .nav()
+                .last_localization_error()
+                .map(|e| format!("{e:?}")),
+        }),
         planner: (scenario.navigation == crate::scenario::NavigationKind::Roverbug).then(|| {
             let (a, b) = (scenario.waypoints[0], end);
             PlannerRun {

@@ -86,6 +86,7 @@ fn simulate(manifest: &Manifest, index: u64, outputs: Option<&Path>) -> anyhow::
             no_slip_comp: !manifest.run.slip_compensation,
             reference_driver: false,
             no_vo: !manifest.run.vo,
+            localization: false,
             counter: CounterMode::SimTime,
             renderer,
             progress: None,

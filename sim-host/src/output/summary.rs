@@ -148,6 +148,8 @@ pub struct Summary {
     pub hazards: HazardSummary,
     /// The goal-directed drive (hazard maps and RoverBug; null for a path drive).
     pub planner: Option<PlannerSummary>,
+    /// Terrain-map localization (issue 17; null when the run did not ask for it).
+    pub localization: Option<LocalizationSummary>,
     /// Slip.
     pub slip: SlipSummary,
     /// VO.
@@ -214,6 +216,41 @@ pub struct PlannerSummary {
     pub gazes_skipped: u32,
     /// RG2 cycles held still waiting for a map.
     pub hold_cycles: u32,
+}
+
+/// Terrain-map localization of a run (issue 17, V99 sec. 5).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct LocalizationSummary {
+    /// Fixes fused into the EKF.
+    pub updates: u32,
+    /// Fixes the EKF's gate refused.
+    pub rejected: u32,
+    /// Searches that ended without a fix (detected failures: ambiguous, too few inliers, peak
+    /// on the window's edge, budget).
+    pub failed: u32,
+    /// Searches that could not start (mostly too few points in the local map).
+    pub not_started: u32,
+    /// Fixes whose capture state was gone.
+    pub stale: u32,
+    /// Searches started.
+    pub searches: u32,
+    /// Hazard maps added to local maps.
+    pub maps: u32,
+    /// Mean NEES of the fixes against the truth at their capture (3 dof: 3 when the
+    /// covariance is consistent); null without a fix.
+    pub nees_mean: Option<f64>,
+    /// Fixes checked against the truth.
+    pub fixes_checked: usize,
+    /// Root-mean-square position error of the fixes, m; null without a fix.
+    pub fix_error_rms_m: Option<f64>,
+    /// Largest position error of a fused fix, m; null without one.
+    pub fused_error_max_m: Option<f64>,
+    /// Points of the uplinked global map, and rocks the descent image mapped.
+    pub map_points: usize,
+    /// Rocks and blocks the descent image mapped.
+    pub map_features: usize,
+    /// Why the last search failed, if one did.
+    pub last_error: Option<String>,
 }
 
 /// One truth-side collision.
@@ -413,6 +450,33 @@ pub fn summarise(run: &RunResult) -> Summary {
                 })
                 .collect(),
         },
+        localization: run.localization.as_ref().map(|l| {
+            let n = l.checks.len();
+            let mean = |f: &dyn Fn(&crate::sim::LocCheck) -> f64| {
+                (n > 0).then(|| l.checks.iter().map(f).sum::<f64>() / n as f64)
+            };
+            LocalizationSummary {
+                updates: l.counters.updates,
+                rejected: l.counters.rejected,
+                failed: l.counters.failed,
+                not_started: l.counters.not_started,
+                stale: l.counters.stale,
+                searches: l.counters.searches,
+                maps: l.counters.maps,
+                nees_mean: mean(&|c| c.nees),
+                fixes_checked: n,
+                fix_error_rms_m: mean(&|c| c.error[0].powi(2) + c.error[1].powi(2)).map(f64::sqrt),
+                fused_error_max_m: l
+                    .checks
+                    .iter()
+                    .filter(|c| c.applied)
+                    .map(|c| c.error[0].hypot(c.error[1]))
+                    .reduce(f64::max),
+                map_points: l.map_points,
+                map_features: l.map_features,
+                last_error: l.last_error.clone(),
+            }
+        }),
         planner: run.planner.as_ref().map(|p| PlannerSummary {
             status: match p.verdict {
                 fsw::flight::nav::hazard_nav::PlannerVerdict::Driving => "driving",
