@@ -16,8 +16,21 @@
 //!    because `x_Ci` is a unit vector normal to `s_i`).
 //! 4. Steering wrap: of `psi` and `psi +- pi` (the wheel rate flipped), the angle within the
 //!    steering limits closest to the current steering angle.
+//!
+//! Rough terrain ([`inverse_kinematics_contact`], [`max_speed_scale_contact`]; Tarokh and
+//! McDermott, "Kinematics modeling and analyses of articulated rovers", IEEE T-RO 21(4) 2005;
+//! Iagnemma and Dubowsky 2004): each wheel `i` touches the ground at the contact angle
+//! `delta_i` in its wheel plane ([`super::contact`] for the frames and the sign). Its
+//! unactuated row is the component along the contact normal
+//! `n_i = cos(delta) z_Ci - sin(delta) x_Ci` of the chain's velocity at the contact point
+//! `c_i(delta)` (the contact neither lifts off nor sinks), and its wheel rate is that
+//! velocity's component along the tangent `t_i(delta) = cos(delta) x_Ci + sin(delta) z_Ci`
+//! over `r` (equivalently: the axle's speed along the tangent over `r`, minus the chain's
+//! rotation about the spin axis). `x_Ci` is taken at the current steering angle. At
+//! `delta_i = 0` a wheel's rows are the ones above, computed by the same operations (bit for
+//! bit). Derivation in `docs/kinematics.md`.
 
-use super::geometry::{check_suspension, wheel_frames_trusted, RoverGeometry};
+use super::geometry::{check_suspension, wheel_frames_trusted, RoverGeometry, WheelFrames};
 use super::{BodyRates, KinematicsError, SuspensionRates, SuspensionState};
 use crate::types::{Mat6, Vec3, Vec6};
 use rover_hal::{MobilityCommand, WHEEL_COUNT};
@@ -116,11 +129,153 @@ impl InverseSolution {
     }
 }
 
-/// Eq. 16-25 without the wheel-rate limit (the steering limit applies).
-fn solve(
+/// The wheel/terrain contact angles the rough-terrain inverse kinematics works with
+/// ([`inverse_kinematics_contact`]): per wheel (index `wheel - 1`) the angle `delta_i` of the
+/// contact in the wheel plane (rad, 0 below the axle, positive ahead of it: the frames and sign
+/// of [`super::contact`], V99 sec. 6) with its sine and cosine, computed once by
+/// [`ContactAngles::new`] (once per RG2 cycle for both the speed scaling and the inverse).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactAngles {
+    /// `Some((sin delta, cos delta))` for a wheel with a non-zero angle in use, `None` for a
+    /// wheel whose contact is taken below its axle (angle 0).
+    sin_cos: [Option<(f64, f64)>; WHEEL_COUNT],
+}
+
+impl ContactAngles {
+    /// Every contact below its axle: the inverse kinematics of eq. 16-25 unchanged.
+    pub const LEVEL: Self = ContactAngles {
+        sin_cos: [None; WHEEL_COUNT],
+    };
+
+    /// The contact angles `angles_rad` (rad, index `wheel - 1`). An angle that is not finite,
+    /// or whose magnitude is at or above `max_angle_rad` (rad; an estimator at its clamp, or a
+    /// wheel whose rate would grow by `1 / cos(delta)` beyond use), is taken as 0 for that
+    /// wheel; a `max_angle_rad` that is not finite or not in `(0, pi/2)` takes every angle
+    /// as 0. Six `sin/cos` pairs.
+    pub fn new(angles_rad: &[f64; WHEEL_COUNT], max_angle_rad: f64) -> Self {
+        let max_ok = max_angle_rad.is_finite()
+            && max_angle_rad > 0.0
+            && max_angle_rad < core::f64::consts::FRAC_PI_2;
+        if !max_ok {
+            return Self::LEVEL;
+        }
+        ContactAngles {
+            sin_cos: angles_rad.map(|d| {
+                if d.is_finite() && d != 0.0 && libm::fabs(d) < max_angle_rad {
+                    Some(libm::sincos(d))
+                } else {
+                    None
+                }
+            }),
+        }
+    }
+
+    /// The angles in use, rad (0 for the wheels that fell back to the level contact).
+    pub fn angles_rad(&self) -> [f64; WHEEL_COUNT] {
+        self.sin_cos
+            .map(|sc| sc.map_or(0.0, |(s, c)| libm::atan2(s, c)))
+    }
+}
+
+/// Where each wheel touches the ground, for [`solve`]: monomorphised so that the level case
+/// ([`Level`]) compiles to the eq. 23-25 code without the contact-angle branches (issue 18's
+/// instruction budget).
+trait ContactModel {
+    /// The per-wheel rows of the wheels with a contact angle.
+    type Rows;
+    /// The rows for frames `frames` (zero steering), steering angles `steer_rad` (rad) and
+    /// wheel radius `radius` (m).
+    fn rows(
+        &self,
+        frames: &[WheelFrames; WHEEL_COUNT],
+        steer_rad: &[f64; WHEEL_COUNT],
+        radius: f64,
+    ) -> Self::Rows;
+    /// The rows of wheel `i`, `None` for a contact below the axle.
+    fn row(rows: &Self::Rows, i: usize) -> Option<&ContactRow>;
+}
+
+/// Every contact below its axle.
+struct Level;
+
+impl ContactModel for Level {
+    type Rows = ();
+    #[inline(always)]
+    fn rows(&self, _: &[WheelFrames; WHEEL_COUNT], _: &[f64; WHEEL_COUNT], _: f64) {}
+    #[inline(always)]
+    fn row(_: &(), _: usize) -> Option<&ContactRow> {
+        None
+    }
+}
+
+impl ContactModel for ContactAngles {
+    type Rows = [Option<ContactRow>; WHEEL_COUNT];
+    fn rows(
+        &self,
+        frames: &[WheelFrames; WHEEL_COUNT],
+        steer_rad: &[f64; WHEEL_COUNT],
+        radius: f64,
+    ) -> Self::Rows {
+        // `from_fn` only calls with `i < WHEEL_COUNT`, the length of the three arrays.
+        core::array::from_fn(|i| {
+            self.sin_cos[i].map(|sc| contact_row(&frames[i], steer_rad[i], sc, radius))
+        })
+    }
+    #[inline]
+    fn row(rows: &Self::Rows, i: usize) -> Option<&ContactRow> {
+        rows.get(i).and_then(Option::as_ref)
+    }
+}
+
+/// The rows of one wheel whose contact lies at an angle `delta` (module doc).
+#[derive(Debug, Clone, Copy)]
+struct ContactRow {
+    /// Contact normal `n_i = cos(delta) z_C - sin(delta) x_C` in `R` (unit).
+    normal: Vec3,
+    /// Contact point `c_i(delta)` in `R`, m.
+    point: Vec3,
+    /// Velocity of the chain point at `c_i` per unit rocker rate, m/rad.
+    d_rocker: Vec3,
+    /// Velocity of the chain point at `c_i` per unit bogie rate, m/rad.
+    d_bogie: Vec3,
+    /// `z_C` (up, along the steering axis) in `R`.
+    z_c: Vec3,
+    /// `sin delta`.
+    sin: f64,
+    /// `cos delta`.
+    cos: f64,
+}
+
+/// The rows of a wheel with frames `f` (at zero steering), current steering angle `psi` (rad)
+/// and contact at `(sin delta, cos delta)`.
+fn contact_row(f: &WheelFrames, psi: f64, (sd, cd): (f64, f64), radius: f64) -> ContactRow {
+    // Rolling direction at the current steering: positive psi turns x0 towards y0 = s x x0.
+    // The contact frame's z axis and origin (the axle centre) lie on the steering axis and do
+    // not turn with psi (checked in KIN-11).
+    let (sp, cp) = libm::sincos(psi);
+    let x0 = f.rolling_dir;
+    let x_c = x0 * cp + f.steer_axis.cross(&x0) * sp;
+    let z_c = f.contact.z_axis();
+    let point = f.contact.pos + (x_c * sd - z_c * cd) * radius;
+    let lever = point - f.contact_point_m;
+    ContactRow {
+        normal: z_c * cd - x_c * sd,
+        point,
+        d_rocker: f.d_contact_d_rocker + f.rocker_axis.cross(&lever),
+        d_bogie: f.d_contact_d_bogie + f.bogie_axis.cross(&lever),
+        z_c,
+        sin: sd,
+        cos: cd,
+    }
+}
+
+/// Eq. 16-25 without the wheel-rate limit (the steering limit applies), with the contacts at
+/// `contact` (module doc).
+fn solve<C: ContactModel>(
     geometry: &RoverGeometry,
     state: &SuspensionState,
     cmd: &VehicleCommand,
+    contact: &C,
 ) -> Result<InverseSolution, KinematicsError> {
     let finite_cmd =
         cmd.x_dot_m_s.is_finite() && cmd.y_dot_m_s.is_finite() && cmd.yaw_rate_rad_s.is_finite();
@@ -137,11 +292,23 @@ fn solve(
     let frames = wheel_frames_trusted(geometry, &level_steer);
     let v_cmd = Vec3::new(cmd.x_dot_m_s, cmd.y_dot_m_s, 0.0);
     let w_cmd = Vec3::new(0.0, 0.0, cmd.yaw_rate_rad_s);
-    // Unactuated rows: s_i . (w_cmd_i + M_i u) = 0, u = [z_dot roll pitch beta rho1 rho2].
+    let radius = geometry.wheel_radius_m;
+    let rows = contact.rows(&frames, &state.steer_rad, radius);
+    // Unactuated rows: s_i . (w_cmd_i + M_i u) = 0, u = [z_dot roll pitch beta rho1 rho2]
+    // (with a contact angle: n_i at the contact point c_i).
     let mut m = Mat6::zeros();
     let mut rhs = Vec6::zeros();
     for (i, f) in frames.iter().enumerate() {
-        let (s, p) = (f.steer_axis, f.contact_point_m);
+        let row = C::row(&rows, i);
+        let (s, p, d_rocker, d_bogie) = match row {
+            None => (
+                f.steer_axis,
+                f.contact_point_m,
+                f.d_contact_d_rocker,
+                f.d_contact_d_bogie,
+            ),
+            Some(c) => (c.normal, c.point, c.d_rocker, c.d_bogie),
+        };
         let bogie_col = match f.bogie {
             Some(1) => 5,
             Some(_) => 4,
@@ -151,13 +318,13 @@ fn solve(
             s.z,
             s.dot(&Vec3::x().cross(&p)),
             s.dot(&Vec3::y().cross(&p)),
-            s.dot(&f.d_contact_d_rocker),
+            s.dot(&d_rocker),
         ];
         for (j, c) in cols.iter().enumerate() {
             m[(i, j)] = *c;
         }
         if bogie_col > 3 {
-            m[(i, bogie_col)] = s.dot(&f.d_contact_d_bogie);
+            m[(i, bogie_col)] = s.dot(&d_bogie);
         }
         rhs[i] = -s.dot(&(v_cmd + w_cmd.cross(&p)));
     }
@@ -174,14 +341,19 @@ fn solve(
     let mut command = MobilityCommand::default();
     let limit = geometry.limits.steer_rad;
     for (i, f) in frames.iter().enumerate() {
+        let row = C::row(&rows, i);
         let bogie_rate = match f.bogie {
             Some(1) => u[5],
             Some(_) => u[4],
             None => 0.0,
         };
-        let p = f.contact_point_m;
-        let contact_v =
-            v + w.cross(&p) + f.d_contact_d_rocker * u[3] + f.d_contact_d_bogie * bogie_rate;
+        let contact_v = match row {
+            None => {
+                let p = f.contact_point_m;
+                v + w.cross(&p) + f.d_contact_d_rocker * u[3] + f.d_contact_d_bogie * bogie_rate
+            }
+            Some(c) => v + w.cross(&c.point) + c.d_rocker * u[3] + c.d_bogie * bogie_rate,
+        };
         let x0 = f.rolling_dir;
         let y0 = f.steer_axis.cross(&x0);
         let (a, b) = (contact_v.dot(&x0), contact_v.dot(&y0));
@@ -194,8 +366,20 @@ fn solve(
             (current, 0.0)
         } else {
             let raw = libm::atan2(b, a);
-            let rate = speed / geometry.wheel_radius_m;
-            let candidates = [(raw, rate), (raw - PI, -rate), (raw + PI, -rate)];
+            // Rim speed along the tangent t = cos(delta) x_C + sin(delta) z_C, with x_C along
+            // (+) or against (-) the contact's horizontal velocity; at delta = 0 `+-speed`.
+            let (forward, backward) = match row {
+                None => {
+                    let rate = speed / geometry.wheel_radius_m;
+                    (rate, -rate)
+                }
+                Some(c) => {
+                    let climb = contact_v.dot(&c.z_c) * c.sin;
+                    let along = speed * c.cos;
+                    ((along + climb) / radius, (climb - along) / radius)
+                }
+            };
+            let candidates = [(raw, forward), (raw - PI, backward), (raw + PI, backward)];
             let mut best: Option<(f64, f64)> = None;
             for (psi, r) in candidates {
                 let better = match best {
@@ -229,7 +413,32 @@ pub fn inverse_kinematics(
     state: &SuspensionState,
     cmd: &VehicleCommand,
 ) -> Result<InverseSolution, KinematicsError> {
-    let solution = solve(geometry, state, cmd)?;
+    checked_rates(geometry, solve(geometry, state, cmd, &Level)?)
+}
+
+/// Rough-terrain inverse kinematics (Tarokh and McDermott 2005; module doc): as
+/// [`inverse_kinematics`] (frames, units and errors the same), with each wheel touching the
+/// ground at its contact angle in `contact` (rad, [`ContactAngles`]; the angles the odometry
+/// estimates, V99 sec. 6). Per wheel the unactuated row is the contact normal `n_i` at the
+/// contact point `c_i` instead of the steering axis, and the wheel rate is the chain's velocity
+/// at `c_i` along the contact tangent `t_i` over `r` (`docs/kinematics.md`, "Rough-terrain
+/// inverse kinematics"); the steering angle keeps the velocity's component along the spin axis
+/// at zero. A wheel at angle 0 gives exactly (bit for bit) the rows of [`inverse_kinematics`];
+/// [`ContactAngles::LEVEL`] is [`inverse_kinematics`].
+pub fn inverse_kinematics_contact(
+    geometry: &RoverGeometry,
+    state: &SuspensionState,
+    cmd: &VehicleCommand,
+    contact: &ContactAngles,
+) -> Result<InverseSolution, KinematicsError> {
+    checked_rates(geometry, solve(geometry, state, cmd, contact)?)
+}
+
+/// [`KinematicsError::WheelRateLimit`] for a solution with a wheel rate above the drive limit.
+fn checked_rates(
+    geometry: &RoverGeometry,
+    solution: InverseSolution,
+) -> Result<InverseSolution, KinematicsError> {
     // Relative tolerance so that a command scaled by `max_speed_scale` to the limit passes.
     let limit = geometry.limits.wheel_rate_rad_s * (1.0 + 1e-9);
     for (i, rate) in solution.command.wheel_rate_rad_s.iter().enumerate() {
@@ -254,14 +463,35 @@ pub fn max_speed_scale(
     if !(max_wheel_rate_rad_s.is_finite() && max_wheel_rate_rad_s > 0.0) {
         return Err(KinematicsError::NonFinite);
     }
-    let solution = solve(geometry, state, cmd)?;
+    let solution = solve(geometry, state, cmd, &Level)?;
+    Ok(scale_of(&solution, max_wheel_rate_rad_s))
+}
+
+/// [`max_speed_scale`] for the rough-terrain inverse kinematics with the contact angles
+/// `contact` ([`inverse_kinematics_contact`]; the wheel rates are still linear in the command).
+pub fn max_speed_scale_contact(
+    geometry: &RoverGeometry,
+    state: &SuspensionState,
+    cmd: &VehicleCommand,
+    max_wheel_rate_rad_s: f64,
+    contact: &ContactAngles,
+) -> Result<f64, KinematicsError> {
+    if !(max_wheel_rate_rad_s.is_finite() && max_wheel_rate_rad_s > 0.0) {
+        return Err(KinematicsError::NonFinite);
+    }
+    let solution = solve(geometry, state, cmd, contact)?;
+    Ok(scale_of(&solution, max_wheel_rate_rad_s))
+}
+
+/// `max_wheel_rate_rad_s` over the solution's fastest wheel rate (infinite for none).
+fn scale_of(solution: &InverseSolution, max_wheel_rate_rad_s: f64) -> f64 {
     let fastest = solution
         .command
         .wheel_rate_rad_s
         .iter()
         .fold(0.0_f64, |m, r| m.max(libm::fabs(*r)));
     if fastest <= 0.0 {
-        return Ok(f64::INFINITY);
+        return f64::INFINITY;
     }
-    Ok(max_wheel_rate_rad_s / fastest)
+    max_wheel_rate_rad_s / fastest
 }

@@ -33,6 +33,8 @@ mod tests;
 #[cfg(test)]
 mod tests_contact;
 #[cfg(test)]
+mod tests_ik_contact;
+#[cfg(test)]
 mod tests_inverse;
 
 pub use contact::{
@@ -43,7 +45,8 @@ pub use geometry::{
     wheel_contact_points, wheel_frames, RoverGeometry, WheelFrames, ROCKY8, WHEEL_RADIUS_M,
 };
 pub use inverse::{
-    instantaneous_centre, inverse_kinematics, max_speed_scale, Icr, InverseSolution, VehicleCommand,
+    instantaneous_centre, inverse_kinematics, inverse_kinematics_contact, max_speed_scale,
+    max_speed_scale_contact, ContactAngles, Icr, InverseSolution, VehicleCommand,
 };
 pub use jacobian::{wheel_jacobians, WheelJacobian};
 pub use odometry::{KinematicOdometry, OdometryConfig};

@@ -121,6 +121,8 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
     imu_timeout_frames: 0,
     joints_timeout_cycles: 0,
     stopped_wheel_rate_rad_s: 0.0,
+    ik_contact_angles: false,
+    ik_contact_max_angle_rad: 0.0,
 };
 
 /// All counters zero (as [`NavCounters::default`], usable in a `const`).

@@ -141,38 +141,62 @@ impl Navigator {
 
     /// The body command `cmd` (rover frame) scaled to the wheel-rate limit and turned into
     /// wheel commands by inverse kinematics (eq. 16-25) at the suspension state of `joints`;
-    /// `None` (counted) when the kinematics fails.
+    /// with [`NavConfig::ik_contact_angles`] the rough-terrain inverse kinematics on the
+    /// odometry's contact angles, falling back to eq. 16-25 when it fails. `None` (counted) when
+    /// the kinematics fails.
     fn motor_command(
         &mut self,
-        mut cmd: VehicleCommand,
+        cmd: VehicleCommand,
         joints: &JointState,
     ) -> Option<MobilityCommand> {
-        let geometry = &self.config.geometry;
         let state = SuspensionState::from_joints(joints);
+        if self.config.ik_contact_angles {
+            let contact = ContactAngles::new(
+                &self.odometry.contact_angles_rad(),
+                self.config.ik_contact_max_angle_rad,
+            );
+            if contact != ContactAngles::LEVEL {
+                if let Some(m) = self.scaled_inverse(cmd, &state, Some(&contact)) {
+                    return Some(m);
+                }
+            }
+        }
+        let m = self.scaled_inverse(cmd, &state, None);
+        if m.is_none() {
+            self.counters.command_errors = self.counters.command_errors.saturating_add(1);
+        }
+        m
+    }
+
+    /// [`Self::motor_command`] with the contacts at `contact` (`None`: below the axles, eq.
+    /// 16-25): the command scaled to the wheel-rate limit, then inverted; `None` when either
+    /// fails.
+    fn scaled_inverse(
+        &mut self,
+        mut cmd: VehicleCommand,
+        state: &SuspensionState,
+        contact: Option<&ContactAngles>,
+    ) -> Option<MobilityCommand> {
+        let geometry = &self.config.geometry;
         let limit = geometry.limits.wheel_rate_rad_s;
-        match max_speed_scale(geometry, &state, &cmd, limit) {
-            Ok(k) if k < 1.0 => {
-                cmd.x_dot_m_s *= k;
-                cmd.y_dot_m_s *= k;
-                cmd.yaw_rate_rad_s *= k;
-            }
-            Ok(_) => {}
-            Err(_) => {
-                self.counters.command_errors = self.counters.command_errors.saturating_add(1);
-                return None;
-            }
+        let k = match contact {
+            Some(c) => max_speed_scale_contact(geometry, state, &cmd, limit, c),
+            None => max_speed_scale(geometry, state, &cmd, limit),
         }
-        match inverse_kinematics(geometry, &state, &cmd) {
-            Ok(solution) => {
-                self.command = cmd;
-                self.last_wheel_rates = solution.command.wheel_rate_rad_s;
-                Some(solution.command)
-            }
-            Err(_) => {
-                self.counters.command_errors = self.counters.command_errors.saturating_add(1);
-                None
-            }
+        .ok()?;
+        if k < 1.0 {
+            cmd.x_dot_m_s *= k;
+            cmd.y_dot_m_s *= k;
+            cmd.yaw_rate_rad_s *= k;
         }
+        let solution = match contact {
+            Some(c) => inverse_kinematics_contact(geometry, state, &cmd, c),
+            None => inverse_kinematics(geometry, state, &cmd),
+        }
+        .ok()?;
+        self.command = cmd;
+        self.last_wheel_rates = solution.command.wheel_rate_rad_s;
+        Some(solution.command)
     }
 
     /// Stop-and-go without VO ([`NavConfig::blind_stop_interval_m`], or when the position
