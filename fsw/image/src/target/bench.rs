@@ -20,8 +20,9 @@ use super::semihost::HostFile;
 use fsw::estimation::{CloneHandle, CoreCov, Ekf, EkfConfig, NominalState};
 use fsw::guidance::{Guidance, GuidanceConfig, Path, Pose2, SlipVector};
 use fsw::kinematics::{
-    forward_kinematics_from_joints, inverse_kinematics, wheel_contact_points, KinematicOdometry,
-    OdometryConfig, SuspensionRates, SuspensionState, VehicleCommand, ROCKY8,
+    forward_kinematics_from_joints, inverse_kinematics, inverse_kinematics_contact,
+    wheel_contact_points, ContactAngles, KinematicOdometry, OdometryConfig, SuspensionRates,
+    SuspensionState, VehicleCommand, ROCKY8,
 };
 use fsw::perception::{CameraPose, HazardMapper, MapProgress};
 use fsw::planning::{ConvexPolygon, Planner, Wedge};
@@ -246,7 +247,16 @@ impl Bench {
             images,
             rectify,
             loaded: None,
-            kin: KinematicOdometry::new(ROCKY8, OdometryConfig::default()),
+            // The flight profile's odometry (with the contact-angle estimator the rough-terrain
+            // inverse kinematics reads).
+            // (`NavConfig::rocky8`'s odometry: `contact_translation` on.)
+            kin: KinematicOdometry::new(
+                ROCKY8,
+                OdometryConfig {
+                    contact_translation: true,
+                    ..OdometryConfig::default()
+                },
+            ),
             vo_prior: KinematicOdometry::new(ROCKY8, OdometryConfig::default()),
             last_vo_capture_us: None,
             start,
@@ -421,8 +431,21 @@ impl Bench {
                 ..VehicleCommand::default()
             },
         };
+        // As flown (`NavConfig::ik_contact_angles`): the rough-terrain inverse kinematics on the
+        // odometry's contact angles (their sines and cosines included), eq. 16-25 when they
+        // are all zero.
         let state = SuspensionState::from_joints(j);
-        let (r, n) = meter.measure(|| inverse_kinematics(&ROCKY8, &state, &cmd));
+        let angles = self.kin.contact_angles_rad();
+        // `NavConfig::rocky8`'s `ik_contact_max_angle_rad`.
+        let max_angle = 1.0;
+        let (r, n) = meter.measure(|| {
+            let contact = ContactAngles::new(&angles, max_angle);
+            if contact == ContactAngles::LEVEL {
+                inverse_kinematics(&ROCKY8, &state, &cmd)
+            } else {
+                inverse_kinematics_contact(&ROCKY8, &state, &cmd, &contact)
+            }
+        });
         self.add(IK, n, r.is_ok());
     }
 
