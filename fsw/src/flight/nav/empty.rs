@@ -123,6 +123,7 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
     stopped_wheel_rate_rad_s: 0.0,
     ik_contact_angles: false,
     ik_contact_max_angle_rad: 0.0,
+    ik_contact_min_angle_rad: 0.0,
 };
 
 /// All counters zero (as [`NavCounters::default`], usable in a `const`).

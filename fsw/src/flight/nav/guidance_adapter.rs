@@ -150,11 +150,16 @@ impl Navigator {
         joints: &JointState,
     ) -> Option<MobilityCommand> {
         let state = SuspensionState::from_joints(joints);
-        if self.config.ik_contact_angles {
-            let contact = ContactAngles::new(
-                &self.odometry.contact_angles_rad(),
-                self.config.ik_contact_max_angle_rad,
-            );
+        // Turns in place on eq. 16-25 (`NavConfig::ik_contact_min_angle_rad`).
+        let translating = cmd.x_dot_m_s != 0.0 || cmd.y_dot_m_s != 0.0;
+        if self.config.ik_contact_angles && translating {
+            let mut angles = self.odometry.contact_angles_rad();
+            for a in angles.iter_mut() {
+                if libm::fabs(*a) < self.config.ik_contact_min_angle_rad {
+                    *a = 0.0;
+                }
+            }
+            let contact = ContactAngles::new(&angles, self.config.ik_contact_max_angle_rad);
             if contact != ContactAngles::LEVEL {
                 if let Some(m) = self.scaled_inverse(cmd, &state, Some(&contact)) {
                     return Some(m);

@@ -884,6 +884,60 @@ mod tests {
         assert!((rho(&c) - rho(&p)).abs() < 1e-12);
     }
 
+    /// A localization stop's views (target selection, V99 sec. 5): toward the mapped rocks,
+    /// in one sweep; no turn when a mapped rock is inside the turning circle.
+    #[test]
+    fn stop_views_look_at_the_mapped_rocks_and_never_turn_into_one() {
+        let mut l = LocNav::EMPTY;
+        assert!(l.map.reset_centred([0.0, 0.0]));
+        // A cluster of rocks 1.8 m east of the rover (heading north), one 2 m south-west.
+        let mut pts = std::vec::Vec::new();
+        for k in 0..12 {
+            let a = f64::from(k) * 0.5;
+            pts.push([0.2 * libm::cos(a), 1.8 + 0.2 * libm::sin(a)]);
+        }
+        pts.push([-1.4, -1.4]);
+        l.map.insert_points(&pts);
+        l.map.finish();
+        l.plan_views([0.0, 0.0], 0.0, 3, 0.8);
+        assert!(l.view_count >= 1);
+        let views = &l.views[..usize::from(l.view_count)];
+        // The east cluster is in view of the first-best heading (+90 deg or +45 deg) and the
+        // views are ordered in one sweep (monotonic turn from the current heading).
+        assert!(views
+            .iter()
+            .any(|h| (h - core::f64::consts::FRAC_PI_2).abs() < 1e-9
+                || (h - core::f64::consts::FRAC_PI_4).abs() < 1e-9));
+        let turns: std::vec::Vec<f64> = views
+            .iter()
+            .map(|h| crate::guidance::carrot::wrap_pi(*h))
+            .collect();
+        let increasing = turns.windows(2).all(|w| w[0] <= w[1]);
+        let decreasing = turns.windows(2).all(|w| w[0] >= w[1]);
+        assert!(increasing || decreasing, "{turns:?}");
+        assert_eq!(l.counters.stops_without_turn, 0);
+
+        // A mapped rock 0.5 m from the rover: inside the turning circle, so no turn.
+        let mut l2 = LocNav::EMPTY;
+        assert!(l2.map.reset_centred([0.0, 0.0]));
+        pts.push([0.0, 0.5]);
+        l2.map.insert_points(&pts);
+        l2.map.finish();
+        l2.plan_views([0.0, 0.0], 0.3, 3, 0.8);
+        assert_eq!(l2.view_count, 1);
+        assert_eq!(l2.views[0], 0.3);
+        assert_eq!(l2.counters.stops_without_turn, 1);
+
+        // No mapped rock anywhere near: the current heading only.
+        let mut l3 = LocNav::EMPTY;
+        assert!(l3.map.reset_centred([0.0, 0.0]));
+        l3.map.insert_points(&[[15.0, 15.0]]);
+        l3.map.finish();
+        l3.plan_views([0.0, 0.0], -0.2, 3, 0.8);
+        assert_eq!((l3.view_count, l3.views[0]), (1, -0.2));
+        assert_eq!(l3.counters.stops_without_turn, 1);
+    }
+
     #[test]
     fn default_settings_are_valid_and_off() {
         let s = LocalizationSettings::DEFAULT;
