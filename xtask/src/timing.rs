@@ -768,7 +768,7 @@ const TASK_DOC: [(&str, &str, &str); 16] = [
     ),
     (
         "inverse_kinematics",
-        "`kinematics::inverse_kinematics_contact` (as flown: on the odometry's contact angles, eq. 16-25 when all are zero)",
+        "`kinematics::inverse_kinematics_contact` (worst case: on the odometry's contact angles without the navigator's 0.1 rad deadband)",
         "RG2: steering and wheel rates of guidance's command",
     ),
     (

@@ -431,9 +431,10 @@ impl Bench {
                 ..VehicleCommand::default()
             },
         };
-        // As flown (`NavConfig::ik_contact_angles`): the rough-terrain inverse kinematics on the
-        // odometry's contact angles (their sines and cosines included), eq. 16-25 when they
-        // are all zero.
+        // The rough-terrain inverse kinematics on the odometry's contact angles (their sines
+        // and cosines included) as the navigator runs it (`NavConfig::ik_contact_angles`), but
+        // without its 0.1 rad deadband: the worst case, every cycle a rough-terrain solve
+        // (eq. 16-25 only when every angle is exactly 0).
         let state = SuspensionState::from_joints(j);
         let angles = self.kin.contact_angles_rad();
         // `NavConfig::rocky8`'s `ik_contact_max_angle_rad`.
