@@ -628,6 +628,51 @@ pub fn max_speed_scale_contact(
     Ok(scale_of(&solution, max_wheel_rate_rad_s))
 }
 
+/// Inverse kinematics scaled to the drive limit in one solve (issue 18: the navigator's
+/// [`max_speed_scale_contact`] then [`inverse_kinematics_contact`] on the scaled command was two
+/// solves per RG2 cycle). With `contact` the rough-terrain inverse kinematics
+/// ([`inverse_kinematics_contact`]), with `None` eq. 16-25 ([`inverse_kinematics`]); frames,
+/// units and errors as there, and [`KinematicsError::NonFinite`] for a non-finite or
+/// non-positive `max_wheel_rate_rad_s` (rad/s).
+///
+/// Returns the solution for `k * cmd` and `k = min(1, max_wheel_rate_rad_s / fastest wheel
+/// rate)` (1 when no wheel turns): at a fixed suspension state the wheel rates, body rates and
+/// suspension rates are linear in the command and the steering angles do not change for
+/// `k > 0` (see [`max_speed_scale`]), so the solution for `cmd` is solved once and its rates are
+/// multiplied by `k`. It differs from solving `k * cmd` again only by rounding (about 1e-15
+/// relative, KIN-12), with one exception: a wheel whose contact speed falls below 1e-9 m/s only
+/// through the scaling keeps the direction of `cmd` (with a rate below 1e-8 rad/s) instead of
+/// its current steering angle. The fastest wheel ends at the limit to rounding; no rate check
+/// follows.
+pub fn inverse_kinematics_scaled(
+    geometry: &RoverGeometry,
+    state: &SuspensionState,
+    cmd: &VehicleCommand,
+    contact: Option<&ContactAngles>,
+    max_wheel_rate_rad_s: f64,
+) -> Result<(InverseSolution, f64), KinematicsError> {
+    if !(max_wheel_rate_rad_s.is_finite() && max_wheel_rate_rad_s > 0.0) {
+        return Err(KinematicsError::NonFinite);
+    }
+    let mut solution = match contact {
+        Some(c) => solve(geometry, state, cmd, c, false)?,
+        None => solve(geometry, state, cmd, &Level, false)?,
+    };
+    let k = scale_of(&solution, max_wheel_rate_rad_s);
+    if k >= 1.0 {
+        return Ok((solution, 1.0));
+    }
+    for rate in solution.command.wheel_rate_rad_s.iter_mut() {
+        *rate *= k;
+    }
+    solution.body_rates *= k;
+    solution.suspension_rates.rocker_rad_s *= k;
+    for rate in solution.suspension_rates.bogie_rad_s.iter_mut() {
+        *rate *= k;
+    }
+    Ok((solution, k))
+}
+
 /// `max_wheel_rate_rad_s` over the solution's fastest wheel rate (infinite for none).
 fn scale_of(solution: &InverseSolution, max_wheel_rate_rad_s: f64) -> f64 {
     let fastest = solution

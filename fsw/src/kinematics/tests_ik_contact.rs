@@ -568,3 +568,116 @@ fn kin_12_matches_the_two_pass_reference() {
     );
     assert!(worst < 1e-12, "largest difference {worst}");
 }
+
+/// KIN-12 (issue 18): [`inverse::inverse_kinematics_scaled`] (one solve, rates scaled) gives
+/// what the navigator computed before with two solves ([`max_speed_scale_contact`], then
+/// [`inverse_kinematics_contact`] on the scaled command; [`max_speed_scale`] and
+/// [`inverse_kinematics`] without contact angles) to rounding: the same outcome, the same scale
+/// to 1e-12 relative, steering angles, wheel, body and suspension rates within 1e-12 (relative to
+/// 1 rad/s), the fastest wheel at the limit; a scale of 1 leaves the solution of `cmd` bit for
+/// bit. A limit that is not finite or not positive is refused.
+#[test]
+fn kin_12_scaled_inverse_matches_two_solves() {
+    let mut rng = ChaCha8Rng::seed_from_u64(127);
+    let limit = ROCKY8.limits.wheel_rate_rad_s;
+    let (mut scaled, mut unscaled) = (0, 0);
+    let mut worst: f64 = 0.0;
+    for k in 0..3000 {
+        let s = random_state(&mut rng);
+        let c = random_cmd(&mut rng);
+        // A third of the commands five times faster: above the limit.
+        let c = if k % 3 == 0 {
+            cmd(c.x_dot_m_s * 5.0, c.y_dot_m_s * 5.0, c.yaw_rate_rad_s * 5.0)
+        } else {
+            c
+        };
+        let angles: [f64; 6] = core::array::from_fn(|_| rng.random_range(-0.8..0.8));
+        let contact = ContactAngles::new(&angles, 1.0);
+        let use_contact = k % 2 == 0;
+        let one = inverse::inverse_kinematics_scaled(
+            &ROCKY8,
+            &s,
+            &c,
+            use_contact.then_some(&contact),
+            limit,
+        );
+        let two = if use_contact {
+            max_speed_scale_contact(&ROCKY8, &s, &c, limit, &contact)
+        } else {
+            max_speed_scale(&ROCKY8, &s, &c, limit)
+        }
+        .and_then(|k2| {
+            let k2 = k2.min(1.0);
+            let c2 = cmd(c.x_dot_m_s * k2, c.y_dot_m_s * k2, c.yaw_rate_rad_s * k2);
+            let sol = if use_contact {
+                inverse_kinematics_contact(&ROCKY8, &s, &c2, &contact)
+            } else {
+                inverse_kinematics(&ROCKY8, &s, &c2)
+            };
+            sol.map(|sol| (sol, k2))
+        });
+        match (one, two) {
+            (Ok((a, ka)), Ok((b, kb))) => {
+                assert!((ka - kb).abs() <= 1e-12 * kb, "scale {ka} {kb}");
+                let fastest = a
+                    .command
+                    .wheel_rate_rad_s
+                    .iter()
+                    .fold(0.0_f64, |m, r| m.max(r.abs()));
+                if ka < 1.0 {
+                    scaled += 1;
+                    assert!((fastest - limit).abs() < 1e-12 * limit);
+                } else {
+                    unscaled += 1;
+                    assert!(fastest <= limit);
+                    let direct = if use_contact {
+                        inverse_kinematics_contact(&ROCKY8, &s, &c, &contact)
+                    } else {
+                        inverse_kinematics(&ROCKY8, &s, &c)
+                    };
+                    assert_eq!(bits(&Ok(a)), bits(&direct));
+                }
+                let pairs = a
+                    .command
+                    .steer_angle_rad
+                    .iter()
+                    .zip(b.command.steer_angle_rad.iter())
+                    .chain(
+                        a.command
+                            .wheel_rate_rad_s
+                            .iter()
+                            .zip(b.command.wheel_rate_rad_s.iter()),
+                    )
+                    .chain(a.body_rates.iter().zip(b.body_rates.iter()))
+                    .chain(core::iter::once((
+                        &a.suspension_rates.rocker_rad_s,
+                        &b.suspension_rates.rocker_rad_s,
+                    )))
+                    .chain(
+                        a.suspension_rates
+                            .bogie_rad_s
+                            .iter()
+                            .zip(b.suspension_rates.bogie_rad_s.iter()),
+                    );
+                for (x, y) in pairs {
+                    worst = worst.max((x - y).abs() / y.abs().max(1.0));
+                }
+            }
+            (one, two) => assert_eq!(one.map(|_| ()), two.map(|_| ()), "case {k}"),
+        }
+    }
+    println!(
+        "one solve vs two: {scaled} scaled, {unscaled} unscaled, largest difference {worst:.2e}"
+    );
+    assert!(
+        scaled > 500 && unscaled > 1000,
+        "{scaled} scaled, {unscaled} unscaled"
+    );
+    assert!(worst < 1e-12, "largest difference {worst}");
+    for bad in [f64::NAN, 0.0, -1.0, f64::INFINITY] {
+        assert_eq!(
+            inverse::inverse_kinematics_scaled(&ROCKY8, &level(), &cmd(0.1, 0.0, 0.0), None, bad),
+            Err(KinematicsError::NonFinite)
+        );
+    }
+}
