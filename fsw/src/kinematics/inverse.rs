@@ -7,9 +7,10 @@
 //!    direction) and unactuated parts. The only rows no wheel actuator can change are the
 //!    components along each steering axis `s_i` (the rolling direction is always normal to
 //!    `s_i`). The six unactuated rates `[z_dot, roll, pitch, beta_dot, rho_1_dot, rho_2_dot]`
-//!    shared by all wheels are solved from these six rows together (one 6x6 LU solve): the rover
-//!    moves as a rigid body whose contacts do not move along their steering axes. On level
-//!    ground they are all zero.
+//!    shared by all wheels are solved from these six rows together (one 6x6 Gaussian
+//!    elimination with partial pivoting, the bogie rates first so that the rows of the other
+//!    wheels are skipped: `eliminate`): the rover moves as a rigid body whose contacts do not
+//!    move along their steering axes. On level ground they are all zero.
 //! 3. Each wheel's required contact velocity `w_i` is then normal to `s_i`: the steering angle
 //!    is its direction (eq. 21-22: `w_i` is perpendicular to the line from the wheel to the ICR)
 //!    and the wheel rate is `|w_i| / r` (eq. 24: the actuated inverse reduces to a dot product
@@ -32,7 +33,7 @@
 
 use super::geometry::{check_suspension, wheel_frames_trusted, RoverGeometry, WheelFrames};
 use super::{BodyRates, KinematicsError, SuspensionRates, SuspensionState};
-use crate::types::{Mat6, Vec3, Vec6};
+use crate::types::Vec3;
 use rover_hal::{MobilityCommand, WHEEL_COUNT};
 
 const PI: f64 = core::f64::consts::PI;
@@ -133,47 +134,68 @@ impl InverseSolution {
 /// ([`inverse_kinematics_contact`]): per wheel (index `wheel - 1`) the angle `delta_i` of the
 /// contact in the wheel plane (rad, 0 below the axle, positive ahead of it: the frames and sign
 /// of [`super::contact`], V99 sec. 6) with its sine and cosine, computed once by
-/// [`ContactAngles::new`] (once per RG2 cycle for both the speed scaling and the inverse).
+/// [`ContactAngles::new`] (once per RG2 cycle).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ContactAngles {
-    /// `Some((sin delta, cos delta))` for a wheel with a non-zero angle in use, `None` for a
-    /// wheel whose contact is taken below its axle (angle 0).
-    sin_cos: [Option<(f64, f64)>; WHEEL_COUNT],
+    /// Bit `i` set: wheel `i` has a non-zero angle in use (compared first: telling a set of
+    /// angles from [`Self::LEVEL`] reads one byte).
+    used: u8,
+    /// `sin delta` per wheel (0 for a wheel not in use).
+    sin: [f64; WHEEL_COUNT],
+    /// `cos delta` per wheel (1 for a wheel not in use).
+    cos: [f64; WHEEL_COUNT],
 }
 
 impl ContactAngles {
     /// Every contact below its axle: the inverse kinematics of eq. 16-25 unchanged.
     pub const LEVEL: Self = ContactAngles {
-        sin_cos: [None; WHEEL_COUNT],
+        used: 0,
+        sin: [0.0; WHEEL_COUNT],
+        cos: [1.0; WHEEL_COUNT],
     };
 
     /// The contact angles `angles_rad` (rad, index `wheel - 1`). An angle that is not finite,
     /// or whose magnitude is at or above `max_angle_rad` (rad; an estimator at its clamp, or a
     /// wheel whose rate would grow by `1 / cos(delta)` beyond use), is taken as 0 for that
     /// wheel; a `max_angle_rad` that is not finite or not in `(0, pi/2)` takes every angle
-    /// as 0. Six `sin/cos` pairs.
+    /// as 0. One `sincos` per angle in use.
     pub fn new(angles_rad: &[f64; WHEEL_COUNT], max_angle_rad: f64) -> Self {
-        let max_ok = max_angle_rad.is_finite()
-            && max_angle_rad > 0.0
-            && max_angle_rad < core::f64::consts::FRAC_PI_2;
+        // Comparisons with NaN are false, and infinities fail the bounds.
+        let max_ok = max_angle_rad > 0.0 && max_angle_rad < core::f64::consts::FRAC_PI_2;
+        let mut out = Self::LEVEL;
         if !max_ok {
-            return Self::LEVEL;
+            return out;
         }
-        ContactAngles {
-            sin_cos: angles_rad.map(|d| {
-                if d.is_finite() && d != 0.0 && libm::fabs(d) < max_angle_rad {
-                    Some(libm::sincos(d))
-                } else {
-                    None
-                }
-            }),
+        let wheels = angles_rad
+            .iter()
+            .zip(out.sin.iter_mut().zip(out.cos.iter_mut()))
+            .enumerate();
+        for (i, (&d, (sin, cos))) in wheels {
+            // Finite, non-zero and below the (finite) limit: NaN fails both comparisons.
+            let m = d.abs();
+            if m > 0.0 && m < max_angle_rad {
+                (*sin, *cos) = libm::sincos(d);
+                out.used |= 1 << i;
+            }
         }
+        out
     }
 
     /// The angles in use, rad (0 for the wheels that fell back to the level contact).
     pub fn angles_rad(&self) -> [f64; WHEEL_COUNT] {
-        self.sin_cos
-            .map(|sc| sc.map_or(0.0, |(s, c)| libm::atan2(s, c)))
+        core::array::from_fn(|i| match self.sin_cos(i) {
+            Some((s, c)) => libm::atan2(s, c),
+            None => 0.0,
+        })
+    }
+
+    /// `(sin delta, cos delta)` of wheel `i` (index `wheel - 1`), `None` for a wheel not in use.
+    #[inline(always)]
+    fn sin_cos(&self, i: usize) -> Option<(f64, f64)> {
+        if self.used & (1 << (i & 7)) == 0 {
+            return None;
+        }
+        Some((*self.sin.get(i)?, *self.cos.get(i)?))
     }
 }
 
@@ -181,49 +203,38 @@ impl ContactAngles {
 /// ([`Level`]) compiles to the eq. 23-25 code without the contact-angle branches (issue 18's
 /// instruction budget).
 trait ContactModel {
-    /// The per-wheel rows of the wheels with a contact angle.
-    type Rows;
-    /// The rows for frames `frames` (zero steering), steering angles `steer_rad` (rad) and
+    /// The rows of one wheel kept between the two passes of [`solve`]: `()` for level
+    /// contacts, `Option<ContactRow>` with contact angles.
+    type Row;
+    /// The rows of wheel `i` with frames `f` (zero steering), steering angle `psi` (rad) and
     /// wheel radius `radius` (m).
-    fn rows(
-        &self,
-        frames: &[WheelFrames; WHEEL_COUNT],
-        steer_rad: &[f64; WHEEL_COUNT],
-        radius: f64,
-    ) -> Self::Rows;
-    /// The rows of wheel `i`, `None` for a contact below the axle.
-    fn row(rows: &Self::Rows, i: usize) -> Option<&ContactRow>;
+    fn row(&self, i: usize, f: &WheelFrames, psi: f64, radius: f64) -> Self::Row;
+    /// The contact-angle rows in `row`, `None` for a contact below the axle.
+    fn get(row: &Self::Row) -> Option<&ContactRow>;
 }
 
 /// Every contact below its axle.
 struct Level;
 
 impl ContactModel for Level {
-    type Rows = ();
+    type Row = ();
     #[inline(always)]
-    fn rows(&self, _: &[WheelFrames; WHEEL_COUNT], _: &[f64; WHEEL_COUNT], _: f64) {}
+    fn row(&self, _: usize, _: &WheelFrames, _: f64, _: f64) {}
     #[inline(always)]
-    fn row(_: &(), _: usize) -> Option<&ContactRow> {
+    fn get(_: &()) -> Option<&ContactRow> {
         None
     }
 }
 
 impl ContactModel for ContactAngles {
-    type Rows = [Option<ContactRow>; WHEEL_COUNT];
-    fn rows(
-        &self,
-        frames: &[WheelFrames; WHEEL_COUNT],
-        steer_rad: &[f64; WHEEL_COUNT],
-        radius: f64,
-    ) -> Self::Rows {
-        // `from_fn` only calls with `i < WHEEL_COUNT`, the length of the three arrays.
-        core::array::from_fn(|i| {
-            self.sin_cos[i].map(|sc| contact_row(&frames[i], steer_rad[i], sc, radius))
-        })
+    type Row = Option<ContactRow>;
+    #[inline(always)]
+    fn row(&self, i: usize, f: &WheelFrames, psi: f64, radius: f64) -> Option<ContactRow> {
+        self.sin_cos(i).map(|sc| contact_row(f, psi, sc, radius))
     }
-    #[inline]
-    fn row(rows: &Self::Rows, i: usize) -> Option<&ContactRow> {
-        rows.get(i).and_then(Option::as_ref)
+    #[inline(always)]
+    fn get(row: &Option<ContactRow>) -> Option<&ContactRow> {
+        row.as_ref()
     }
 }
 
@@ -232,11 +243,12 @@ impl ContactModel for ContactAngles {
 struct ContactRow {
     /// Contact normal `n_i = cos(delta) z_C - sin(delta) x_C` in `R` (unit).
     normal: Vec3,
-    /// Contact point `c_i(delta)` in `R`, m.
+    /// Contact point `c_i(delta) = a_i - r n_i` in `R` (`a_i` the axle centre), m.
     point: Vec3,
     /// Velocity of the chain point at `c_i` per unit rocker rate, m/rad.
     d_rocker: Vec3,
-    /// Velocity of the chain point at `c_i` per unit bogie rate, m/rad.
+    /// Velocity of the chain point at `c_i` per unit bogie rate, m/rad (not computed, zero,
+    /// for a wheel without a bogie).
     d_bogie: Vec3,
     /// `z_C` (up, along the steering axis) in `R`.
     z_c: Vec3,
@@ -251,31 +263,229 @@ struct ContactRow {
 fn contact_row(f: &WheelFrames, psi: f64, (sd, cd): (f64, f64), radius: f64) -> ContactRow {
     // Rolling direction at the current steering: positive psi turns x0 towards y0 = s x x0.
     // The contact frame's z axis and origin (the axle centre) lie on the steering axis and do
-    // not turn with psi (checked in KIN-11).
-    let (sp, cp) = libm::sincos(psi);
+    // not turn with psi (checked in KIN-11). `sincos(0)` is `(0, 1)` exactly: a wheel steered
+    // straight skips the call.
+    let (sp, cp) = if psi == 0.0 {
+        (0.0, 1.0)
+    } else {
+        libm::sincos(psi)
+    };
     let x0 = f.rolling_dir;
     let x_c = x0 * cp + f.steer_axis.cross(&x0) * sp;
     let z_c = f.contact.z_axis();
-    let point = f.contact.pos + (x_c * sd - z_c * cd) * radius;
+    let normal = z_c * cd - x_c * sd;
+    // `a + r (sin(delta) x_C - cos(delta) z_C)`: the bracket is `-n` exactly (IEEE negation
+    // commutes with rounding).
+    let point = f.contact.pos - normal * radius;
     let lever = point - f.contact_point_m;
+    let d_bogie = match f.bogie {
+        Some(_) => f.d_contact_d_bogie + f.bogie_axis.cross(&lever),
+        None => Vec3::zeros(),
+    };
     ContactRow {
-        normal: z_c * cd - x_c * sd,
+        normal,
         point,
         d_rocker: f.d_contact_d_rocker + f.rocker_axis.cross(&lever),
-        d_bogie: f.d_contact_d_bogie + f.bogie_axis.cross(&lever),
+        d_bogie,
         z_c,
         sin: sd,
         cos: cd,
     }
 }
 
-/// Eq. 16-25 without the wheel-rate limit (the steering limit applies), with the contacts at
-/// `contact` (module doc).
+/// Column of the right-hand side in a row of the unactuated system
+/// `A [rho1_dot rho2_dot z_dot roll pitch beta_dot]^T = rhs` ([`unactuated_row`]). The bogie
+/// rates come first: each appears only in the rows of its own wheels, so Gaussian elimination
+/// with partial pivoting in this column order finds exact zeros below its first two pivots and
+/// skips those rows ([`eliminate`]); the last four columns are full.
+const RHS: usize = 6;
+
+/// One row of the unactuated system of the wheel with frames `f` and, with a contact angle, rows
+/// `c`: `s . (v_cmd + w_cmd x p + M u) = 0` (eq. 23-25, module doc) with the unactuated
+/// direction `s` (steering axis, or contact normal), the point `p` (contact point, m) and the
+/// chain velocities per joint rate at `p` (m/rad). The products with the zero components of the
+/// unit vectors and of `v_cmd = [x_dot y_dot 0]`, `w_cmd = [0 0 phi_dot]` are left out:
+/// `s . (x x p) = s_z p_y - s_y p_z`, `s . (y x p) = s_x p_z - s_z p_x`.
+#[inline(always)]
+fn unactuated_row(f: &WheelFrames, c: Option<&ContactRow>, cmd: &VehicleCommand) -> [f64; 7] {
+    let (s, p, d_rocker, d_bogie) = match c {
+        None => (
+            &f.steer_axis,
+            &f.contact_point_m,
+            &f.d_contact_d_rocker,
+            &f.d_contact_d_bogie,
+        ),
+        Some(c) => (&c.normal, &c.point, &c.d_rocker, &c.d_bogie),
+    };
+    let (rho1, rho2) = match f.bogie {
+        Some(1) => (0.0, s.dot(d_bogie)),
+        Some(_) => (s.dot(d_bogie), 0.0),
+        None => (0.0, 0.0),
+    };
+    let wz = cmd.yaw_rate_rad_s;
+    [
+        rho1,
+        rho2,
+        s.z,
+        s.z * p.y - s.y * p.z,
+        s.x * p.z - s.z * p.x,
+        s.dot(d_rocker),
+        -(s.x * (cmd.x_dot_m_s - wz * p.y) + s.y * (cmd.y_dot_m_s + wz * p.x)),
+    ]
+}
+
+/// The body and suspension motion of a solution: body velocity `v` (m/s) and angular velocity
+/// `w` (rad/s) in `R`, rocker and bogie rates (rad/s).
+struct Motion {
+    v: Vec3,
+    w: Vec3,
+    beta: f64,
+    rho: [f64; 2],
+}
+
+/// Steering angle (rad) and wheel rate (rad/s) of the wheel with frames `f`, contact-angle rows
+/// `c`, current steering angle `current` (rad) for the motion `m` (eq. 21-22, 24 and the
+/// steering wrap; module doc). Errors: [`KinematicsError::NonFinite`] for a non-finite contact
+/// velocity, [`KinematicsError::SteeringLimit`] (wheel index 0, the caller sets it) when no
+/// steering candidate lies within `limit` (rad).
+#[inline(always)]
+fn wheel_command(
+    f: &WheelFrames,
+    c: Option<&ContactRow>,
+    current: f64,
+    m: &Motion,
+    limit: f64,
+    radius: f64,
+) -> Result<(f64, f64), KinematicsError> {
+    let (p, d_rocker) = match c {
+        None => (&f.contact_point_m, &f.d_contact_d_rocker),
+        Some(c) => (&c.point, &c.d_rocker),
+    };
+    let contact_v = m.v + m.w.cross(p) + d_rocker * m.beta;
+    let contact_v = match (f.bogie, c) {
+        (Some(k), None) => contact_v + f.d_contact_d_bogie * m.rho[usize::from(k == 1)],
+        (Some(k), Some(c)) => contact_v + c.d_bogie * m.rho[usize::from(k == 1)],
+        (None, _) => contact_v,
+    };
+    let x0 = f.rolling_dir;
+    let y0 = f.steer_axis.cross(&x0);
+    let (a, b) = (contact_v.dot(&x0), contact_v.dot(&y0));
+    let speed = libm::sqrt(a * a + b * b);
+    if !speed.is_finite() {
+        return Err(KinematicsError::NonFinite);
+    }
+    if speed <= WHEEL_SPEED_EPS_M_S {
+        return Ok((current, 0.0));
+    }
+    // For `a > 0`, `atan2(b, a)` is `atan(b / a)` bit for bit (libm's `atan2` takes that
+    // branch and `atan` is odd; KIN-12 checks it): one call less.
+    let raw = if a > 0.0 {
+        libm::atan(b / a)
+    } else {
+        libm::atan2(b, a)
+    };
+    // Rim speed along the tangent t = cos(delta) x_C + sin(delta) z_C, with x_C along (+) or
+    // against (-) the contact's horizontal velocity; at delta = 0 `+-speed`.
+    let (forward, backward) = match c {
+        None => {
+            let rate = speed / radius;
+            (rate, -rate)
+        }
+        Some(c) => {
+            let climb = contact_v.dot(&c.z_c) * c.sin;
+            let along = speed * c.cos;
+            ((along + climb) / radius, (climb - along) / radius)
+        }
+    };
+    let candidates = [(raw, forward), (raw - PI, backward), (raw + PI, backward)];
+    let mut best: Option<(f64, f64)> = None;
+    for (psi, r) in candidates {
+        let better = match best {
+            None => true,
+            Some((b_psi, _)) => libm::fabs(psi - current) < libm::fabs(b_psi - current),
+        };
+        if libm::fabs(psi) <= limit && better {
+            best = Some((psi, r));
+        }
+    }
+    best.ok_or(KinematicsError::SteeringLimit { wheel: 0 })
+}
+
+/// Solves the 6x6 system `a` (right-hand side in column [`RHS`]) in place by Gaussian
+/// elimination with partial pivoting (largest magnitude, first on ties), skipping the rows whose
+/// multiplier is exactly zero (below the pivots of the two bogie columns that come first, see
+/// [`RHS`]): about 40 multiply-subtracts instead of about 110. `None` when a pivot is zero or not
+/// finite, or the solution is not finite. The unknowns come back in the column order
+/// `[rho1_dot rho2_dot z_dot roll pitch beta_dot]`.
+fn eliminate(a: &mut [[f64; 7]; 6]) -> Option<[f64; 6]> {
+    // One step per column, each with its column as a constant: the loops below unroll fully.
+    pivot_step::<0>(a)?;
+    pivot_step::<1>(a)?;
+    pivot_step::<2>(a)?;
+    pivot_step::<3>(a)?;
+    pivot_step::<4>(a)?;
+    pivot_step::<5>(a)?;
+    let [r0, r1, r2, r3, r4, r5] = a;
+    let u5 = r5[RHS] / r5[5];
+    let u4 = (r4[RHS] - r4[5] * u5) / r4[4];
+    let u3 = (r3[RHS] - r3[4] * u4 - r3[5] * u5) / r3[3];
+    let u2 = (r2[RHS] - r2[3] * u3 - r2[4] * u4 - r2[5] * u5) / r2[2];
+    let u1 = (r1[RHS] - r1[2] * u2 - r1[3] * u3 - r1[4] * u4 - r1[5] * u5) / r1[1];
+    let u0 = (r0[RHS] - r0[1] * u1 - r0[2] * u2 - r0[3] * u3 - r0[4] * u4 - r0[5] * u5) / r0[0];
+    let u = [u0, u1, u2, u3, u4, u5];
+    u.iter().all(|x| x.is_finite()).then_some(u)
+}
+
+/// Step `K` of [`eliminate`]: the pivot of column `K` (rows `K..6`) swapped into row `K`, and
+/// column `K` eliminated from the rows below (only columns `K+1..7` are updated; column `K`
+/// below the pivot is not read again). `None` for a zero or non-finite pivot.
+// A constant index range over a fixed-size array: the optimiser proves it in bounds and
+// unrolls it.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn pivot_step<const K: usize>(a: &mut [[f64; 7]; 6]) -> Option<()> {
+    let (head, tail) = a.split_at_mut(K + 1);
+    let pivot = head.last_mut()?;
+    // `f64::abs` (exact, as `libm::fabs`) compiles to the FPU's `vabs`.
+    let mut best_abs = pivot.get(K)?.abs();
+    let mut best: Option<&mut [f64; 7]> = None;
+    for row in tail.iter_mut() {
+        let v = row.get(K)?.abs();
+        if v > best_abs {
+            best_abs = v;
+            best = Some(row);
+        }
+    }
+    if !(best_abs > 0.0 && best_abs.is_finite()) {
+        return None;
+    }
+    if let Some(row) = best {
+        core::mem::swap(pivot, row);
+    }
+    let inv = 1.0 / *pivot.get(K)?;
+    for row in tail.iter_mut() {
+        let f = *row.get(K)? * inv;
+        if f != 0.0 {
+            for c in (K + 1)..7 {
+                row[c] -= f * pivot[c];
+            }
+        }
+    }
+    Some(())
+}
+
+/// Eq. 16-25 with the contacts at `contact` (module doc): the steering limit applies, and with
+/// `rate_check` the drive limit too ([`KinematicsError::WheelRateLimit`] for a wheel rate above
+/// it, with a relative tolerance of 1e-9 so that a command scaled by [`max_speed_scale`] to the
+/// limit passes). The six wheels are written out one by one, and the solution is checked in
+/// place (no per-wheel arrays to clear, no copies of the solution: issue 18's instruction
+/// budget).
 fn solve<C: ContactModel>(
     geometry: &RoverGeometry,
     state: &SuspensionState,
     cmd: &VehicleCommand,
     contact: &C,
+    rate_check: bool,
 ) -> Result<InverseSolution, KinematicsError> {
     let finite_cmd =
         cmd.x_dot_m_s.is_finite() && cmd.y_dot_m_s.is_finite() && cmd.yaw_rate_rad_s.is_finite();
@@ -290,115 +500,65 @@ fn solve<C: ContactModel>(
         ..*state
     };
     let frames = wheel_frames_trusted(geometry, &level_steer);
-    let v_cmd = Vec3::new(cmd.x_dot_m_s, cmd.y_dot_m_s, 0.0);
-    let w_cmd = Vec3::new(0.0, 0.0, cmd.yaw_rate_rad_s);
     let radius = geometry.wheel_radius_m;
-    let rows = contact.rows(&frames, &state.steer_rad, radius);
-    // Unactuated rows: s_i . (w_cmd_i + M_i u) = 0, u = [z_dot roll pitch beta rho1 rho2]
-    // (with a contact angle: n_i at the contact point c_i).
-    let mut m = Mat6::zeros();
-    let mut rhs = Vec6::zeros();
-    for (i, f) in frames.iter().enumerate() {
-        let row = C::row(&rows, i);
-        let (s, p, d_rocker, d_bogie) = match row {
-            None => (
-                f.steer_axis,
-                f.contact_point_m,
-                f.d_contact_d_rocker,
-                f.d_contact_d_bogie,
-            ),
-            Some(c) => (c.normal, c.point, c.d_rocker, c.d_bogie),
-        };
-        let bogie_col = match f.bogie {
-            Some(1) => 5,
-            Some(_) => 4,
-            None => 3,
-        };
-        let cols = [
-            s.z,
-            s.dot(&Vec3::x().cross(&p)),
-            s.dot(&Vec3::y().cross(&p)),
-            s.dot(&d_rocker),
-        ];
-        for (j, c) in cols.iter().enumerate() {
-            m[(i, j)] = *c;
-        }
-        if bogie_col > 3 {
-            m[(i, bogie_col)] = s.dot(&d_bogie);
-        }
-        rhs[i] = -s.dot(&(v_cmd + w_cmd.cross(&p)));
-    }
-    let u = crate::linalg::solve6(&m, &rhs).ok_or(KinematicsError::Singular)?;
-    if u.iter().any(|x| !x.is_finite()) {
-        return Err(KinematicsError::NonFinite);
-    }
-    let v = Vec3::new(cmd.x_dot_m_s, cmd.y_dot_m_s, u[0]);
-    let w = Vec3::new(u[1], u[2], cmd.yaw_rate_rad_s);
-    let suspension_rates = SuspensionRates {
-        rocker_rad_s: u[3],
-        bogie_rad_s: [u[4], u[5]],
+    let [f0, f1, f2, f3, f4, f5] = &frames;
+    let [q0, q1, q2, q3, q4, q5] = state.steer_rad;
+    let c0 = contact.row(0, f0, q0, radius);
+    let c1 = contact.row(1, f1, q1, radius);
+    let c2 = contact.row(2, f2, q2, radius);
+    let c3 = contact.row(3, f3, q3, radius);
+    let c4 = contact.row(4, f4, q4, radius);
+    let c5 = contact.row(5, f5, q5, radius);
+    // Unactuated rows: s_i . (w_cmd_i + M_i u) = 0 (with a contact angle: n_i at the contact
+    // point c_i).
+    let mut a = [
+        unactuated_row(f0, C::get(&c0), cmd),
+        unactuated_row(f1, C::get(&c1), cmd),
+        unactuated_row(f2, C::get(&c2), cmd),
+        unactuated_row(f3, C::get(&c3), cmd),
+        unactuated_row(f4, C::get(&c4), cmd),
+        unactuated_row(f5, C::get(&c5), cmd),
+    ];
+    let [rho1, rho2, z_dot, roll, pitch, beta] =
+        eliminate(&mut a).ok_or(KinematicsError::Singular)?;
+    let m = Motion {
+        v: Vec3::new(cmd.x_dot_m_s, cmd.y_dot_m_s, z_dot),
+        w: Vec3::new(roll, pitch, cmd.yaw_rate_rad_s),
+        beta,
+        rho: [rho1, rho2],
     };
-    let mut command = MobilityCommand::default();
     let limit = geometry.limits.steer_rad;
-    for (i, f) in frames.iter().enumerate() {
-        let row = C::row(&rows, i);
-        let bogie_rate = match f.bogie {
-            Some(1) => u[5],
-            Some(_) => u[4],
-            None => 0.0,
-        };
-        let contact_v = match row {
-            None => {
-                let p = f.contact_point_m;
-                v + w.cross(&p) + f.d_contact_d_rocker * u[3] + f.d_contact_d_bogie * bogie_rate
+    let wheel = |k: u8, r: Result<(f64, f64), KinematicsError>| {
+        r.map_err(|e| match e {
+            KinematicsError::SteeringLimit { .. } => KinematicsError::SteeringLimit { wheel: k },
+            e => e,
+        })
+    };
+    let w0 = wheel(0, wheel_command(f0, C::get(&c0), q0, &m, limit, radius))?;
+    let w1 = wheel(1, wheel_command(f1, C::get(&c1), q1, &m, limit, radius))?;
+    let w2 = wheel(2, wheel_command(f2, C::get(&c2), q2, &m, limit, radius))?;
+    let w3 = wheel(3, wheel_command(f3, C::get(&c3), q3, &m, limit, radius))?;
+    let w4 = wheel(4, wheel_command(f4, C::get(&c4), q4, &m, limit, radius))?;
+    let w5 = wheel(5, wheel_command(f5, C::get(&c5), q5, &m, limit, radius))?;
+    let wheel_rate_rad_s = [w0.1, w1.1, w2.1, w3.1, w4.1, w5.1];
+    if rate_check {
+        let rate_limit = geometry.limits.wheel_rate_rad_s * (1.0 + 1e-9);
+        for (i, rate) in wheel_rate_rad_s.iter().enumerate() {
+            if libm::fabs(*rate) > rate_limit {
+                return Err(KinematicsError::WheelRateLimit { wheel: i as u8 });
             }
-            Some(c) => v + w.cross(&c.point) + c.d_rocker * u[3] + c.d_bogie * bogie_rate,
-        };
-        let x0 = f.rolling_dir;
-        let y0 = f.steer_axis.cross(&x0);
-        let (a, b) = (contact_v.dot(&x0), contact_v.dot(&y0));
-        let speed = libm::sqrt(a * a + b * b);
-        if !speed.is_finite() {
-            return Err(KinematicsError::NonFinite);
         }
-        let current = state.steer_rad[i];
-        let (psi, rate) = if speed <= WHEEL_SPEED_EPS_M_S {
-            (current, 0.0)
-        } else {
-            let raw = libm::atan2(b, a);
-            // Rim speed along the tangent t = cos(delta) x_C + sin(delta) z_C, with x_C along
-            // (+) or against (-) the contact's horizontal velocity; at delta = 0 `+-speed`.
-            let (forward, backward) = match row {
-                None => {
-                    let rate = speed / geometry.wheel_radius_m;
-                    (rate, -rate)
-                }
-                Some(c) => {
-                    let climb = contact_v.dot(&c.z_c) * c.sin;
-                    let along = speed * c.cos;
-                    ((along + climb) / radius, (climb - along) / radius)
-                }
-            };
-            let candidates = [(raw, forward), (raw - PI, backward), (raw + PI, backward)];
-            let mut best: Option<(f64, f64)> = None;
-            for (psi, r) in candidates {
-                let better = match best {
-                    None => true,
-                    Some((b_psi, _)) => libm::fabs(psi - current) < libm::fabs(b_psi - current),
-                };
-                if libm::fabs(psi) <= limit && better {
-                    best = Some((psi, r));
-                }
-            }
-            best.ok_or(KinematicsError::SteeringLimit { wheel: i as u8 })?
-        };
-        command.steer_angle_rad[i] = psi;
-        command.wheel_rate_rad_s[i] = rate;
     }
     Ok(InverseSolution {
-        command,
-        body_rates: BodyRates::new(v.x, v.y, v.z, w.x, w.y, w.z),
-        suspension_rates,
+        command: MobilityCommand {
+            steer_angle_rad: [w0.0, w1.0, w2.0, w3.0, w4.0, w5.0],
+            wheel_rate_rad_s,
+        },
+        body_rates: BodyRates::new(m.v.x, m.v.y, m.v.z, m.w.x, m.w.y, m.w.z),
+        suspension_rates: SuspensionRates {
+            rocker_rad_s: beta,
+            bogie_rad_s: [rho1, rho2],
+        },
     })
 }
 
@@ -413,7 +573,7 @@ pub fn inverse_kinematics(
     state: &SuspensionState,
     cmd: &VehicleCommand,
 ) -> Result<InverseSolution, KinematicsError> {
-    checked_rates(geometry, solve(geometry, state, cmd, &Level)?)
+    solve(geometry, state, cmd, &Level, true)
 }
 
 /// Rough-terrain inverse kinematics (Tarokh and McDermott 2005; module doc): as
@@ -431,22 +591,7 @@ pub fn inverse_kinematics_contact(
     cmd: &VehicleCommand,
     contact: &ContactAngles,
 ) -> Result<InverseSolution, KinematicsError> {
-    checked_rates(geometry, solve(geometry, state, cmd, contact)?)
-}
-
-/// [`KinematicsError::WheelRateLimit`] for a solution with a wheel rate above the drive limit.
-fn checked_rates(
-    geometry: &RoverGeometry,
-    solution: InverseSolution,
-) -> Result<InverseSolution, KinematicsError> {
-    // Relative tolerance so that a command scaled by `max_speed_scale` to the limit passes.
-    let limit = geometry.limits.wheel_rate_rad_s * (1.0 + 1e-9);
-    for (i, rate) in solution.command.wheel_rate_rad_s.iter().enumerate() {
-        if libm::fabs(*rate) > limit {
-            return Err(KinematicsError::WheelRateLimit { wheel: i as u8 });
-        }
-    }
-    Ok(solution)
+    solve(geometry, state, cmd, contact, true)
 }
 
 /// The largest factor `k` such that the command `k * cmd` keeps every wheel rate at or below
@@ -463,7 +608,7 @@ pub fn max_speed_scale(
     if !(max_wheel_rate_rad_s.is_finite() && max_wheel_rate_rad_s > 0.0) {
         return Err(KinematicsError::NonFinite);
     }
-    let solution = solve(geometry, state, cmd, &Level)?;
+    let solution = solve(geometry, state, cmd, &Level, false)?;
     Ok(scale_of(&solution, max_wheel_rate_rad_s))
 }
 
@@ -479,8 +624,53 @@ pub fn max_speed_scale_contact(
     if !(max_wheel_rate_rad_s.is_finite() && max_wheel_rate_rad_s > 0.0) {
         return Err(KinematicsError::NonFinite);
     }
-    let solution = solve(geometry, state, cmd, contact)?;
+    let solution = solve(geometry, state, cmd, contact, false)?;
     Ok(scale_of(&solution, max_wheel_rate_rad_s))
+}
+
+/// Inverse kinematics scaled to the drive limit in one solve (issue 18: the navigator's
+/// [`max_speed_scale_contact`] then [`inverse_kinematics_contact`] on the scaled command was two
+/// solves per RG2 cycle). With `contact` the rough-terrain inverse kinematics
+/// ([`inverse_kinematics_contact`]), with `None` eq. 16-25 ([`inverse_kinematics`]); frames,
+/// units and errors as there, and [`KinematicsError::NonFinite`] for a non-finite or
+/// non-positive `max_wheel_rate_rad_s` (rad/s).
+///
+/// Returns the solution for `k * cmd` and `k = min(1, max_wheel_rate_rad_s / fastest wheel
+/// rate)` (1 when no wheel turns): at a fixed suspension state the wheel rates, body rates and
+/// suspension rates are linear in the command and the steering angles do not change for
+/// `k > 0` (see [`max_speed_scale`]), so the solution for `cmd` is solved once and its rates are
+/// multiplied by `k`. It differs from solving `k * cmd` again only by rounding (about 1e-15
+/// relative, KIN-12), with one exception: a wheel whose contact speed falls below 1e-9 m/s only
+/// through the scaling keeps the direction of `cmd` (with a rate below 1e-8 rad/s) instead of
+/// its current steering angle. The fastest wheel ends at the limit to rounding; no rate check
+/// follows.
+pub fn inverse_kinematics_scaled(
+    geometry: &RoverGeometry,
+    state: &SuspensionState,
+    cmd: &VehicleCommand,
+    contact: Option<&ContactAngles>,
+    max_wheel_rate_rad_s: f64,
+) -> Result<(InverseSolution, f64), KinematicsError> {
+    if !(max_wheel_rate_rad_s.is_finite() && max_wheel_rate_rad_s > 0.0) {
+        return Err(KinematicsError::NonFinite);
+    }
+    let mut solution = match contact {
+        Some(c) => solve(geometry, state, cmd, c, false)?,
+        None => solve(geometry, state, cmd, &Level, false)?,
+    };
+    let k = scale_of(&solution, max_wheel_rate_rad_s);
+    if k >= 1.0 {
+        return Ok((solution, 1.0));
+    }
+    for rate in solution.command.wheel_rate_rad_s.iter_mut() {
+        *rate *= k;
+    }
+    solution.body_rates *= k;
+    solution.suspension_rates.rocker_rad_s *= k;
+    for rate in solution.suspension_rates.bogie_rad_s.iter_mut() {
+        *rate *= k;
+    }
+    Ok((solution, k))
 }
 
 /// `max_wheel_rate_rad_s` over the solution's fastest wheel rate (infinite for none).
@@ -494,4 +684,119 @@ fn scale_of(solution: &InverseSolution, max_wheel_rate_rad_s: f64) -> f64 {
         return f64::INFINITY;
     }
     max_wheel_rate_rad_s / fastest
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::{Mat6, Vec6};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// KIN-12: [`eliminate`] (bogie columns first, zero multipliers skipped) solves the systems
+    /// of the unactuated rows as `linalg::solve6` (the 6x6 elimination it replaced) does, to
+    /// rounding: relative residual below 1e-12 and agreement below 1e-10 relative over random
+    /// systems with the bogie pattern (two rows per bogie column) and dense ones; refuses a
+    /// zero column, a non-finite entry and dependent rows.
+    #[test]
+    fn kin_12_eliminate_matches_solve6() {
+        let mut rng = ChaCha8Rng::seed_from_u64(124);
+        let mut worst_residual: f64 = 0.0;
+        let mut worst_diff: f64 = 0.0;
+        for k in 0..5000 {
+            let mut a = [[0.0; 7]; 6];
+            for (r, row) in a.iter_mut().enumerate() {
+                for (c, x) in row.iter_mut().enumerate() {
+                    *x = rng.random_range(-1.0..1.0);
+                    // Bogie pattern: rho1 in rows 0 and 2, rho2 in rows 1 and 3 (except in
+                    // every fifth, dense, system).
+                    let structural_zero =
+                        (c == 0 && r != 0 && r != 2) || (c == 1 && r != 1 && r != 3);
+                    if k % 5 != 0 && structural_zero {
+                        *x = 0.0;
+                    }
+                }
+            }
+            // The old column order: [z roll pitch beta rho1 rho2].
+            let m = Mat6::from_fn(|r, c| a[r][(c + 2) % 6]);
+            let rhs = Vec6::from_fn(|r, _| a[r][RHS]);
+            let Some(old) = crate::linalg::solve6(&m, &rhs) else {
+                continue;
+            };
+            let mut work = a;
+            let u = eliminate(&mut work).unwrap();
+            let new = Vec6::from_fn(|c, _| u[(c + 2) % 6]);
+            let scale = old.amax().max(1.0);
+            worst_diff = worst_diff.max((new - old).amax() / scale);
+            let residual = (m * new - rhs).amax() / (m.amax() * new.amax() + rhs.amax());
+            worst_residual = worst_residual.max(residual);
+        }
+        println!("eliminate vs solve6: residual {worst_residual:.2e}, difference {worst_diff:.2e}");
+        assert!(worst_residual < 1e-12, "residual {worst_residual}");
+        assert!(worst_diff < 1e-10, "difference {worst_diff}");
+        let mut zero_col = [[1.0, 0.0, 2.0, 3.0, 4.0, 5.0, 1.0]; 6];
+        for (r, row) in zero_col.iter_mut().enumerate() {
+            row[2 + r % 4] += 1.0 + r as f64;
+        }
+        assert_eq!(eliminate(&mut zero_col.clone()), None);
+        let mut nan = good_system();
+        nan[3][4] = f64::NAN;
+        assert_eq!(eliminate(&mut nan), None);
+        // Two equal rows.
+        let mut dependent = good_system();
+        dependent[5] = dependent[1];
+        assert_eq!(eliminate(&mut dependent), None);
+        assert!(eliminate(&mut good_system()).is_some());
+    }
+
+    /// A regular system: 2 on the diagonal, 0.5 elsewhere.
+    fn good_system() -> [[f64; 7]; 6] {
+        let mut a = [[0.5; 7]; 6];
+        for (r, row) in a.iter_mut().enumerate() {
+            row[r] = 2.0;
+        }
+        a
+    }
+
+    /// KIN-12: for `a > 0` libm's `atan(b / a)` is `atan2(b, a)` bit for bit (the steering angle
+    /// without the `atan2` call), over random ratios from 1e-30 to 1e30, both signs, zeros and
+    /// the `a = 1` and huge-ratio branches of `atan2`.
+    #[test]
+    fn kin_12_atan_of_ratio_is_atan2_for_positive_a() {
+        let mut rng = ChaCha8Rng::seed_from_u64(125);
+        let mut cases = 0;
+        for _ in 0..200_000 {
+            let a = libm::pow(10.0, rng.random_range(-12.0..12.0));
+            let ratio = libm::pow(10.0, rng.random_range(-30.0..30.0));
+            let b = if rng.random_bool(0.5) {
+                a * ratio
+            } else {
+                -a * ratio
+            };
+            assert_eq!(
+                libm::atan(b / a).to_bits(),
+                libm::atan2(b, a).to_bits(),
+                "{b} {a}"
+            );
+            cases += 1;
+        }
+        for (b, a) in [
+            (0.0, 1.0),
+            (-0.0, 1.0),
+            (0.3, 1.0),
+            (-0.3, 1.0),
+            (1e300, 1e-10),
+            (-1e300, 1e-10),
+            (1e-300, 1e10),
+            (f64::MAX, 1.0),
+            (1.0, f64::MIN_POSITIVE),
+        ] {
+            assert_eq!(
+                libm::atan(b / a).to_bits(),
+                libm::atan2(b, a).to_bits(),
+                "{b} {a}"
+            );
+        }
+        assert_eq!(cases, 200_000);
+    }
 }

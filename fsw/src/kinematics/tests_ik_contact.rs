@@ -355,3 +355,329 @@ fn kin_12_speed_scale_and_errors() {
     assert!((used[4] - 0.99).abs() < 1e-15);
     assert_eq!([used[2], used[3], used[5]], [0.0; 3]);
 }
+
+/// The rough-terrain inverse kinematics as it was before issue 18's instruction budget (main
+/// at 69f5f4b, `inverse.rs`): per-wheel rows copied into arrays, the unactuated rates from
+/// `linalg::solve6` in the column order `[z roll pitch beta rho1 rho2]`, `atan2` per wheel.
+/// `angles` and `max` as [`ContactAngles::new`]. The reference of
+/// `kin_12_matches_the_two_pass_reference`.
+fn reference_ik(
+    s: &SuspensionState,
+    c: &VehicleCommand,
+    angles: &[f64; 6],
+    max: f64,
+) -> Result<InverseSolution, KinematicsError> {
+    use crate::types::{Mat6, Vec6};
+    use core::f64::consts::PI;
+    use rover_hal::MobilityCommand;
+    let g = &ROCKY8;
+    let max_ok = max.is_finite() && max > 0.0 && max < core::f64::consts::FRAC_PI_2;
+    let sin_cos = angles.map(|d| {
+        (max_ok && d.is_finite() && d != 0.0 && libm::fabs(d) < max).then(|| libm::sincos(d))
+    });
+    if !(c.x_dot_m_s.is_finite() && c.y_dot_m_s.is_finite() && c.yaw_rate_rad_s.is_finite()) {
+        return Err(KinematicsError::NonFinite);
+    }
+    // The state check of the old `solve`, then the frames at zero steering.
+    wheel_frames(g, s)?;
+    let frames = wheel_frames(
+        g,
+        &SuspensionState {
+            steer_rad: [0.0; 6],
+            ..*s
+        },
+    )?;
+    // (normal, point, d_rocker, d_bogie, z_c, sin, cos) per wheel with an angle.
+    type Rows = (Vec3, Vec3, Vec3, Vec3, Vec3, f64, f64);
+    let rows: [Option<Rows>; 6] = core::array::from_fn(|i| {
+        sin_cos[i].map(|(sd, cd)| {
+            let f = &frames[i];
+            let (sp, cp) = libm::sincos(s.steer_rad[i]);
+            let x0 = f.rolling_dir;
+            let x_c = x0 * cp + f.steer_axis.cross(&x0) * sp;
+            let z_c = f.contact.z_axis();
+            let point = f.contact.pos + (x_c * sd - z_c * cd) * R;
+            let lever = point - f.contact_point_m;
+            (
+                z_c * cd - x_c * sd,
+                point,
+                f.d_contact_d_rocker + f.rocker_axis.cross(&lever),
+                f.d_contact_d_bogie + f.bogie_axis.cross(&lever),
+                z_c,
+                sd,
+                cd,
+            )
+        })
+    });
+    let v_cmd = Vec3::new(c.x_dot_m_s, c.y_dot_m_s, 0.0);
+    let w_cmd = Vec3::new(0.0, 0.0, c.yaw_rate_rad_s);
+    let mut m = Mat6::zeros();
+    let mut rhs = Vec6::zeros();
+    for (i, f) in frames.iter().enumerate() {
+        let (sv, p, dr, db) = match rows[i] {
+            None => (
+                f.steer_axis,
+                f.contact_point_m,
+                f.d_contact_d_rocker,
+                f.d_contact_d_bogie,
+            ),
+            Some(r) => (r.0, r.1, r.2, r.3),
+        };
+        m[(i, 0)] = sv.z;
+        m[(i, 1)] = sv.dot(&Vec3::x().cross(&p));
+        m[(i, 2)] = sv.dot(&Vec3::y().cross(&p));
+        m[(i, 3)] = sv.dot(&dr);
+        match f.bogie {
+            Some(1) => m[(i, 5)] = sv.dot(&db),
+            Some(_) => m[(i, 4)] = sv.dot(&db),
+            None => {}
+        }
+        rhs[i] = -sv.dot(&(v_cmd + w_cmd.cross(&p)));
+    }
+    let u = crate::linalg::solve6(&m, &rhs).ok_or(KinematicsError::Singular)?;
+    let v = Vec3::new(c.x_dot_m_s, c.y_dot_m_s, u[0]);
+    let w = Vec3::new(u[1], u[2], c.yaw_rate_rad_s);
+    let mut command = MobilityCommand::default();
+    for (i, f) in frames.iter().enumerate() {
+        let rate_b = match f.bogie {
+            Some(1) => u[5],
+            Some(_) => u[4],
+            None => 0.0,
+        };
+        let (p, dr, db) = match rows[i] {
+            None => (f.contact_point_m, f.d_contact_d_rocker, f.d_contact_d_bogie),
+            Some(r) => (r.1, r.2, r.3),
+        };
+        let cv = v + w.cross(&p) + dr * u[3] + db * rate_b;
+        let x0 = f.rolling_dir;
+        let (a, b) = (cv.dot(&x0), cv.dot(&f.steer_axis.cross(&x0)));
+        let speed = libm::sqrt(a * a + b * b);
+        let current = s.steer_rad[i];
+        let (psi, rate) = if speed <= 1e-9 {
+            (current, 0.0)
+        } else {
+            let raw = libm::atan2(b, a);
+            let (fw, bw) = match rows[i] {
+                None => (speed / R, -speed / R),
+                Some(r) => {
+                    let climb = cv.dot(&r.4) * r.5;
+                    ((speed * r.6 + climb) / R, (climb - speed * r.6) / R)
+                }
+            };
+            let mut best: Option<(f64, f64)> = None;
+            for (psi, rt) in [(raw, fw), (raw - PI, bw), (raw + PI, bw)] {
+                let better =
+                    best.is_none_or(|(bp, _)| (psi - current).abs() < (bp - current).abs());
+                if psi.abs() <= g.limits.steer_rad && better {
+                    best = Some((psi, rt));
+                }
+            }
+            best.ok_or(KinematicsError::SteeringLimit { wheel: i as u8 })?
+        };
+        command.steer_angle_rad[i] = psi;
+        command.wheel_rate_rad_s[i] = rate;
+    }
+    let limit = g.limits.wheel_rate_rad_s * (1.0 + 1e-9);
+    if let Some(i) = command
+        .wheel_rate_rad_s
+        .iter()
+        .position(|r| r.abs() > limit)
+    {
+        return Err(KinematicsError::WheelRateLimit { wheel: i as u8 });
+    }
+    Ok(InverseSolution {
+        command,
+        body_rates: BodyRates::new(v.x, v.y, v.z, w.x, w.y, w.z),
+        suspension_rates: SuspensionRates {
+            rocker_rad_s: u[3],
+            bogie_rad_s: [u[4], u[5]],
+        },
+    })
+}
+
+/// KIN-12 (issue 18): the single-pass inverse kinematics (bogie columns first in the
+/// elimination, products with structural zeros left out, `atan(b / a)` for `a > 0`) gives the
+/// results of the reference above to rounding: same outcome (solution or the same error) and
+/// every steering angle, wheel rate, body and suspension rate within 1e-12 (rad, rad/s, m/s;
+/// relative to 1 rad/s for the rates), over random suspension states, commands (a fiftieth
+/// beyond the wheel-rate limit) and contact angles (some zero, non-finite or beyond the limit).
+/// Measured: the largest difference is printed (5.3e-15).
+#[test]
+fn kin_12_matches_the_two_pass_reference() {
+    let mut rng = ChaCha8Rng::seed_from_u64(126);
+    let (mut solved, mut refused) = (0, 0);
+    let mut worst: f64 = 0.0;
+    for k in 0..4000 {
+        let s = if k % 7 == 0 {
+            level()
+        } else {
+            random_state(&mut rng)
+        };
+        let c = if k % 50 == 0 {
+            cmd(3.0, 0.0, 0.1)
+        } else {
+            random_cmd(&mut rng)
+        };
+        let angles: [f64; 6] = core::array::from_fn(|_| match rng.random_range(0..10) {
+            0 => 0.0,
+            1 => f64::NAN,
+            2 => 1.2,
+            _ => rng.random_range(-0.9..0.9),
+        });
+        let want = reference_ik(&s, &c, &angles, 1.0);
+        let got = inverse_kinematics_contact(&ROCKY8, &s, &c, &ContactAngles::new(&angles, 1.0));
+        match (want, got) {
+            (Ok(w), Ok(g)) => {
+                solved += 1;
+                let pairs = w
+                    .command
+                    .steer_angle_rad
+                    .iter()
+                    .zip(g.command.steer_angle_rad.iter())
+                    .chain(
+                        w.command
+                            .wheel_rate_rad_s
+                            .iter()
+                            .zip(g.command.wheel_rate_rad_s.iter()),
+                    )
+                    .chain(w.body_rates.iter().zip(g.body_rates.iter()))
+                    .chain(core::iter::once((
+                        &w.suspension_rates.rocker_rad_s,
+                        &g.suspension_rates.rocker_rad_s,
+                    )))
+                    .chain(
+                        w.suspension_rates
+                            .bogie_rad_s
+                            .iter()
+                            .zip(g.suspension_rates.bogie_rad_s.iter()),
+                    );
+                for (a, b) in pairs {
+                    worst = worst.max((a - b).abs() / a.abs().max(1.0));
+                }
+            }
+            (w, g) => {
+                refused += 1;
+                assert_eq!(w.map(|_| ()), g.map(|_| ()), "case {k}");
+            }
+        }
+    }
+    println!("single pass vs reference: {solved} solved, {refused} refused, largest difference {worst:.2e}");
+    assert!(
+        solved > 3000 && refused > 50,
+        "{solved} solved, {refused} refused"
+    );
+    assert!(worst < 1e-12, "largest difference {worst}");
+}
+
+/// KIN-12 (issue 18): [`inverse::inverse_kinematics_scaled`] (one solve, rates scaled) gives
+/// what the navigator computed before with two solves ([`max_speed_scale_contact`], then
+/// [`inverse_kinematics_contact`] on the scaled command; [`max_speed_scale`] and
+/// [`inverse_kinematics`] without contact angles) to rounding: the same outcome, the same scale
+/// to 1e-12 relative, steering angles, wheel, body and suspension rates within 1e-12 (relative to
+/// 1 rad/s), the fastest wheel at the limit; a scale of 1 leaves the solution of `cmd` bit for
+/// bit. A limit that is not finite or not positive is refused.
+#[test]
+fn kin_12_scaled_inverse_matches_two_solves() {
+    let mut rng = ChaCha8Rng::seed_from_u64(127);
+    let limit = ROCKY8.limits.wheel_rate_rad_s;
+    let (mut scaled, mut unscaled) = (0, 0);
+    let mut worst: f64 = 0.0;
+    for k in 0..3000 {
+        let s = random_state(&mut rng);
+        let c = random_cmd(&mut rng);
+        // A third of the commands five times faster: above the limit.
+        let c = if k % 3 == 0 {
+            cmd(c.x_dot_m_s * 5.0, c.y_dot_m_s * 5.0, c.yaw_rate_rad_s * 5.0)
+        } else {
+            c
+        };
+        let angles: [f64; 6] = core::array::from_fn(|_| rng.random_range(-0.8..0.8));
+        let contact = ContactAngles::new(&angles, 1.0);
+        let use_contact = k % 2 == 0;
+        let one = inverse::inverse_kinematics_scaled(
+            &ROCKY8,
+            &s,
+            &c,
+            use_contact.then_some(&contact),
+            limit,
+        );
+        let two = if use_contact {
+            max_speed_scale_contact(&ROCKY8, &s, &c, limit, &contact)
+        } else {
+            max_speed_scale(&ROCKY8, &s, &c, limit)
+        }
+        .and_then(|k2| {
+            let k2 = k2.min(1.0);
+            let c2 = cmd(c.x_dot_m_s * k2, c.y_dot_m_s * k2, c.yaw_rate_rad_s * k2);
+            let sol = if use_contact {
+                inverse_kinematics_contact(&ROCKY8, &s, &c2, &contact)
+            } else {
+                inverse_kinematics(&ROCKY8, &s, &c2)
+            };
+            sol.map(|sol| (sol, k2))
+        });
+        match (one, two) {
+            (Ok((a, ka)), Ok((b, kb))) => {
+                assert!((ka - kb).abs() <= 1e-12 * kb, "scale {ka} {kb}");
+                let fastest = a
+                    .command
+                    .wheel_rate_rad_s
+                    .iter()
+                    .fold(0.0_f64, |m, r| m.max(r.abs()));
+                if ka < 1.0 {
+                    scaled += 1;
+                    assert!((fastest - limit).abs() < 1e-12 * limit);
+                } else {
+                    unscaled += 1;
+                    assert!(fastest <= limit);
+                    let direct = if use_contact {
+                        inverse_kinematics_contact(&ROCKY8, &s, &c, &contact)
+                    } else {
+                        inverse_kinematics(&ROCKY8, &s, &c)
+                    };
+                    assert_eq!(bits(&Ok(a)), bits(&direct));
+                }
+                let pairs = a
+                    .command
+                    .steer_angle_rad
+                    .iter()
+                    .zip(b.command.steer_angle_rad.iter())
+                    .chain(
+                        a.command
+                            .wheel_rate_rad_s
+                            .iter()
+                            .zip(b.command.wheel_rate_rad_s.iter()),
+                    )
+                    .chain(a.body_rates.iter().zip(b.body_rates.iter()))
+                    .chain(core::iter::once((
+                        &a.suspension_rates.rocker_rad_s,
+                        &b.suspension_rates.rocker_rad_s,
+                    )))
+                    .chain(
+                        a.suspension_rates
+                            .bogie_rad_s
+                            .iter()
+                            .zip(b.suspension_rates.bogie_rad_s.iter()),
+                    );
+                for (x, y) in pairs {
+                    worst = worst.max((x - y).abs() / y.abs().max(1.0));
+                }
+            }
+            (one, two) => assert_eq!(one.map(|_| ()), two.map(|_| ()), "case {k}"),
+        }
+    }
+    println!(
+        "one solve vs two: {scaled} scaled, {unscaled} unscaled, largest difference {worst:.2e}"
+    );
+    assert!(
+        scaled > 500 && unscaled > 1000,
+        "{scaled} scaled, {unscaled} unscaled"
+    );
+    assert!(worst < 1e-12, "largest difference {worst}");
+    for bad in [f64::NAN, 0.0, -1.0, f64::INFINITY] {
+        assert_eq!(
+            inverse::inverse_kinematics_scaled(&ROCKY8, &level(), &cmd(0.1, 0.0, 0.0), None, bad),
+            Err(KinematicsError::NonFinite)
+        );
+    }
+}

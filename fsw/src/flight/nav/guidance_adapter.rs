@@ -174,8 +174,12 @@ impl Navigator {
     }
 
     /// [`Self::motor_command`] with the contacts at `contact` (`None`: below the axles, eq.
-    /// 16-25): the command scaled to the wheel-rate limit, then inverted; `None` when either
-    /// fails.
+    /// 16-25): the command inverted and scaled to the wheel-rate limit in one solve
+    /// ([`inverse_kinematics_scaled`]: the wheel rates are linear in the command and the
+    /// steering does not change with the scale; the stored command is scaled with them);
+    /// `None` when the solve fails. The results differ from scaling the command first
+    /// ([`max_speed_scale_contact`](crate::kinematics::max_speed_scale_contact)) and solving
+    /// again only by rounding: one solve per RG2 cycle instead of two (issue 18).
     fn scaled_inverse(
         &mut self,
         mut cmd: VehicleCommand,
@@ -184,21 +188,13 @@ impl Navigator {
     ) -> Option<MobilityCommand> {
         let geometry = &self.config.geometry;
         let limit = geometry.limits.wheel_rate_rad_s;
-        let k = match contact {
-            Some(c) => max_speed_scale_contact(geometry, state, &cmd, limit, c),
-            None => max_speed_scale(geometry, state, &cmd, limit),
-        }
-        .ok()?;
+        let (solution, k) =
+            inverse_kinematics_scaled(geometry, state, &cmd, contact, limit).ok()?;
         if k < 1.0 {
             cmd.x_dot_m_s *= k;
             cmd.y_dot_m_s *= k;
             cmd.yaw_rate_rad_s *= k;
         }
-        let solution = match contact {
-            Some(c) => inverse_kinematics_contact(geometry, state, &cmd, c),
-            None => inverse_kinematics(geometry, state, &cmd),
-        }
-        .ok()?;
         self.command = cmd;
         self.last_wheel_rates = solution.command.wheel_rate_rad_s;
         Some(solution.command)

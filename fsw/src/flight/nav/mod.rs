@@ -67,8 +67,8 @@ use crate::estimation::{
 use crate::guidance::{
     Guidance, GuidanceCommand, GuidanceConfig, GuidanceError, Path, Point2, Pose2, SlipVector,
 };
+use crate::kinematics::inverse::inverse_kinematics_scaled;
 use crate::kinematics::{
-    inverse_kinematics, inverse_kinematics_contact, max_speed_scale, max_speed_scale_contact,
     planar_pose_increment, wheel_contact_points, ContactAngles, KinematicOdometry, KinematicsError,
     OdometryConfig, RoverGeometry, SuspensionState, VehicleCommand, ROCKY8,
 };
