@@ -503,14 +503,17 @@ pub(crate) fn wheel_frames_trusted(
             rocker.then(&geometry.bogies[1].frame(&q0)),
         ],
     };
-    // `from_fn` only calls with `i < WHEEL_COUNT`, the length of both arrays.
-    core::array::from_fn(|i| {
+    // `w` is only called with `i < WHEEL_COUNT`, the length of both arrays. The array is
+    // written element by element into the caller's slot: `core::array::from_fn` built it on the
+    // stack and copied its 1,632 bytes (about 1,220 rover-CPU instructions per call, issue 18).
+    let w = |i: usize| {
         let q = ChainJoints {
             steer: sc(state.steer_rad[i]),
             ..q0
         };
         wheel_frames_unchecked(geometry, &shared, &geometry.wheels[i], &q)
-    })
+    };
+    [w(0), w(1), w(2), w(3), w(4), w(5)]
 }
 
 /// Wheel/terrain contact points in the rover frame `R` (x forward, y right, z down), m, from
