@@ -46,6 +46,9 @@ import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from middlebury_eval import read_calibration  # noqa: E402  (the `key = value` files of both tools)
+
 WIDTH, HEIGHT = 640, 480
 BOARD = (9, 6)
 SQUARE_M = 0.025  # square_size of the package's left_intrinsics.yml
@@ -75,16 +78,6 @@ def read_pgm(path):
     with open(path, "rb") as f:
         data = f.read()
     return np.frombuffer(data[-WIDTH * HEIGHT:], np.uint8).reshape(HEIGHT, WIDTH).copy()
-
-
-def read_calibration(path):
-    out = {}
-    with open(path) as f:
-        for line in f:
-            if "=" in line:
-                k, v = line.split("=", 1)
-                out[k.strip()] = float(v)
-    return out
 
 
 def export_chessboard(out_dir):

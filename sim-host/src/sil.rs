@@ -303,6 +303,14 @@ const fn fault_case(id: &'static str, scenario: &'static str, title: &'static st
 }
 
 /// Goal (issue 7): EKF final error at most 0.5 % of the distance.
+const EKF_ONE_PERCENT: Check = req(
+    "EKF error / distance",
+    |s| s.error_pct.ekf,
+    Compare::AtMost,
+    1.0,
+    "%",
+);
+
 const EKF_HALF_PERCENT: Check = goal(
     "EKF error / distance",
     |s| s.error_pct.ekf,
@@ -455,13 +463,7 @@ pub const CASES: [Case; 27] = [
                 2.5,
                 "%",
             ),
-            req(
-                "EKF error / distance",
-                |s| s.error_pct.ekf,
-                Compare::AtMost,
-                1.0,
-                "%",
-            ),
+            EKF_ONE_PERCENT,
             req(
                 "EKF attitude error max",
                 |s| s.max_attitude_error_deg.ekf,
@@ -726,13 +728,7 @@ pub const CASES: [Case; 27] = [
         title: "Mars Yard without VO, terrain-map localization against a MARDI map (V99 sec. 5)",
         checks: &[
             GOAL_REACHED,
-            req(
-                "EKF error / distance",
-                |s| s.error_pct.ekf,
-                Compare::AtMost,
-                1.0,
-                "%",
-            ),
+            EKF_ONE_PERCENT,
             req(
                 "localization fixes fused",
                 |s| s.localization.as_ref().map(|l| f64::from(l.updates)),

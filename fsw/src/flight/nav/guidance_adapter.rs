@@ -64,26 +64,17 @@ impl Navigator {
             return None;
         }
         // A localization stop (path drives, V99 sec. 5): hold, or turn in place to a view.
-        match self.loc_command() {
-            Some(None) => return None,
-            Some(Some(turn)) => {
-                let joints = self.last_joints?;
-                return self.motor_command(turn, &joints);
-            }
-            None => {}
+        let stop = self.loc_command();
+        if let Some(turn) = stop {
+            return self.hold_or_turn(turn);
         }
         // Goal-directed driving: hold for a map, or turn in place for a gaze (V99 sec. 4).
         if self.config.hazard_avoidance && !self.hazard_on() {
             self.counters.command_errors = self.counters.command_errors.saturating_add(1);
             return None;
         }
-        match self.hazard_command() {
-            Some(None) => return None,
-            Some(Some(turn)) => {
-                let joints = self.last_joints?;
-                return self.motor_command(turn, &joints);
-            }
-            None => {}
+        if let Some(turn) = self.hazard_command() {
+            return self.hold_or_turn(turn);
         }
         let (ekf, guidance, joints) = match (
             self.ekf_running.then_some(&self.ekf),
@@ -137,6 +128,13 @@ impl Navigator {
             yaw_rate_rad_s: out.phi_dot_rad_s,
         };
         self.motor_command(cmd, &joints)
+    }
+
+    /// A stop's or a gaze's say: `None` holds the rover still, `Some(turn)` turns it in place.
+    fn hold_or_turn(&mut self, turn: Option<VehicleCommand>) -> Option<MobilityCommand> {
+        let turn = turn?;
+        let joints = self.last_joints?;
+        self.motor_command(turn, &joints)
     }
 
     /// The body command `cmd` (rover frame) scaled to the wheel-rate limit and turned into
