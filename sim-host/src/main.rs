@@ -419,6 +419,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
             reference_driver,
             no_vo,
             localization,
+            map_offset_m: [0.0; 2],
             counter: if sim_counter {
                 CounterMode::SimTime
             } else {

@@ -79,7 +79,13 @@ pub struct Variant {
     pub no_vo: bool,
     /// Terrain-map localization on, against the MARDI map the simulator uplinks (issue 17).
     pub localization: bool,
+    /// The uplinked map is registered wrongly: moved by [`MAP_TIE_FAULT_M`].
+    pub map_tie_fault: bool,
 }
+
+/// The map-tie fault of SIL-LOC-2: 1.5 m (north 1.2 m, east -0.9 m), beyond the localization's
+/// search window (3 x 0.3 m) and five times a fix's error.
+pub const MAP_TIE_FAULT_M: [f64; 2] = [1.2, -0.9];
 
 impl Variant {
     /// The scenario as this variant runs it.
@@ -114,6 +120,9 @@ impl Variant {
         if self.localization {
             parts.push("localization");
         }
+        if self.map_tie_fault {
+            parts.push("map 1.5 m off");
+        }
         parts.join(", ")
     }
 }
@@ -124,6 +133,7 @@ const BASE: Variant = Variant {
     lumped: false,
     no_vo: false,
     localization: false,
+    map_tie_fault: false,
 };
 
 /// No slip, with the per-seed dimension and calibration errors (the gate's false alarms).
@@ -137,6 +147,12 @@ const LOCALIZATION: Variant = Variant {
     no_vo: true,
     localization: true,
     ..BASE
+};
+
+/// As [`LOCALIZATION`] with a map registered 1.5 m off.
+const LOCALIZATION_WRONG_MAP: Variant = Variant {
+    map_tie_fault: true,
+    ..LOCALIZATION
 };
 
 /// VO off: IMU, sun sensor and kinematics only (RB's comparison).
@@ -320,7 +336,7 @@ const EKF_HALF_PERCENT: Check = goal(
 );
 
 /// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
-pub const CASES: [Case; 27] = [
+pub const CASES: [Case; 28] = [
     Case {
         id: "SIL-GNC-1",
         scenario: "slope-10-cross",
@@ -753,6 +769,39 @@ pub const CASES: [Case; 27] = [
         ],
     },
     Case {
+        id: "SIL-LOC-2",
+        scenario: "marsyard-25m",
+        no_slip_comp: false,
+        variant: LOCALIZATION_WRONG_MAP,
+        title: "As SIL-LOC-1 with the uplinked map registered 1.5 m off: failed matches are detected, not fused",
+        checks: &[
+            GOAL_REACHED,
+            EKF_ONE_PERCENT,
+            req(
+                "largest error of a fused fix (none fused: 0)",
+                |s| {
+                    s.localization
+                        .as_ref()
+                        .map(|l| l.fused_error_max_m.unwrap_or(0.0))
+                },
+                Compare::AtMost,
+                0.5,
+                "m",
+            ),
+            goal(
+                "searches ended without a fix, or fixes refused by the gate",
+                |s| {
+                    s.localization
+                        .as_ref()
+                        .map(|l| f64::from(l.failed + l.rejected))
+                },
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+        ],
+    },
+    Case {
         id: "SIL-SLIP-2",
         scenario: "marsyard-25m",
         no_slip_comp: false,
@@ -942,6 +991,11 @@ pub fn run_case(case: Case, scenarios_dir: &Path) -> anyhow::Result<CaseResult> 
             no_slip_comp: case.no_slip_comp,
             no_vo: case.variant.no_vo,
             localization: case.variant.localization,
+            map_offset_m: if case.variant.map_tie_fault {
+                MAP_TIE_FAULT_M
+            } else {
+                [0.0; 2]
+            },
             counter: CounterMode::SimTime,
             renderer,
             ..RunOptions::default()

@@ -49,6 +49,9 @@ pub struct RunOptions {
     /// the simulator makes from its own rocks as a MARDI descent image from 150 m shows them
     /// ([`crate::descent_map`]) and uplinks before the drive.
     pub localization: bool,
+    /// Map-tie fault of the uplinked map: every point moved by this, m (north, east), on top of
+    /// the descent image's own errors (a wrong registration of the image to the rover's frame).
+    pub map_offset_m: [f64; 2],
     /// Execution counter of the flight clock.
     pub counter: CounterMode,
     /// Stereo renderer (default: [`FlatGreyRenderer`]).
@@ -70,6 +73,7 @@ impl Default for RunOptions {
             reference_driver: false,
             no_vo: false,
             localization: false,
+            map_offset_m: [0.0; 2],
             counter: CounterMode::Host,
             renderer: None,
             progress: None,
@@ -424,10 +428,14 @@ pub fn run_with<H: RunHooks>(
         .map_err(|e| anyhow::anyhow!("flight software refused its configuration: {e:?}"))?;
     fsw.start_vo();
     let uplinked = if options.localization {
-        let map = {
+        let mut map = {
             let w = world.borrow();
             uplink_map(&w.terrain, &scenario.waypoints, seed)
         };
+        for p in &mut map.1.points {
+            p[0] += options.map_offset_m[0];
+            p[1] += options.map_offset_m[1];
+        }
         let inserted = fsw
             .uplink_global_map(map.0, &map.1.points)
             .ok_or_else(|| anyhow::anyhow!("the flight software refused the global map"))?;

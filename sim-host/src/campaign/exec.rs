@@ -87,6 +87,7 @@ fn simulate(manifest: &Manifest, index: u64, outputs: Option<&Path>) -> anyhow::
             reference_driver: false,
             no_vo: !manifest.run.vo,
             localization: false,
+            map_offset_m: [0.0; 2],
             counter: CounterMode::SimTime,
             renderer,
             progress: None,
