@@ -537,6 +537,13 @@ impl<P: Platform> Fsw<P> {
         &self.nav
     }
 
+    /// The storage of terrain-map localization ([`nav::LocNav`], about 82 KB): a static in
+    /// external RAM on the rover CPU. Give it before [`Self::start_vo`] when the configuration
+    /// enables localization (otherwise it is refused, counted).
+    pub fn provide_localization_memory(&mut self, store: &'static mut nav::LocNav) {
+        self.nav.provide_localization_memory(store);
+    }
+
     /// Ground command: uplink the global map of terrain-map localization (V99 sec. 5):
     /// occupied world points `[x north, y east]` (`N`, m) in a 38.4 m square centred on
     /// `centre_m` ([`Navigator::uplink_global_map`]; call after [`Self::start_vo`], while the

@@ -76,6 +76,16 @@ fn install_new_fsw(
         ));
         return None;
     }
+    // Terrain-map localization's storage (issue 17, about 82 KB): in external RAM, like the
+    // image buffers (the replayed configuration leaves localization off; the storage is
+    // there for a drive that enables it).
+    if let Some(store) = take_static!(
+        extram,
+        fsw::flight::nav::LocNav,
+        fsw::flight::nav::LocNav::EMPTY
+    ) {
+        fsw.provide_localization_memory(store);
+    }
     fsw.start_vo();
     Some(fsw)
 }
@@ -83,7 +93,8 @@ fn install_new_fsw(
 /// A `&'static mut` to a new static of type `$t` holding `$value` (evaluated once; `None` on a
 /// second call). Like `cortex_m::singleton!`, with the static in `.bss` (`MaybeUninit`), or in
 /// the external RAM `.extram` with `take_static!(extram, T, value)` (measurement harness state
-/// that is not part of the flight software's RAM budget).
+/// that is not part of the flight software's RAM budget, and the flight software's large data
+/// buffers: the localization storage).
 macro_rules! take_static {
     (extram, $t:ty, $value:expr) => {{
         static TAKEN: core::sync::atomic::AtomicBool = core::sync::atomic::AtomicBool::new(false);

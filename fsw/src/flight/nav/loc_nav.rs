@@ -217,9 +217,12 @@ struct Pending {
     t_us: u64,
 }
 
-/// State of terrain-map localization (about 80 KB: the global map 49 KB, the localizer
-/// 24 KB, two scans of 4 KB).
-pub(super) struct LocNav {
+/// State of terrain-map localization (about 82 KB: the global map 49 KB, the localizer
+/// 24 KB, two scans of 4 KB). The platform provides it
+/// ([`crate::flight::Fsw::provide_localization_memory`]): on the rover CPU a static in external
+/// RAM, like the image buffers, so that it does not count against the internal RAM of the
+/// flight state.
+pub struct LocNav {
     map: GlobalMap,
     localizer: Localizer,
     /// The local map: hazard points of the maps so far, in the frame of the first.
@@ -248,8 +251,9 @@ pub(super) struct LocNav {
 }
 
 impl LocNav {
-    /// Placeholder: the compile-time value before [`Navigator::start_vo`] builds it.
-    pub(super) const EMPTY: Self = Self {
+    /// Placeholder: the compile-time value of the storage before [`Navigator::start_vo`]
+    /// builds it.
+    pub const EMPTY: Self = Self {
         map: GlobalMap::new(),
         localizer: Localizer::EMPTY,
         scan: LocalScan::new(),
@@ -397,20 +401,71 @@ fn cap_covariance(p: &[[f64; 3]; 3], caps: [f64; 3]) -> [[f64; 3]; 3] {
 /// through the absolute-pose gate (`S = H P H' + R`), m^2 and rad^2.
 const READ_VARIANCE: f64 = 1e-12;
 
+/// Where the navigator keeps terrain-map localization: the storage the platform provided and
+/// whether it was built for this drive.
+pub(super) struct LocSlot {
+    store: Option<&'static mut LocNav>,
+    built: bool,
+}
+
+impl LocSlot {
+    /// No storage, not built.
+    pub(super) const NONE: Self = Self {
+        store: None,
+        built: false,
+    };
+
+    /// The state when built.
+    fn as_ref(&self) -> Option<&LocNav> {
+        if self.built {
+            self.store.as_deref()
+        } else {
+            None
+        }
+    }
+
+    /// The state when built, mutable.
+    fn as_mut(&mut self) -> Option<&mut LocNav> {
+        if self.built {
+            self.store.as_deref_mut()
+        } else {
+            None
+        }
+    }
+
+    /// True when built.
+    fn is_some(&self) -> bool {
+        self.built && self.store.is_some()
+    }
+
+    /// Marks it not built (a new drive); the storage is kept.
+    pub(super) fn unbuild(&mut self) {
+        self.built = false;
+    }
+}
+
 impl Navigator {
-    /// Build terrain-map localization in place (about 80 KB) when
-    /// [`LocalizationSettings::enabled`]; called by [`Self::start_vo`]. Settings it refuses
-    /// leave it off (counted in [`NavCounters::command_errors`]).
+    /// The storage of terrain-map localization (about 82 KB; external RAM on the rover CPU).
+    /// Without it, an enabled localization is refused by [`Self::start_vo`] (counted).
+    pub fn provide_localization_memory(&mut self, store: &'static mut LocNav) {
+        self.loc.store = Some(store);
+        self.loc.built = false;
+    }
+
+    /// Build terrain-map localization in its storage when
+    /// [`LocalizationSettings::enabled`]; called by [`Self::start_vo`]. Settings it refuses, or
+    /// no storage ([`Self::provide_localization_memory`]), leave it off (counted in
+    /// [`NavCounters::command_errors`]).
     pub(super) fn start_localization(&mut self) {
         let s = self.config.localization;
         if !s.enabled || self.loc.is_some() {
             return;
         }
-        if !s.is_valid() {
+        let valid = s.is_valid();
+        let Some(l) = self.loc.store.as_deref_mut().filter(|_| valid) else {
             self.counters.command_errors = self.counters.command_errors.saturating_add(1);
             return;
-        }
-        let l = &mut self.loc.value;
+        };
         if l.localizer.init(s.localizer).is_err() {
             self.counters.command_errors = self.counters.command_errors.saturating_add(1);
             return;

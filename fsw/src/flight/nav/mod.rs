@@ -55,7 +55,7 @@ mod vo_sched;
 use align::Alignment;
 pub use boresight::{Boresight, BoresightConfig};
 use diagnostics::Trajectories;
-pub use loc_nav::{LocCounters, LocFixReport, LocalizationSettings};
+pub use loc_nav::{LocCounters, LocFixReport, LocNav, LocalizationSettings};
 use protection::{FaultResponse, Protection, ProtectionConfig};
 pub use radius::{RadiusScale, RadiusScaleConfig};
 use vo_gate::{CaptureMark, VoGateStatus};
@@ -641,7 +641,7 @@ pub struct Navigator {
     /// Goal-directed driving with hazard avoidance (built in place by [`Self::start_vo`]).
     hazard: InPlace<hazard_nav::HazardNav>,
     /// Terrain-map localization (built in place by [`Self::start_vo`]).
-    loc: InPlace<loc_nav::LocNav>,
+    loc: loc_nav::LocSlot,
 }
 
 /// Why the navigator could not be built.
@@ -738,7 +738,7 @@ impl Navigator {
         cycles_since_zupt: u32::MAX,
         last_ekf_error: None,
         hazard: InPlace::unbuilt(hazard_nav::HazardNav::EMPTY),
-        loc: InPlace::unbuilt(loc_nav::LocNav::EMPTY),
+        loc: loc_nav::LocSlot::NONE,
     };
 
     /// [`Self::new`] in place: this navigator becomes the one `new(*config, path,
@@ -758,7 +758,7 @@ impl Navigator {
         self.mode = NavMode::Safed;
         self.vo.built = false;
         self.hazard.built = false;
-        self.loc.built = false;
+        self.loc.unbuild();
         let start = [
             config.initial_position_n_m[0],
             config.initial_position_n_m[1],
