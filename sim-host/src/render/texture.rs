@@ -147,18 +147,28 @@ impl Tile {
     }
 
     /// [`Self::bilinear`] at `(x[k] * scale - 0.5, y[k] * scale - 0.5)` for up to [`BATCH`]
-    /// points into `out[k]` (bit-identical to the one-point form). The work runs in passes, the
-    /// coordinate and interpolation passes over whole arrays (which the compiler vectorises)
-    /// and only the texel loads one point at a time.
+    /// points into `out[k]` (bit-identical to the one-point form). The coordinate pass runs over
+    /// whole arrays (which the compiler vectorises), then the texel loads and the interpolation
+    /// one point at a time; `scratch` holds the per-point coordinates (reused between calls,
+    /// so that no per-call buffer is zeroed).
     #[inline(always)]
-    fn bilinear_batch(&self, x: &[f64], y: &[f64], scale: f64, out: &mut [f64]) {
+    fn bilinear_batch(
+        &self,
+        x: &[f64],
+        y: &[f64],
+        scale: f64,
+        out: &mut [f64],
+        scratch: &mut BilinearScratch,
+    ) {
         const MAGIC: f64 = 6_755_399_441_055_744.0;
         let n = out.len().min(x.len()).min(y.len()).min(BATCH);
         let (x, y, out) = (&x[..n], &y[..n], &mut out[..n]);
         let mask = self.size - 1;
-        let mut fu = [0.0f64; BATCH];
-        let mut fv = [0.0f64; BATCH];
-        let mut base = [0usize; BATCH];
+        let (fu, fv, base) = (
+            &mut scratch.fu[..n],
+            &mut scratch.fv[..n],
+            &mut scratch.base[..n],
+        );
         for k in 0..n {
             let (u, v) = (x[k] * scale - 0.5, y[k] * scale - 0.5);
             let tu = (u - 0.5) + MAGIC;
@@ -167,18 +177,15 @@ impl Tile {
             fv[k] = v - (tv - MAGIC);
             base[k] = self.index(tu.to_bits() as usize & mask, tv.to_bits() as usize & mask);
         }
-        let mut taps = [[0.0f64; 4]; BATCH];
-        for (t, &b) in taps.iter_mut().zip(&base[..n]) {
+        for k in 0..n {
+            let b = base[k];
             let q = &self.data[b..b + STRIDE + 2];
-            *t = [
+            let (a, b, c, d) = (
                 f64::from(q[0]),
                 f64::from(q[1]),
                 f64::from(q[STRIDE]),
                 f64::from(q[STRIDE + 1]),
-            ];
-        }
-        for k in 0..n {
-            let [a, b, c, d] = taps[k];
+            );
             let top = a + fu[k] * (b - a);
             let bottom = c + fu[k] * (d - c);
             out[k] = (top + fv[k] * (bottom - top)) * (1.0 / 65535.0);
@@ -295,6 +302,13 @@ impl Pyramid {
 /// Points per batch of [`AlbedoTexture::albedo_filtered_batch`].
 const BATCH: usize = 64;
 
+/// Per-point coordinates of [`Tile::bilinear_batch`]: texel fractions and storage indices.
+struct BilinearScratch {
+    fu: [f64; BATCH],
+    fv: [f64; BATCH],
+    base: [usize; BATCH],
+}
+
 /// Procedural albedo texture of sandy ground with pebbles (see the module documentation).
 ///
 /// Indexed by world `x, y` (frame `W`, m); deterministic from [`TextureParams::seed`]
@@ -408,6 +422,17 @@ impl AlbedoTexture {
         let mut blend = [0.0f64; BATCH];
         // Detail points: index into the batch, level, weight.
         let mut detail = [(0u8, 0u8, 0.0f64); BATCH];
+        // Gathered coordinates, batch indices and values of the blend and detail passes, and
+        // the lookups' scratch: set up once per call (every entry read was written first).
+        let mut bx = [0.0f64; BATCH];
+        let mut by = [0.0f64; BATCH];
+        let mut bk = [0u8; BATCH];
+        let mut values = [0.0f64; BATCH];
+        let mut scratch = BilinearScratch {
+            fu: [0.0; BATCH],
+            fv: [0.0; BATCH],
+            base: [0; BATCH],
+        };
         for start in (0..n).step_by(BATCH) {
             let end = (start + BATCH).min(n);
             let x = &x_m[start..end];
@@ -461,13 +486,10 @@ impl AlbedoTexture {
                     e += 1;
                 }
                 let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
-                tile.bilinear_batch(&x[k..e], &y[k..e], scale, &mut out[k..e]);
+                tile.bilinear_batch(&x[k..e], &y[k..e], scale, &mut out[k..e], &mut scratch);
                 k = e;
             }
             // The blend with the next level, for the points with t > 0, gathered.
-            let mut bx = [0.0f64; BATCH];
-            let mut by = [0.0f64; BATCH];
-            let mut bk = [0u8; BATCH];
             let mut blends = 0;
             for k in 0..count {
                 if blend[k] > 0.0 {
@@ -477,7 +499,6 @@ impl AlbedoTexture {
                     blends += 1;
                 }
             }
-            let mut values = [0.0f64; BATCH];
             let mut j = 0;
             while j < blends {
                 let lv = usize::from(level[usize::from(bk[j])]) + 1;
@@ -486,7 +507,7 @@ impl AlbedoTexture {
                     e += 1;
                 }
                 let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
-                tile.bilinear_batch(&bx[j..e], &by[j..e], scale, &mut values[j..e]);
+                tile.bilinear_batch(&bx[j..e], &by[j..e], scale, &mut values[j..e], &mut scratch);
                 j = e;
             }
             for (&k, &value) in bk[..blends].iter().zip(&values[..blends]) {
@@ -509,7 +530,7 @@ impl AlbedoTexture {
                     e += 1;
                 }
                 let (tile, scale) = (&self.detail.levels[d], self.detail.scales[d]);
-                tile.bilinear_batch(&bx[j..e], &by[j..e], scale, &mut values[j..e]);
+                tile.bilinear_batch(&bx[j..e], &by[j..e], scale, &mut values[j..e], &mut scratch);
                 j = e;
             }
             for (&(k, _, weight), &value) in detail.iter().zip(&values[..detail.len()]) {
