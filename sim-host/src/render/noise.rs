@@ -69,19 +69,29 @@ fn fade(t: f64) -> f64 {
 
 /// Periodic 2-D gradient (Perlin) noise. `x`, `y` in lattice cells; the lattice wraps every
 /// `period` cells (so a tile whose side is a multiple of the cell size is seamless). Output in
-/// about `[-0.7, 0.7]`, zero mean, zero at lattice points.
+/// about `[-0.7, 0.7]`, zero mean, zero at lattice points. The reference form of
+/// [`GradientLattice::noise`], which gives the same bits from a precomputed lattice.
+#[cfg(test)]
 pub(crate) fn gradient_noise(x: f64, y: f64, period: u64, seed: u64) -> f64 {
+    noise_with(x, y, period.max(1) as i64, |i, j| {
+        (hash3(seed, i as u64, j as u64) & 15) as usize
+    })
+}
+
+/// Gradient noise at `(x, y)` on a lattice of period `p >= 1` whose gradient index at the
+/// wrapped lattice point `(i, j)` is `grad_index(i, j)` (below 16).
+#[inline(always)]
+fn noise_with(x: f64, y: f64, p: i64, grad_index: impl Fn(i64, i64) -> usize) -> f64 {
     let x0 = floor_i64(x);
     let y0 = floor_i64(y);
     let fx = x - x0 as f64;
     let fy = y - y0 as f64;
-    let p = period.max(1) as i64;
     let i0 = x0.rem_euclid(p);
     let j0 = y0.rem_euclid(p);
     let i1 = (i0 + 1) % p;
     let j1 = (j0 + 1) % p;
     let grad = |i: i64, j: i64, dx: f64, dy: f64| {
-        let (gx, gy) = GRADIENTS[(hash3(seed, i as u64, j as u64) & 15) as usize];
+        let (gx, gy) = GRADIENTS[grad_index(i, j) & 15];
         gx * dx + gy * dy
     };
     let n00 = grad(i0, j0, fx, fy);
@@ -93,6 +103,38 @@ pub(crate) fn gradient_noise(x: f64, y: f64, period: u64, seed: u64) -> f64 {
     let a = n00 + u * (n10 - n00);
     let b = n01 + u * (n11 - n01);
     a + v * (b - a)
+}
+
+/// The gradient indices of one periodic noise lattice (`period x period` points, row-major),
+/// hashed once: the texture generation evaluates each lattice point for many texels.
+#[derive(Debug, Clone)]
+pub(crate) struct GradientLattice {
+    period: i64,
+    grads: Vec<u8>,
+}
+
+impl GradientLattice {
+    /// The lattice of period `period` (at least 1) and seed `seed`.
+    pub(crate) fn new(period: u64, seed: u64) -> Self {
+        let p = period.max(1);
+        let grads = (0..p * p)
+            .map(|n| (hash3(seed, n % p, n / p) & 15) as u8)
+            .collect();
+        Self {
+            period: p as i64,
+            grads,
+        }
+    }
+
+    /// Gradient noise at `(x, y)` (lattice cells): bit-identical to
+    /// `gradient_noise(x, y, period, seed)`.
+    #[inline]
+    pub(crate) fn noise(&self, x: f64, y: f64) -> f64 {
+        let p = self.period;
+        noise_with(x, y, p, |i, j| {
+            usize::from(self.grads.get((j * p + i) as usize).copied().unwrap_or(0))
+        })
+    }
 }
 
 /// Number of entries of the Gaussian quantile table (a power of two).
@@ -190,6 +232,19 @@ mod tests {
             let b = gradient_noise(x + 8.0, y - 16.0, 8, 7);
             assert!((a - b).abs() < 1e-9);
             assert!(a.abs() < 1.0);
+        }
+    }
+
+    #[test]
+    fn gradient_lattice_gives_the_same_bits() {
+        for (period, seed) in [(1u64, 3u64), (4, 7), (64, 0x1000), (512, 0xde7a_11ed)] {
+            let lattice = GradientLattice::new(period, seed);
+            for k in 0..400 {
+                let x = 0.173 * k as f64 - 9.0;
+                let y = 0.291 * k as f64 + 0.25 * (k % 7) as f64 - 20.0;
+                let a = gradient_noise(x, y, period, seed);
+                assert_eq!(a.to_bits(), lattice.noise(x, y).to_bits(), "{period} {k}");
+            }
         }
     }
 }

@@ -19,7 +19,7 @@
 //! point sample would give on distant, foreshortened ground. The whole texture repeats every
 //! 8.19 m (default), more than a hazcam sees.
 
-use super::noise::{gradient_noise, hash3, unit_f64};
+use super::noise::{hash3, unit_f64, GradientLattice};
 use super::FilteredAlbedo;
 use crate::surface::TerrainSurface;
 use rayon::prelude::*;
@@ -567,21 +567,24 @@ fn fine_tile(p: &TextureParams, size: usize) -> Tile {
         (4.0, 0.45),
     ];
     let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
+    // Per octave: wavelength (small tiles: none beyond the tile, so the tile stays seamless),
+    // amplitude and the hashed lattice.
+    let layers: Vec<(f64, f64, GradientLattice)> = octaves
+        .iter()
+        .enumerate()
+        .map(|(k, &(wavelength, amp))| {
+            let wavelength = wavelength.min(size as f64);
+            let period = (size as f64 / wavelength) as u64;
+            let lattice = GradientLattice::new(period, seed.wrapping_add(k as u64 * 0x1000));
+            (wavelength, amp, lattice)
+        })
+        .collect();
     let mut field = vec![0f32; size * size];
     field.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
         for (i, out) in row.iter_mut().enumerate() {
             let mut s = 0.0;
-            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
-                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
-                let wavelength = wavelength.min(size as f64);
-                let period = (size as f64 / wavelength) as u64;
-                s += amp
-                    * gradient_noise(
-                        i as f64 / wavelength,
-                        j as f64 / wavelength,
-                        period,
-                        seed.wrapping_add(k as u64 * 0x1000),
-                    );
+            for (wavelength, amp, lattice) in &layers {
+                s += amp * lattice.noise(i as f64 / wavelength, j as f64 / wavelength);
             }
             // Gradient noise has a standard deviation near 0.2 per octave.
             *out = (s * norm * 5.0) as f32;
@@ -659,22 +662,28 @@ fn coarse_tile(p: &TextureParams, size: usize) -> Tile {
     let octaves: [(f64, f64); 4] = [(256.0, 1.0), (128.0, 0.7), (64.0, 0.5), (32.0, 0.35)];
     let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
     let seed = p.seed ^ 0xc0a7_5e00;
+    // Per octave: wavelength (small tiles: none beyond the tile, so the tile stays seamless),
+    // amplitude and the hashed lattice.
+    let layers: Vec<(f64, f64, GradientLattice)> = octaves
+        .iter()
+        .enumerate()
+        .map(|(k, &(wavelength, amp))| {
+            let wavelength = wavelength.min(size as f64);
+            let period = ((size as f64 / wavelength) as u64).max(1);
+            (
+                wavelength,
+                amp,
+                GradientLattice::new(period, seed.wrapping_add(k as u64)),
+            )
+        })
+        .collect();
     let rows: Vec<u16> = (0..size * size)
         .into_par_iter()
         .map(|idx| {
             let (i, j) = (idx % size, idx / size);
             let mut s = 0.0;
-            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
-                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
-                let wavelength = wavelength.min(size as f64);
-                let period = ((size as f64 / wavelength) as u64).max(1);
-                s += amp
-                    * gradient_noise(
-                        i as f64 / wavelength,
-                        j as f64 / wavelength,
-                        period,
-                        seed.wrapping_add(k as u64),
-                    );
+            for (wavelength, amp, lattice) in &layers {
+                s += amp * lattice.noise(i as f64 / wavelength, j as f64 / wavelength);
             }
             let factor = (1.0 + p.coarse_contrast * s * norm * 5.0).clamp(0.2, 1.99);
             (0.5 * factor * 65535.0).round() as u16
@@ -689,22 +698,28 @@ fn detail_tile(p: &TextureParams, size: usize) -> Tile {
     let octaves: [(f64, f64); 4] = [(16.0, 1.0), (8.0, 0.9), (4.0, 0.8), (2.0, 0.6)];
     let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
     let seed = p.seed ^ 0xde7a_11ed;
+    // Per octave: wavelength (small tiles: none beyond the tile, so the tile stays seamless),
+    // amplitude and the hashed lattice.
+    let layers: Vec<(f64, f64, GradientLattice)> = octaves
+        .iter()
+        .enumerate()
+        .map(|(k, &(wavelength, amp))| {
+            let wavelength = wavelength.min(size as f64);
+            let period = (size as f64 / wavelength) as u64;
+            (
+                wavelength,
+                amp,
+                GradientLattice::new(period, seed.wrapping_add(k as u64)),
+            )
+        })
+        .collect();
     let rows: Vec<u16> = (0..size * size)
         .into_par_iter()
         .map(|idx| {
             let (i, j) = (idx % size, idx / size);
             let mut s = 0.0;
-            for (k, &(wavelength, amp)) in octaves.iter().enumerate() {
-                // Small tiles: no wavelength beyond the tile, so the tile stays seamless.
-                let wavelength = wavelength.min(size as f64);
-                let period = (size as f64 / wavelength) as u64;
-                s += amp
-                    * gradient_noise(
-                        i as f64 / wavelength,
-                        j as f64 / wavelength,
-                        period,
-                        seed.wrapping_add(k as u64),
-                    );
+            for (wavelength, amp, lattice) in &layers {
+                s += amp * lattice.noise(i as f64 / wavelength, j as f64 / wavelength);
             }
             let factor = (1.0 + p.detail_contrast * s * norm * 5.0).clamp(0.2, 1.99);
             (0.5 * factor * 65535.0).round() as u16
