@@ -177,15 +177,18 @@ impl Tile {
             fv[k] = v - (tv - MAGIC);
             base[k] = self.index(tu.to_bits() as usize & mask, tv.to_bits() as usize & mask);
         }
-        for k in 0..n {
-            let b = base[k];
+        let taps = &mut scratch.taps[..n];
+        for (t, &b) in taps.iter_mut().zip(base.iter()) {
             let q = &self.data[b..b + STRIDE + 2];
-            let (a, b, c, d) = (
+            *t = [
                 f64::from(q[0]),
                 f64::from(q[1]),
                 f64::from(q[STRIDE]),
                 f64::from(q[STRIDE + 1]),
-            );
+            ];
+        }
+        for k in 0..n {
+            let [a, b, c, d] = taps[k];
             let top = a + fu[k] * (b - a);
             let bottom = c + fu[k] * (d - c);
             out[k] = (top + fv[k] * (bottom - top)) * (1.0 / 65535.0);
@@ -307,6 +310,7 @@ struct BilinearScratch {
     fu: [f64; BATCH],
     fv: [f64; BATCH],
     base: [usize; BATCH],
+    taps: [[f64; 4]; BATCH],
 }
 
 /// Procedural albedo texture of sandy ground with pebbles (see the module documentation).
@@ -432,6 +436,7 @@ impl AlbedoTexture {
             fu: [0.0; BATCH],
             fv: [0.0; BATCH],
             base: [0; BATCH],
+            taps: [[0.0; 4]; BATCH],
         };
         for start in (0..n).step_by(BATCH) {
             let end = (start + BATCH).min(n);
