@@ -572,18 +572,7 @@ fn fine_tile(p: &TextureParams, size: usize) -> Tile {
         (4.0, 0.45),
     ];
     let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
-    // Per octave: wavelength (small tiles: none beyond the tile, so the tile stays seamless),
-    // amplitude and the hashed lattice.
-    let layers: Vec<(f64, f64, GradientLattice)> = octaves
-        .iter()
-        .enumerate()
-        .map(|(k, &(wavelength, amp))| {
-            let wavelength = wavelength.min(size as f64);
-            let period = (size as f64 / wavelength) as u64;
-            let lattice = GradientLattice::new(period, seed.wrapping_add(k as u64 * 0x1000));
-            (wavelength, amp, lattice)
-        })
-        .collect();
+    let layers = octave_layers(&octaves, size, |k| seed.wrapping_add(k * 0x1000));
     let mut field = vec![0f32; size * size];
     field.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
         for (i, out) in row.iter_mut().enumerate() {
@@ -697,15 +686,15 @@ fn coarse_tile(p: &TextureParams, size: usize) -> Tile {
     Tile::from_row_major(size, &rows)
 }
 
-/// Detail tile (1 mm texels, period 0.51 m): sand grain noise of wavelengths 2-16 mm,
-/// stores `0.5 * (1 + contrast * noise)`.
-fn detail_tile(p: &TextureParams, size: usize) -> Tile {
-    let octaves: [(f64, f64); 4] = [(16.0, 1.0), (8.0, 0.9), (4.0, 0.8), (2.0, 0.6)];
-    let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
-    let seed = p.seed ^ 0xde7a_11ed;
-    // Per octave: wavelength (small tiles: none beyond the tile, so the tile stays seamless),
-    // amplitude and the hashed lattice.
-    let layers: Vec<(f64, f64, GradientLattice)> = octaves
+/// Per octave of `octaves` (`(wavelength, amplitude)`, texels): the wavelength (small tiles:
+/// none beyond the tile, so the tile stays seamless), the amplitude and the hashed gradient
+/// lattice of period `size / wavelength`, seeded with `seed_of(octave index)`.
+fn octave_layers(
+    octaves: &[(f64, f64)],
+    size: usize,
+    seed_of: impl Fn(u64) -> u64,
+) -> Vec<(f64, f64, GradientLattice)> {
+    octaves
         .iter()
         .enumerate()
         .map(|(k, &(wavelength, amp))| {
@@ -714,10 +703,19 @@ fn detail_tile(p: &TextureParams, size: usize) -> Tile {
             (
                 wavelength,
                 amp,
-                GradientLattice::new(period, seed.wrapping_add(k as u64)),
+                GradientLattice::new(period, seed_of(k as u64)),
             )
         })
-        .collect();
+        .collect()
+}
+
+/// Detail tile (1 mm texels, period 0.51 m): sand grain noise of wavelengths 2-16 mm,
+/// stores `0.5 * (1 + contrast * noise)`.
+fn detail_tile(p: &TextureParams, size: usize) -> Tile {
+    let octaves: [(f64, f64); 4] = [(16.0, 1.0), (8.0, 0.9), (4.0, 0.8), (2.0, 0.6)];
+    let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
+    let seed = p.seed ^ 0xde7a_11ed;
+    let layers = octave_layers(&octaves, size, |k| seed.wrapping_add(k));
     let rows: Vec<u16> = (0..size * size)
         .into_par_iter()
         .map(|idx| {
