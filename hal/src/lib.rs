@@ -45,6 +45,7 @@ mod clock;
 mod error;
 mod imu;
 mod mobility;
+mod power;
 mod sun_sensor;
 mod telemetry;
 
@@ -56,5 +57,6 @@ pub use clock::Clock;
 pub use error::{Error, ErrorKind};
 pub use imu::{Imu, ImuSample};
 pub use mobility::{JointState, Mobility, MobilityCommand, WHEEL_COUNT};
+pub use power::{Power, PowerReading};
 pub use sun_sensor::{SunReading, SunSensor};
 pub use telemetry::Telemetry;

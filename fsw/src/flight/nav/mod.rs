@@ -45,6 +45,7 @@ mod guidance_adapter;
 pub mod hazard_nav;
 mod kin_aiding;
 pub mod loc_nav;
+mod mission;
 pub mod protection;
 mod radius;
 #[cfg(test)]
@@ -642,6 +643,8 @@ pub struct Navigator {
     hazard: InPlace<hazard_nav::HazardNav>,
     /// Terrain-map localization (built in place by [`Self::start_vo`]).
     loc: loc_nav::LocSlot,
+    /// The day's targets and the power telemetry ([`mission`]).
+    mission: mission::Mission,
 }
 
 /// Why the navigator could not be built.
@@ -739,6 +742,7 @@ impl Navigator {
         last_ekf_error: None,
         hazard: InPlace::unbuilt(hazard_nav::HazardNav::EMPTY),
         loc: loc_nav::LocSlot::NONE,
+        mission: mission::Mission::EMPTY,
     };
 
     /// [`Self::new`] in place: this navigator becomes the one `new(*config, path,
@@ -759,6 +763,7 @@ impl Navigator {
         self.vo.built = false;
         self.hazard.built = false;
         self.loc.unbuild();
+        self.mission = mission::Mission::EMPTY;
         let start = [
             config.initial_position_n_m[0],
             config.initial_position_n_m[1],
