@@ -124,6 +124,8 @@ pub enum DropReason {
     Energy,
     /// It does not fit before the end of the plan.
     Horizon,
+    /// The path planner found no way to it ([`Sequencer::unreachable`]); never reconsidered.
+    Unreachable,
 }
 
 /// State of a target.
@@ -278,6 +280,47 @@ impl Sequencer {
     /// True when a localization is at the head of the plan ([`Self::request_localization`]).
     pub fn localization_due(&self) -> bool {
         self.localize_first
+    }
+
+    /// The resource model the plan is timed with.
+    pub fn model(&self) -> ResourceModel {
+        self.model
+    }
+
+    /// Replace the resource model (the caller's calibration of the powers from the energy
+    /// telemetry); replan afterwards. Errors: a model [`Self::new`] would refuse.
+    pub fn set_model(&mut self, model: ResourceModel) -> Result<(), SequencerError> {
+        if !model.is_valid() {
+            return Err(SequencerError::InvalidInput);
+        }
+        self.model = model;
+        Ok(())
+    }
+
+    /// Extra length of the leg into target `i` ([`Self::set_leg_penalty`]), m; 0 out of range.
+    pub fn leg_penalty(&self, i: usize) -> f64 {
+        self.penalty_m.get(i).copied().unwrap_or(0.0)
+    }
+
+    /// The path planner found no way to target `i` (RoverBug's unreachable verdict, V99
+    /// sec. 4): it leaves the plan as [`DropReason::Unreachable`] and later replans do not
+    /// reconsider it.
+    pub fn unreachable(&mut self, i: usize) -> Result<(), SequencerError> {
+        if i >= self.targets.len() {
+            return Err(SequencerError::NoSuchTarget);
+        }
+        if let Some(s) = self.status.get_mut(i) {
+            *s = TargetStatus::Dropped(DropReason::Unreachable);
+        }
+        self.counters.drops = self.counters.drops.saturating_add(1);
+        self.plan.retain(|&k| usize::from(k) != i);
+        Ok(())
+    }
+
+    /// Duration (s, from `situation.now_s` to the end of the last dwell) of the current plan,
+    /// or its first conflict.
+    pub fn duration(&self, situation: &Situation) -> Result<f64, Conflict> {
+        self.evaluate(situation, &self.plan, None)
     }
 
     /// Record the localization at the head of the plan as done.
@@ -441,6 +484,23 @@ impl Sequencer {
     /// repaired by dropping, or-opt improvement, re-insertion of dropped targets. Visited
     /// targets stay out; dropped ones are reconsidered. Errors: a non-finite situation.
     pub fn replan(&mut self, situation: &Situation) -> Result<(), SequencerError> {
+        self.replan_committed(situation, None, 0.0)
+    }
+
+    /// [`Self::replan`] with a commitment to the target the rover is driving to: when the best
+    /// plan starts elsewhere, the plan with `committed` moved to its head is kept instead if it
+    /// is feasible and at most `hysteresis_s` (s, finite, >= 0) longer. A rover turned away
+    /// for a few seconds' gain would dither between targets as its position changes; V99's
+    /// replan on an obstacle (Fig. 3) changes the order by far more. `None`: no commitment.
+    pub fn replan_committed(
+        &mut self,
+        situation: &Situation,
+        committed: Option<usize>,
+        hysteresis_s: f64,
+    ) -> Result<(), SequencerError> {
+        if !(hysteresis_s.is_finite() && hysteresis_s >= 0.0) {
+            return Err(SequencerError::InvalidInput);
+        }
         let finite = situation.now_s.is_finite()
             && situation.end_s.is_finite()
             && situation.energy_available_j.is_finite()
@@ -453,8 +513,11 @@ impl Sequencer {
         let mut candidates: Vec<u8, MAX_TARGETS> = Vec::new();
         for level in (0..=u8::MAX).rev() {
             for (i, t) in self.targets.iter().enumerate() {
-                let visited = self.status.get(i) == Some(&TargetStatus::Visited);
-                if t.priority == level && !visited {
+                let out = matches!(
+                    self.status.get(i),
+                    Some(TargetStatus::Visited | TargetStatus::Dropped(DropReason::Unreachable))
+                );
+                if t.priority == level && !out {
                     let _ = candidates.push(i as u8);
                 }
             }
@@ -512,6 +575,22 @@ impl Sequencer {
                     order = o;
                     if let Some(s) = status.get_mut(usize::from(c)) {
                         *s = TargetStatus::Pending;
+                    }
+                }
+            }
+        }
+        // The commitment: the committed target first if that costs little.
+        let head = order.first().map(|&k| usize::from(k));
+        if let (Some(c), Ok(best)) = (committed, self.evaluate(situation, &order, None)) {
+            if head != Some(c) && order.iter().any(|&k| usize::from(k) == c) {
+                let mut alt: Vec<u8, MAX_TARGETS> = Vec::new();
+                let _ = alt.push(c as u8);
+                for &k in order.iter().filter(|&&k| usize::from(k) != c) {
+                    let _ = alt.push(k);
+                }
+                if let Ok(d) = self.evaluate(situation, &alt, None) {
+                    if alt.len() == order.len() && d <= best + hysteresis_s {
+                        order = alt;
                     }
                 }
             }

@@ -262,3 +262,62 @@ fn seq_4_localization_windows_and_invalid_inputs() {
     assert_eq!(seq.replan(&nan), Err(SequencerError::InvalidInput));
     assert_eq!(seq.visited(7), Err(SequencerError::NoSuchTarget));
 }
+
+/// SEQ-5: an unreachable target leaves the plan for good; the commitment keeps the target the
+/// rover drives to unless another order saves more than the hysteresis; a recalibrated model
+/// (more power than planned) drops a target the old one kept.
+#[test]
+fn seq_5_unreachable_commitment_and_recalibration() {
+    let targets = [
+        target(10.0, 0.0, 1),
+        target(10.0, 10.0, 1),
+        target(0.0, 12.0, 1),
+    ];
+    let mut seq = Sequencer::new(&targets, ResourceModel::rocky8()).unwrap();
+    seq.replan(&situation(1e7)).unwrap();
+    assert_eq!(seq.plan(), &[0, 1, 2]);
+    // Near target 2 the best order starts there; committed to 0 with a small hysteresis the
+    // order changes anyway (the saving is far larger), with a huge one it keeps 0 first.
+    let near = Situation {
+        position_m: [1.0, 11.0],
+        ..situation(1e7)
+    };
+    let mut free = seq.clone();
+    free.replan(&near).unwrap();
+    let best = free.duration(&near).unwrap();
+    assert_eq!(free.plan()[0], 2);
+    let mut kept = seq.clone();
+    kept.replan_committed(&near, Some(0), 1e6).unwrap();
+    assert_eq!(kept.plan()[0], 0);
+    assert!(kept.duration(&near).unwrap() > best);
+    let mut switched = seq.clone();
+    switched.replan_committed(&near, Some(0), 10.0).unwrap();
+    assert_eq!(switched.plan(), free.plan());
+    assert!(seq.replan_committed(&near, Some(0), f64::NAN).is_err());
+    // Unreachable: out now and in every later replan, even with all the energy in the world.
+    seq.unreachable(1).unwrap();
+    assert_eq!(seq.plan(), &[0, 2]);
+    seq.replan(&situation(1e9)).unwrap();
+    assert!(!seq.plan().contains(&1));
+    assert_eq!(
+        seq.status(1),
+        Some(TargetStatus::Dropped(DropReason::Unreachable))
+    );
+    assert_eq!(seq.unreachable(9), Err(SequencerError::NoSuchTarget));
+    // Recalibration: the energy of the plan under the rocky8 model, then powers 4x as high.
+    let need = seq.timeline().last().unwrap().energy_j;
+    seq.replan(&situation(need * 1.05)).unwrap();
+    assert_eq!(seq.plan().len(), 2);
+    let mut hungry = ResourceModel::rocky8();
+    hungry.drive_power_w *= 4.0;
+    hungry.idle_power_w *= 4.0;
+    seq.set_model(hungry).unwrap();
+    assert_eq!(seq.model(), hungry);
+    seq.replan(&situation(need * 1.05)).unwrap();
+    assert!(seq.plan().len() < 2);
+    assert!([0, 2]
+        .iter()
+        .any(|&i| seq.status(i) == Some(TargetStatus::Dropped(DropReason::Energy))));
+    hungry.speed_m_s = 0.0;
+    assert!(seq.set_model(hungry).is_err());
+}
