@@ -282,6 +282,73 @@ pub struct Scenario {
     /// [`crate::hazards::DEFAULT_HAZARD_HEIGHT_M`].
     #[serde(default = "default_hazard_height")]
     pub hazard_height_m: f64,
+    /// The day's science targets for the flight software's sequencer (V99 sec. 3; issue 17),
+    /// uplinked after the start. Needs `navigation = "roverbug"`.
+    #[serde(default)]
+    pub mission: Option<MissionSpec>,
+}
+
+/// The ground's targets and budget for a run.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MissionSpec {
+    /// Energy the plan may use from the uplink on, J.
+    pub energy_budget_j: f64,
+    /// The plan must end by this time, s since the start (default: the scenario's duration).
+    #[serde(default)]
+    pub end_s: Option<f64>,
+    /// The targets (at most `fsw::sequencer::MAX_TARGETS`), in `W`.
+    pub targets: Vec<TargetSpec>,
+}
+
+/// One science target.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetSpec {
+    /// North, m (`W`).
+    pub x_m: f64,
+    /// East, m (`W`).
+    pub y_m: f64,
+    /// Priority (higher is dropped last).
+    #[serde(default = "default_priority")]
+    pub priority: u8,
+    /// Science time at the target, s.
+    #[serde(default = "default_dwell")]
+    pub dwell_s: f64,
+    /// The dwell may start from, s.
+    #[serde(default)]
+    pub window_open_s: f64,
+    /// The dwell must start by, s (default: no limit).
+    #[serde(default)]
+    pub window_close_s: Option<f64>,
+    /// Instrument energy above the idle power during the dwell, J (the simulator does not
+    /// draw it: its energy model has no instruments).
+    #[serde(default)]
+    pub dwell_energy_j: f64,
+}
+
+fn default_priority() -> u8 {
+    1
+}
+fn default_dwell() -> f64 {
+    60.0
+}
+
+impl MissionSpec {
+    /// The flight software's targets.
+    pub fn targets(&self) -> Vec<fsw::sequencer::Target> {
+        self.targets
+            .iter()
+            .map(|t| fsw::sequencer::Target {
+                position_m: [t.x_m, t.y_m],
+                priority: t.priority,
+                window_open_s: t.window_open_s,
+                window_close_s: t.window_close_s.unwrap_or(1.0e9),
+                dwell_s: t.dwell_s,
+                dwell_energy_j: t.dwell_energy_j,
+            })
+            .collect()
+    }
 }
 
 fn default_hazard_height() -> f64 {
@@ -364,6 +431,21 @@ impl Scenario {
         for (k, f) in self.faults.iter().enumerate() {
             f.check()
                 .map_err(|e| anyhow::anyhow!("faults[{k}] ({:?} {:?}): {e}", f.device, f.kind))?;
+        }
+        if let Some(m) = &self.mission {
+            anyhow::ensure!(
+                self.navigation == NavigationKind::Roverbug,
+                "mission targets need navigation = \"roverbug\""
+            );
+            anyhow::ensure!(
+                !m.targets.is_empty() && m.targets.len() <= fsw::sequencer::MAX_TARGETS,
+                "mission: 1 to {} targets",
+                fsw::sequencer::MAX_TARGETS
+            );
+            anyhow::ensure!(
+                m.energy_budget_j.is_finite() && m.energy_budget_j >= 0.0,
+                "mission: energy_budget_j must be finite and non-negative"
+            );
         }
         match self.slip_model {
             SlipModelKind::Lumped => self.soil.lumped().map(|_| ())?,

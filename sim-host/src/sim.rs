@@ -254,6 +254,8 @@ pub struct RunResult {
     pub planner: Option<PlannerRun>,
     /// Terrain-map localization, when the run asked for it.
     pub localization: Option<LocalizationRun>,
+    /// The day's targets and the sequencer, when the scenario has them.
+    pub mission: Option<MissionRun>,
     /// Wall-clock seconds of the run.
     pub wall_time_s: f64,
 }
@@ -344,6 +346,71 @@ fn loc_check(
     })
 }
 
+/// What the sequencer did with the day's targets (issue 17, V99 sec. 3).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MissionRun {
+    /// The flight software's counters.
+    pub counters: fsw::flight::nav::MissionCounters,
+    /// Outcome of each target, in the scenario's order.
+    pub outcomes: Vec<fsw::flight::nav::TargetOutcome>,
+    /// Target indices in the order visited.
+    pub order: Vec<usize>,
+    /// Each dwell's start against the truth.
+    pub visits: Vec<TargetVisit>,
+    /// Largest truth miss: at the dwell for a visited target, at the end of the run for one
+    /// not visited, m.
+    pub worst_miss_m: f64,
+    /// The ground's energy budget, J.
+    pub energy_budget_j: f64,
+    /// Final mission phase.
+    pub phase: fsw::flight::nav::MissionPhase,
+}
+
+/// The truth at the start of a dwell.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetVisit {
+    /// Target index.
+    pub target: usize,
+    /// Simulated time, s.
+    pub t_s: f64,
+    /// Truth distance to the target, m.
+    pub miss_m: f64,
+    /// True distance travelled so far, m.
+    pub distance_m: f64,
+}
+
+fn mission_run(
+    spec: &crate::scenario::MissionSpec,
+    nav: &fsw::flight::nav::Navigator,
+    visits: &[TargetVisit],
+    end: [f64; 3],
+) -> MissionRun {
+    let outcomes: Vec<_> = (0..spec.targets.len())
+        .map(|i| {
+            nav.target_outcome(i)
+                .unwrap_or(fsw::flight::nav::TargetOutcome::Pending)
+        })
+        .collect();
+    let worst_miss_m = spec
+        .targets
+        .iter()
+        .enumerate()
+        .map(|(i, t)| match visits.iter().find(|v| v.target == i) {
+            Some(v) => v.miss_m,
+            None => (end[0] - t.x_m).hypot(end[1] - t.y_m),
+        })
+        .fold(0.0, f64::max);
+    MissionRun {
+        counters: nav.mission_counters(),
+        outcomes,
+        order: nav.visit_order().iter().map(|&i| usize::from(i)).collect(),
+        visits: visits.to_vec(),
+        worst_miss_m,
+        energy_budget_j: spec.energy_budget_j,
+        phase: nav.mission_phase(),
+    }
+}
+
 /// What the flight software's hazard maps and RoverBug planner did in a run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlannerRun {
@@ -355,6 +422,8 @@ pub struct PlannerRun {
     pub planner: Option<fsw::planning::PlannerCounters>,
     /// Straight-line distance from the start to the goal, m.
     pub straight_line_m: f64,
+    /// The planner's last step's status with its reason (e.g. `Blocked(GazeLimit)`).
+    pub last_status: Option<String>,
 }
 
 /// Hooks into a run (used by `record`): wrap the simulated devices before the flight software
@@ -448,6 +517,22 @@ pub fn run_with<H: RunHooks>(
     } else {
         None
     };
+    if let Some(m) = &scenario.mission {
+        let budget = fsw::flight::nav::MissionBudget {
+            energy_j: m.energy_budget_j,
+            end_s: m.end_s.unwrap_or(scenario.duration_s),
+        };
+        // The flight software's own a-priori resource model (not the simulator's energy
+        // model: the flight software learns the difference from the power telemetry).
+        fsw.uplink_targets(
+            &m.targets(),
+            fsw::sequencer::ResourceModel::rocky8(),
+            budget,
+        )
+        .map_err(|e| anyhow::anyhow!("the flight software refused the targets: {e:?}"))?;
+    }
+    let mut mission_visits: Vec<TargetVisit> = Vec::new();
+    let mut mission_phase = fsw::flight::nav::MissionPhase::None;
     let mut loc_seen = 0u32;
     let mut loc_checks: Vec<LocCheck> = Vec::new();
     let mut source = if options.reference_driver {
@@ -509,6 +594,23 @@ pub fn run_with<H: RunHooks>(
                 }
             }
         }
+        if nav.mission_phase() != mission_phase {
+            mission_phase = nav.mission_phase();
+            if let (fsw::flight::nav::MissionPhase::Dwelling { target }, Some(m)) =
+                (mission_phase, &scenario.mission)
+            {
+                // The truth at the start of the dwell: is the rover really at the target?
+                let w = world.borrow();
+                let p = w.truth.pose.pos_m;
+                let t = m.targets.get(usize::from(target));
+                mission_visits.push(TargetVisit {
+                    target: usize::from(target),
+                    t_s: w.truth.t_us as f64 * 1e-6,
+                    miss_m: t.map_or(f64::NAN, |t| (p[0] - t.x_m).hypot(p[1] - t.y_m)),
+                    distance_m: w.truth.distance_m,
+                });
+            }
+        }
         if let Some(fix) = nav.last_localization() {
             if fix.search != loc_seen {
                 loc_seen = fix.search;
@@ -549,7 +651,17 @@ pub fn run_with<H: RunHooks>(
     let w = world.borrow();
     let end = scenario.waypoints[scenario.waypoints.len() - 1];
     let p = w.truth.pose.pos_m;
-    let goal_miss_m = ((p[0] - end[0]).powi(2) + (p[1] - end[1]).powi(2)).sqrt();
+    let mission = scenario
+        .mission
+        .as_ref()
+        .map(|m| mission_run(m, fsw.nav(), &mission_visits, p));
+    // With targets the goal is every target: reached when each was visited within the
+    // tolerance; the miss is the largest truth miss (at the dwell, or at the end for a target
+    // not visited).
+    let goal_miss_m = match &mission {
+        Some(m) => m.worst_miss_m,
+        None => ((p[0] - end[0]).powi(2) + (p[1] - end[1]).powi(2)).sqrt(),
+    };
     let exec = fsw.executive();
     let timing = exec
         .groups()
@@ -612,6 +724,7 @@ pub fn run_with<H: RunHooks>(
             .min_distance_m
             .is_finite()
             .then_some(hazard_monitor.min_distance_m),
+        mission,
         localization: uplinked.map(|(map, inserted)| LocalizationRun {
             counters: fsw.nav().localization_counters(),
             map_points: inserted,
@@ -629,6 +742,10 @@ pub fn run_with<H: RunHooks>(
                 hazard: fsw.nav().hazard_counters(),
                 planner: fsw.nav().planner_counters(),
                 straight_line_m: (b[0] - a[0]).hypot(b[1] - a[1]),
+                last_status: fsw
+                    .nav()
+                    .planner_output()
+                    .map(|o| format!("{:?}", o.status)),
             }
         }),
         wall_time_s: start.elapsed().as_secs_f64(),

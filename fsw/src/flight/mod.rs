@@ -553,6 +553,18 @@ impl<P: Platform> Fsw<P> {
         self.nav.uplink_global_map(centre_m, points)
     }
 
+    /// Ground command: the day's science targets (`N`, m), the sequencer's resource model and
+    /// the budget (V99 sec. 3, [`Navigator::uplink_targets`]); call after [`Self::start_vo`]
+    /// with goal-directed driving on.
+    pub fn uplink_targets(
+        &mut self,
+        targets: &[crate::sequencer::Target],
+        model: crate::sequencer::ResourceModel,
+        budget: nav::MissionBudget,
+    ) -> Result<(), nav::MissionError> {
+        self.nav.uplink_targets(targets, model, budget)
+    }
+
     /// The clock (for drivers that need the time base); `None` before [`Self::init`].
     pub fn clock_mut(&mut self) -> Option<&mut P::Clock> {
         self.devices.as_mut().map(|a| &mut a.clock)
@@ -888,6 +900,10 @@ impl<P: Platform> Work<'_, P> {
     }
 
     fn poll_stereo(&mut self, quantum: u32) -> u32 {
+        // A replan of the day's targets takes the slice (V99 sec. 3).
+        if self.nav.mission_replan_due() {
+            return self.nav.mission_background(quantum);
+        }
         if self.nav.replaying() {
             return self.nav.replay_step();
         }

@@ -4,8 +4,8 @@
 //! rescheduling with iterative repair", 1994).
 //!
 //! The plan is an order of the pending targets, each a goto (travel at the rover's speed over
-//! the straight-line distance times a detour factor, plus any leg penalty learnt from the path
-//! planner) followed by a dwell (science) inside the target's time window. Its timeline has
+//! the straight-line distance times a detour factor, plus, for the leg from the rover's
+//! position, any penalty learnt from the path planner) followed by a dwell (science) inside the target's time window. Its timeline has
 //! three kinds of constraint (V99 sec. 3: temporal, resource, state):
 //! - **time windows**: each dwell starts inside its target's window (the rover waits, idling, for
 //!   a window that has not opened);
@@ -204,8 +204,8 @@ pub struct SequencerCounters {
 pub struct Sequencer {
     targets: Vec<Target, MAX_TARGETS>,
     status: [TargetStatus; MAX_TARGETS],
-    /// Extra travel length of the leg into each target from anywhere, m (the path planner's
-    /// report of an obstacle near it).
+    /// Extra travel length of the leg from the rover's position into each target, m (the path
+    /// planner's report of an obstacle on the way).
     penalty_m: [f64; MAX_TARGETS],
     model: ResourceModel,
     plan: Vec<u8, MAX_TARGETS>,
@@ -340,9 +340,11 @@ impl Sequencer {
         Ok(())
     }
 
-    /// The path planner found the leg into target `i` longer than the straight line allows
-    /// (an unexpected obstacle, V99 Fig. 3): `extra_m` (m, finite, >= 0) is added to every leg
-    /// into it until the next call. Replan afterwards.
+    /// The path planner found the way from the rover's position into target `i` longer than
+    /// the straight line allows (an unexpected obstacle, V99 Fig. 3): `extra_m` (m, finite,
+    /// >= 0) is added to the leg into `i` when it is the plan's first (from the situation's
+    /// position; the planner knows nothing of the ways from the other targets) until the next
+    /// call or [`Self::clear_leg_penalties`]. Replan afterwards.
     pub fn set_leg_penalty(&mut self, i: usize, extra_m: f64) -> Result<(), SequencerError> {
         if !(extra_m.is_finite() && extra_m >= 0.0) {
             return Err(SequencerError::InvalidInput);
@@ -356,6 +358,11 @@ impl Sequencer {
         }
     }
 
+    /// Forget every leg penalty (the rover has moved on: a visit, another goal).
+    pub fn clear_leg_penalties(&mut self) {
+        self.penalty_m = [0.0; MAX_TARGETS];
+    }
+
     /// Put a localization (the model's time and energy) at the head of the plan (V99 sec. 3:
     /// the position uncertainty grew too large). Replan afterwards: targets that no longer fit
     /// are dropped by priority.
@@ -366,13 +373,18 @@ impl Sequencer {
         self.localize_first = true;
     }
 
-    /// Travel time (s) and energy (J) of the leg from `from` (`W`, m) into target `to`.
-    fn leg(&self, from: [f64; 2], to: usize) -> (f64, f64) {
+    /// Travel time (s) and energy (J) of the leg from `from` (`W`, m) into target `to`; with
+    /// `first` (the leg from the rover's position) its penalty is added.
+    fn leg(&self, from: [f64; 2], to: usize, first: bool) -> (f64, f64) {
         let Some(t) = self.targets.get(to) else {
             return (f64::INFINITY, f64::INFINITY);
         };
         let (dx, dy) = (t.position_m[0] - from[0], t.position_m[1] - from[1]);
-        let penalty = self.penalty_m.get(to).copied().unwrap_or(0.0);
+        let penalty = if first {
+            self.penalty_m.get(to).copied().unwrap_or(0.0)
+        } else {
+            0.0
+        };
         let length = libm::sqrt(dx * dx + dy * dy) * self.model.detour_factor + penalty;
         let time = length / self.model.speed_m_s;
         (time, time * self.model.drive_power_w)
@@ -400,12 +412,12 @@ impl Sequencer {
         }
         let mut pos = situation.position_m;
         let mut slots: Vec<Slot, MAX_TARGETS> = Vec::new();
-        for &k in order {
+        for (n, &k) in order.iter().enumerate() {
             let i = usize::from(k);
             let Some(target) = self.targets.get(i) else {
                 return Err(Conflict::Horizon);
             };
-            let (dt, de) = self.leg(pos, i);
+            let (dt, de) = self.leg(pos, i, n == 0);
             t += dt;
             e += de;
             let arrive = t;

@@ -150,6 +150,8 @@ pub struct Summary {
     pub planner: Option<PlannerSummary>,
     /// Terrain-map localization (issue 17; null when the run did not ask for it).
     pub localization: Option<LocalizationSummary>,
+    /// The day's targets and the sequencer (issue 17; null without targets).
+    pub targets: Option<TargetsSummary>,
     /// Slip.
     pub slip: SlipSummary,
     /// VO.
@@ -196,6 +198,8 @@ pub struct HazardSummary {
 pub struct PlannerSummary {
     /// `reached`, `unreachable`, `blocked` or `driving` (the planner's verdict at the end).
     pub status: String,
+    /// The planner's last step's status with its reason (e.g. `Blocked(GazeLimit)`).
+    pub last_status: Option<String>,
     /// Planner replans (changes of route).
     pub replans: u32,
     /// Planner steps (one per hazard map).
@@ -251,6 +255,46 @@ pub struct LocalizationSummary {
     pub map_features: usize,
     /// Why the last search failed, if one did.
     pub last_error: Option<String>,
+}
+
+/// The day's targets and the on-board sequencer of a run (issue 17, V99 sec. 3).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct TargetsSummary {
+    /// Targets uplinked.
+    pub total: u32,
+    /// Targets visited (reached and dwelt at).
+    pub visited: u32,
+    /// Targets dropped (energy, window, horizon, unreachable).
+    pub dropped: u32,
+    /// Of them, found unreachable by the path planner.
+    pub unreachable: u32,
+    /// Replans.
+    pub replans: u32,
+    /// Replans that changed the order of the targets.
+    pub reorders: u32,
+    /// Replans triggered by a leg growing (an unexpected obstacle).
+    pub leg_triggers: u32,
+    /// Replans triggered by the energy telemetry.
+    pub energy_triggers: u32,
+    /// Replans after 2 m of travel (the opportunity check).
+    pub travel_triggers: u32,
+    /// Switches to another target while driving.
+    pub goal_switches: u32,
+    /// Order of the visits (target indices).
+    pub order: Vec<usize>,
+    /// Outcome per target (scenario order).
+    pub outcomes: Vec<String>,
+    /// Truth miss at the start of each visited target's dwell, m (scenario order; null when
+    /// not visited).
+    pub miss_m: Vec<Option<f64>>,
+    /// The ground's energy budget, J.
+    pub energy_budget_j: f64,
+    /// Energy used since the uplink as the flight software counted it at its last replan, J.
+    pub fsw_energy_used_j: f64,
+    /// The flight software's power calibration (measured over its model's energy).
+    pub calibration_ratio: f64,
+    /// Final phase of the mission.
+    pub phase: String,
 }
 
 /// One truth-side collision.
@@ -450,6 +494,27 @@ pub fn summarise(run: &RunResult) -> Summary {
                 })
                 .collect(),
         },
+        targets: run.mission.as_ref().map(|m| TargetsSummary {
+            total: m.counters.total,
+            visited: m.counters.visited,
+            dropped: m.counters.dropped,
+            unreachable: m.counters.unreachable,
+            replans: m.counters.replans,
+            reorders: m.counters.reorders,
+            leg_triggers: m.counters.leg_triggers,
+            energy_triggers: m.counters.energy_triggers,
+            travel_triggers: m.counters.travel_triggers,
+            goal_switches: m.counters.goal_switches,
+            order: m.order.clone(),
+            outcomes: m.outcomes.iter().map(|o| format!("{o:?}")).collect(),
+            miss_m: (0..m.outcomes.len())
+                .map(|i| m.visits.iter().find(|v| v.target == i).map(|v| v.miss_m))
+                .collect(),
+            energy_budget_j: m.energy_budget_j,
+            fsw_energy_used_j: m.counters.energy_used_j,
+            calibration_ratio: m.counters.calibration_ratio,
+            phase: format!("{:?}", m.phase),
+        }),
         localization: run.localization.as_ref().map(|l| {
             let n = l.checks.len();
             let mean = |f: &dyn Fn(&crate::sim::LocCheck) -> f64| {
@@ -485,6 +550,7 @@ pub fn summarise(run: &RunResult) -> Summary {
                 fsw::flight::nav::hazard_nav::PlannerVerdict::Blocked => "blocked",
             }
             .to_string(),
+            last_status: p.last_status.clone(),
             replans: p.planner.map_or(0, |c| c.replans),
             steps: p.planner.map_or(0, |c| c.calls),
             boundary_following: p.planner.map_or(0, |c| c.follow_entries),

@@ -21,6 +21,7 @@ impl Navigator {
         // The wheel rates commanded in the previous cycle (stall check), then cleared until a
         // new command is made.
         let commanded = core::mem::replace(&mut self.last_wheel_rates, [0.0; 6]);
+        self.mission_book(commanded.iter().any(|r| *r != 0.0));
         if self.mode != NavMode::Driving {
             return None;
         }
@@ -67,6 +68,10 @@ impl Navigator {
         let stop = self.loc_command();
         if let Some(turn) = stop {
             return self.hold_or_turn(turn);
+        }
+        // The day's targets: hold for a plan, or stand at a target for its dwell (V99 sec. 3).
+        if self.mission_command().is_some() {
+            return None;
         }
         // Goal-directed driving: hold for a map, or turn in place for a gaze (V99 sec. 4).
         if self.config.hazard_avoidance && !self.hazard_on() {
@@ -116,7 +121,10 @@ impl Navigator {
             }
             let p = &self.config.protection;
             if out.goal_distance_m + p.arrival_sigmas * sigma_h <= p.arrival_tolerance_m {
-                self.mode = NavMode::Arrived;
+                // With targets: the dwell at this one, then on to the next.
+                if !self.mission_arrived() {
+                    self.mode = NavMode::Arrived;
+                }
             } else {
                 self.fault_stop(FaultResponse::ArrivedUncertain);
             }

@@ -140,6 +140,28 @@ pub fn turn_sweep_radius(geometry: &RoverGeometry) -> f64 {
     libm::sqrt(reach * reach + w * w)
 }
 
+impl HazardNav {
+    /// A new traverse to `goal` (`N`, m; the sequencer's next target): the planner's goal
+    /// (its obstacle memory kept), the verdict back to `Driving`. With `face_rad` (the bearing
+    /// of the goal, rad from north) the rover first turns in place to face it, as a gaze (the
+    /// planner's own gazes, a wedge's width at a time, would hit its gaze limit on a target
+    /// behind the rover), then maps; without, it maps where it stands.
+    pub(super) fn restart(
+        &mut self,
+        goal: [f64; 2],
+        face_rad: Option<f64>,
+    ) -> Result<(), crate::planning::PlanError> {
+        self.planner.set_goal(goal)?;
+        self.verdict = PlannerVerdict::Driving;
+        self.last_output = None;
+        self.gaze_rad = face_rad.filter(|h| h.is_finite());
+        // Holding for a map at once, or after the turn (`hazard_command` asks for it).
+        self.map_wanted = self.gaze_rad.is_none();
+        self.planned = self.gaze_rad.is_some();
+        Ok(())
+    }
+}
+
 impl Navigator {
     /// Build the hazard mapper and the planner in place (about 68 KB) when
     /// [`NavConfig::hazard_avoidance`] is on, or the mapper alone for terrain-map localization
@@ -390,6 +412,28 @@ impl Navigator {
         let status = out.status;
         let gaze = out.gaze_heading_rad;
         let path = out.path;
+        // The planner's estimate of the leg left to the goal (the sequencer's leg trigger):
+        // its path from the rover, then the straight line from the path's end.
+        let leg_left = match (status, path.as_ref(), h.planner.goal()) {
+            (PlanStatus::Driving, Some(p), Some(goal)) => {
+                let w = p.waypoints();
+                let along = w
+                    .windows(2)
+                    .map(|s| match s {
+                        [a, b] => libm::hypot(b[0] - a[0], b[1] - a[1]),
+                        _ => 0.0,
+                    })
+                    .sum::<f64>();
+                let first = w
+                    .first()
+                    .map_or(0.0, |a| libm::hypot(a[0] - position[0], a[1] - position[1]));
+                let last = w
+                    .last()
+                    .map_or(0.0, |b| libm::hypot(goal[0] - b[0], goal[1] - b[1]));
+                Some(first + along + last)
+            }
+            _ => None,
+        };
         h.last_output = Some(out);
         h.gaze_rad = None;
         match status {
@@ -429,17 +473,29 @@ impl Navigator {
                     .and_then(|p| Guidance::new(p, self.config.guidance).ok());
                 match line {
                     Some(g) => self.guidance = Some(g),
-                    None => self.mode = NavMode::Arrived,
+                    None => {
+                        if !self.mission_arrived() {
+                            self.mode = NavMode::Arrived;
+                        }
+                    }
                 }
             }
             PlanStatus::Unreachable(_) => {
                 h.verdict = PlannerVerdict::Unreachable;
-                self.fault_stop(FaultResponse::GoalUnreachable);
+                // With targets the sequencer drops it and the rover goes on to the next.
+                if !self.mission_unreachable() {
+                    self.fault_stop(FaultResponse::GoalUnreachable);
+                }
             }
             PlanStatus::Blocked(_) => {
                 h.verdict = PlannerVerdict::Blocked;
-                self.fault_stop(FaultResponse::PlannerBlocked);
+                if !self.mission_unreachable() {
+                    self.fault_stop(FaultResponse::PlannerBlocked);
+                }
             }
+        }
+        if let Some(remaining) = leg_left {
+            self.mission_leg(position, remaining);
         }
     }
 

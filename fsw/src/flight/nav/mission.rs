@@ -1,31 +1,603 @@
 //! The day's targets: the CASPER-style sequencer ([`crate::sequencer`], V99 sec. 3) drives the
-//! goal-directed navigation ([`super::hazard_nav`]) from target to target, with the power
-//! subsystem's energy telemetry.
+//! goal-directed navigation ([`super::hazard_nav`], V99 sec. 4) from target to target, with the
+//! power subsystem's energy telemetry.
+//!
+//! - **Uplink** ([`Navigator::uplink_targets`]): the targets, the resource model and the budget
+//!   (energy for the plan, J; the time the plan must end by, s since boot). Needs
+//!   goal-directed driving ([`NavConfig::hazard_avoidance`]).
+//! - **Replans** run in the background ([`Navigator::mission_background`]: one replan costs up
+//!   to a few hundred thousand instructions, too much for RG2) from the rover's situation: the
+//!   EKF position, the time, and the energy left (budget minus the power subsystem's energy
+//!   used since the uplink). Triggers (V99 sec. 3): the first plan; a target reached and its
+//!   dwell done; RoverBug's unreachable verdict (the target is dropped for good); the planner's
+//!   path to the target grown by more than [`LEG_REPLAN_M`] beyond what the plan assumed (an
+//!   unexpected obstacle: the leg penalty, V99 Fig. 3's reorder); the energy telemetry showing
+//!   the plan no longer fits ([`crate::sequencer::Sequencer::check`] at each power reading);
+//!   every [`REPLAN_INTERVAL_M`] of travel (a detour can bring the rover closer to other
+//!   targets: V99 Fig. 3's reorder).
+//! - **Commitment**: a replan switches the rover to another target only when that saves more
+//!   than [`COMMIT_HYSTERESIS_S`] of plan time (no dithering between targets).
+//! - **Calibration**: before each replan the model's drive and idle powers are scaled by the
+//!   ratio of the energy measured since the uplink to the energy the model gives for the same
+//!   history (time driving and standing), once [`CALIBRATION_MIN_S`] have passed; the ratio is
+//!   limited to [`CALIBRATION_RANGE`] (a counted clamp).
+//! - **At a target** the rover stands for the target's dwell (science), then it is visited.
+//! - **Without power readings** the energy used is the model's own integral (counted).
+//!
+//! Frames and units: positions in `N` (x north, y east), m; times s since boot; energies J.
 
 use super::*;
+use crate::sequencer::{
+    ResourceModel, Sequencer, SequencerCounters, SequencerError, Situation, Target, TargetStatus,
+    MAX_TARGETS,
+};
 use rover_hal::PowerReading;
 
-/// The mission state of the navigator: the latest power reading.
+/// Growth (m) of the planner's estimate of the leg into the current target beyond the plan's
+/// (straight line times the detour factor plus the leg penalty) that triggers a replan with the
+/// new penalty. 1.5 m is 20 s at the model's 0.075 m/s: RoverBug's paths bend by less round
+/// the small obstacles of a drive.
+pub const LEG_REPLAN_M: f64 = 1.5;
+
+/// Plan time (s) another order must save before the rover turns away from the target it is
+/// driving to ([`Sequencer::replan_committed`]): 1.5 m at the model's 0.075 m/s, about the
+/// EKF's drift over a leg and the size of RoverBug's small bends.
+pub const COMMIT_HYSTERESIS_S: f64 = 20.0;
+
+/// Travel (m, EKF) after which the plan is remade from where the rover is (V99 sec. 3's
+/// opportunity: a detour that brings the rover closer to other targets, Fig. 3).
+pub const REPLAN_INTERVAL_M: f64 = 2.0;
+
+/// History (s since the uplink) before the powers are calibrated from the energy telemetry.
+pub const CALIBRATION_MIN_S: f64 = 60.0;
+
+/// Range of the calibration ratio (measured over modelled energy).
+pub const CALIBRATION_RANGE: [f64; 2] = [0.25, 8.0];
+
+/// The ground's budget for the day's targets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MissionBudget {
+    /// Energy the plan may use from the uplink on, J.
+    pub energy_j: f64,
+    /// The plan must end by this time, s since boot.
+    pub end_s: f64,
+}
+
+/// Why the targets were refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MissionError {
+    /// Goal-directed driving is off or not built ([`Navigator::start_vo`] first).
+    NotGoalDirected,
+    /// The sequencer refused the targets or the model (too many, non-finite, bad windows).
+    Sequencer(SequencerError),
+    /// A non-finite or negative budget.
+    BadBudget,
+}
+
+/// Where the mission is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum MissionPhase {
+    /// No targets uplinked: the path drive of the configuration.
+    #[default]
+    None,
+    /// Waiting for a replan (held still).
+    Planning,
+    /// Driving to target `target`.
+    Driving {
+        /// Target index.
+        target: u8,
+    },
+    /// Standing at target `target` for its dwell.
+    Dwelling {
+        /// Target index.
+        target: u8,
+    },
+    /// The plan is empty: every target visited or dropped.
+    Done,
+}
+
+/// Counters of the mission (telemetry and the simulator's `targets` summary).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct MissionCounters {
+    /// Targets uplinked.
+    pub total: u32,
+    /// Targets visited (reached and dwelt at).
+    pub visited: u32,
+    /// Targets dropped now (energy, window, horizon, unreachable).
+    pub dropped: u32,
+    /// Of them, dropped as unreachable by the path planner.
+    pub unreachable: u32,
+    /// Replans run.
+    pub replans: u32,
+    /// Replans whose order differs from the previous plan's.
+    pub reorders: u32,
+    /// Replans triggered by the planner's leg growing (an unexpected obstacle).
+    pub leg_triggers: u32,
+    /// Replans triggered by the energy telemetry (the plan no longer fitting).
+    pub energy_triggers: u32,
+    /// Replans after [`REPLAN_INTERVAL_M`] of travel.
+    pub travel_triggers: u32,
+    /// Times the rover switched to another target while driving.
+    pub goal_switches: u32,
+    /// Replans refused by the sequencer (non-finite situation) or goals refused by the planner.
+    pub errors: u32,
+    /// Replans made with the model's own energy integral (no power reading).
+    pub power_missing: u32,
+    /// Calibrations whose ratio was clamped to [`CALIBRATION_RANGE`].
+    pub calibration_clamps: u32,
+    /// The last calibration ratio (measured over modelled energy; 1 before the first).
+    pub calibration_ratio: f64,
+    /// Energy used since the uplink at the last replan, J.
+    pub energy_used_j: f64,
+}
+
+/// A target's state as the ground sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum TargetOutcome {
+    /// Still in the plan.
+    Pending,
+    /// Visited.
+    Visited,
+    /// Dropped for energy.
+    DroppedEnergy,
+    /// Dropped: its window cannot be met.
+    DroppedWindow,
+    /// Dropped: it does not fit before the end of the plan.
+    DroppedHorizon,
+    /// Dropped: the path planner found no way to it.
+    Unreachable,
+}
+
+/// The mission state of the navigator.
 pub(super) struct Mission {
     /// Latest accepted power reading (checked by the flight task: time advancing, finite,
     /// energy not decreasing).
     pub(super) power: Option<PowerReading>,
+    sequencer: Option<Sequencer>,
+    /// The uplinked model (the calibration scales its powers).
+    model: ResourceModel,
+    budget: MissionBudget,
+    /// Energy used at the first power reading after the uplink, J.
+    energy_base_j: Option<f64>,
+    /// Time of the uplink, us.
+    uplink_t_us: u64,
+    /// Time spent driving and standing since the uplink (RG2), s.
+    drive_s: f64,
+    stand_s: f64,
+    last_cycle_t_us: Option<u64>,
+    phase: MissionPhase,
+    /// End of the dwell in progress, us.
+    dwell_until_us: u64,
+    replan_due: bool,
+    /// EKF position of the last replan, m.
+    last_replan_xy: Option<[f64; 2]>,
+    /// Visiting order (target indices), for the ground.
+    visits: heapless::Vec<u8, MAX_TARGETS>,
+    counters: MissionCounters,
 }
 
 impl Mission {
-    /// No reading.
-    pub(super) const EMPTY: Self = Self { power: None };
+    /// No targets, no reading.
+    pub(super) const EMPTY: Self = Self {
+        power: None,
+        sequencer: None,
+        model: ResourceModel {
+            speed_m_s: 0.0,
+            drive_power_w: 0.0,
+            idle_power_w: 0.0,
+            detour_factor: 1.0,
+            localization_s: 0.0,
+            localization_energy_j: 0.0,
+        },
+        budget: MissionBudget {
+            energy_j: 0.0,
+            end_s: 0.0,
+        },
+        energy_base_j: None,
+        uplink_t_us: 0,
+        drive_s: 0.0,
+        stand_s: 0.0,
+        last_cycle_t_us: None,
+        phase: MissionPhase::None,
+        dwell_until_us: 0,
+        replan_due: false,
+        last_replan_xy: None,
+        visits: heapless::Vec::new(),
+        counters: MissionCounters {
+            total: 0,
+            visited: 0,
+            dropped: 0,
+            unreachable: 0,
+            replans: 0,
+            reorders: 0,
+            leg_triggers: 0,
+            energy_triggers: 0,
+            travel_triggers: 0,
+            goal_switches: 0,
+            errors: 0,
+            power_missing: 0,
+            calibration_clamps: 0,
+            calibration_ratio: 1.0,
+            energy_used_j: 0.0,
+        },
+    };
+
+    /// Energy used since the uplink, J: the power subsystem's, or the model's integral of the
+    /// history when no reading has come since the uplink (second value false).
+    fn energy_used(&self) -> (f64, bool) {
+        match (self.power, self.energy_base_j) {
+            (Some(p), Some(base)) => ((p.energy_used_j - base).max(0.0), true),
+            _ => (self.modelled_energy(&self.model), false),
+        }
+    }
+
+    /// The energy `model` gives for the history since the uplink, J.
+    fn modelled_energy(&self, model: &ResourceModel) -> f64 {
+        self.drive_s * model.drive_power_w + self.stand_s * model.idle_power_w
+    }
 }
 
 impl Navigator {
     /// RG4: a checked power reading (the battery energy used since boot, J, and the bus power,
-    /// W; V99 sec. 3: "current power reserves").
+    /// W; V99 sec. 3: "current power reserves"). With targets uplinked, the plan is checked
+    /// against the energy left and a replan is asked for when it no longer fits.
     pub fn power(&mut self, reading: &PowerReading) {
-        self.mission.power = Some(*reading);
+        let m = &mut self.mission;
+        m.power = Some(*reading);
+        if m.sequencer.is_some() && m.energy_base_j.is_none() {
+            // The first reading after the uplink: the energy the plan has used so far is the
+            // model's (normally none: the uplink comes while the rover stands).
+            m.energy_base_j = Some(reading.energy_used_j - m.modelled_energy(&m.model));
+        }
+        if !matches!(m.phase, MissionPhase::Driving { .. }) || m.replan_due {
+            return;
+        }
+        let Some(situation) = self.mission_situation() else {
+            return;
+        };
+        let m = &mut self.mission;
+        if let Some(seq) = m.sequencer.as_ref() {
+            if seq.check(&situation).is_err() {
+                m.counters.energy_triggers = m.counters.energy_triggers.saturating_add(1);
+                m.replan_due = true;
+            }
+        }
     }
 
     /// The latest power reading the navigator has, if any.
     pub fn last_power(&self) -> Option<PowerReading> {
         self.mission.power
+    }
+
+    /// Ground command: the day's `targets` (`N`, m; at most [`MAX_TARGETS`]) to visit under
+    /// `model` within `budget` (V99 sec. 3). Call after [`Self::start_vo`] with goal-directed
+    /// driving on; the first plan is made in the background as soon as the EKF runs, and the
+    /// rover holds until then. Replaces any earlier targets.
+    pub fn uplink_targets(
+        &mut self,
+        targets: &[Target],
+        model: ResourceModel,
+        budget: MissionBudget,
+    ) -> Result<(), MissionError> {
+        if !(self.config.hazard_avoidance && self.hazard_on()) {
+            return Err(MissionError::NotGoalDirected);
+        }
+        let ok = budget.energy_j.is_finite() && budget.energy_j >= 0.0 && budget.end_s.is_finite();
+        if !ok {
+            return Err(MissionError::BadBudget);
+        }
+        let seq = Sequencer::new(targets, model).map_err(MissionError::Sequencer)?;
+        let power = self.mission.power;
+        self.mission = Mission::EMPTY;
+        let m = &mut self.mission;
+        m.power = power;
+        m.sequencer = Some(seq);
+        m.model = model;
+        m.budget = budget;
+        m.energy_base_j = power.map(|p| p.energy_used_j);
+        m.uplink_t_us = self.ekf.state().t_us;
+        m.phase = MissionPhase::Planning;
+        m.replan_due = true;
+        m.counters.total = u32::try_from(targets.len()).unwrap_or(u32::MAX);
+        Ok(())
+    }
+
+    /// Where the mission is.
+    pub fn mission_phase(&self) -> MissionPhase {
+        self.mission.phase
+    }
+
+    /// Mission counters (the sequencer's replans and drops included).
+    pub fn mission_counters(&self) -> MissionCounters {
+        self.mission.counters
+    }
+
+    /// The sequencer's own counters, if targets were uplinked.
+    pub fn sequencer_counters(&self) -> Option<SequencerCounters> {
+        self.mission.sequencer.as_ref().map(|s| s.counters())
+    }
+
+    /// Outcome of target `i` (`None` out of range or without targets).
+    pub fn target_outcome(&self, i: usize) -> Option<TargetOutcome> {
+        use crate::sequencer::DropReason;
+        let status = self.mission.sequencer.as_ref()?.status(i)?;
+        Some(match status {
+            TargetStatus::Pending => TargetOutcome::Pending,
+            TargetStatus::Visited => TargetOutcome::Visited,
+            TargetStatus::Dropped(DropReason::Energy) => TargetOutcome::DroppedEnergy,
+            TargetStatus::Dropped(DropReason::Window) => TargetOutcome::DroppedWindow,
+            TargetStatus::Dropped(DropReason::Horizon) => TargetOutcome::DroppedHorizon,
+            TargetStatus::Dropped(DropReason::Unreachable) => TargetOutcome::Unreachable,
+        })
+    }
+
+    /// Target indices in the order they were visited.
+    pub fn visit_order(&self) -> &[u8] {
+        &self.mission.visits
+    }
+
+    /// The current plan (target indices), empty without targets.
+    pub fn mission_plan(&self) -> &[u8] {
+        self.mission
+            .sequencer
+            .as_ref()
+            .map(|s| s.plan())
+            .unwrap_or(&[])
+    }
+
+    /// The rover's situation for the sequencer: EKF time and position, the energy left, the
+    /// end of the plan. `None` before the EKF runs.
+    fn mission_situation(&self) -> Option<Situation> {
+        if !self.ekf_running {
+            return None;
+        }
+        let x = self.ekf.state();
+        let m = &self.mission;
+        let (used, _) = m.energy_used();
+        Some(Situation {
+            now_s: x.t_us as f64 * 1e-6,
+            position_m: [x.p_n.x, x.p_n.y],
+            energy_available_j: m.budget.energy_j - used,
+            end_s: m.budget.end_s,
+        })
+    }
+
+    /// RG2, first in [`Self::guidance_cycle`]: the time since the last cycle is booked as
+    /// driving (`moving`: wheel rates were commanded) or standing, for the calibration.
+    pub(super) fn mission_book(&mut self, moving: bool) {
+        let t = self.ekf.state().t_us;
+        let m = &mut self.mission;
+        if m.phase == MissionPhase::None {
+            return;
+        }
+        if let Some(last) = m.last_cycle_t_us {
+            let dt = t.saturating_sub(last) as f64 * 1e-6;
+            if moving {
+                m.drive_s += dt;
+            } else {
+                m.stand_s += dt;
+            }
+        }
+        m.last_cycle_t_us = Some(t);
+    }
+
+    /// RG2, from [`Self::guidance_cycle`]: the mission's say in the motor command. `Some(())`
+    /// holds the rover still (waiting for a plan, dwelling at a target); `None` lets the
+    /// goal-directed drive go on.
+    pub(super) fn mission_command(&mut self) -> Option<()> {
+        let t = self.ekf.state().t_us;
+        let m = &mut self.mission;
+        match m.phase {
+            MissionPhase::None | MissionPhase::Driving { .. } => None,
+            MissionPhase::Planning | MissionPhase::Done => Some(()),
+            MissionPhase::Dwelling { target } => {
+                if t >= m.dwell_until_us {
+                    if let Some(seq) = m.sequencer.as_mut() {
+                        // The index came from the sequencer's plan.
+                        let _ = seq.visited(usize::from(target));
+                        // The penalties were of the ways from where the rover was.
+                        seq.clear_leg_penalties();
+                    }
+                    m.counters.visited = m.counters.visited.saturating_add(1);
+                    let _ = m.visits.push(target);
+                    m.phase = MissionPhase::Planning;
+                    m.replan_due = true;
+                }
+                Some(())
+            }
+        }
+    }
+
+    /// Guidance arrived at the goal (within fault protection's tolerance). With targets: the
+    /// dwell at the target starts and the rover keeps driving afterwards; returns true.
+    /// Without: false (the drive is over).
+    pub(super) fn mission_arrived(&mut self) -> bool {
+        let t = self.ekf.state().t_us;
+        let m = &mut self.mission;
+        let MissionPhase::Driving { target } = m.phase else {
+            return m.phase != MissionPhase::None;
+        };
+        let dwell_s = m
+            .sequencer
+            .as_ref()
+            .and_then(|s| s.targets().get(usize::from(target)))
+            .map(|t| t.dwell_s)
+            .unwrap_or(0.0);
+        // Dwells are finite and non-negative (the sequencer checked them); whole us.
+        let dwell_us = (dwell_s * 1e6) as u64;
+        m.dwell_until_us = t.saturating_add(dwell_us);
+        m.phase = MissionPhase::Dwelling { target };
+        true
+    }
+
+    /// The path planner gave up on the current target (unreachable, or blocked without a
+    /// verdict). With targets: it is dropped and the rover replans; returns true. Without:
+    /// false (the caller stops the rover).
+    pub(super) fn mission_unreachable(&mut self) -> bool {
+        let m = &mut self.mission;
+        let MissionPhase::Driving { target } = m.phase else {
+            return m.phase != MissionPhase::None;
+        };
+        if let Some(seq) = m.sequencer.as_mut() {
+            let _ = seq.unreachable(usize::from(target));
+        }
+        m.counters.unreachable = m.counters.unreachable.saturating_add(1);
+        m.phase = MissionPhase::Planning;
+        m.replan_due = true;
+        true
+    }
+
+    /// Background, after a RoverBug step towards the current target: the planner's estimate
+    /// of the leg left (`remaining_m`: its path from the rover plus the straight line from the
+    /// path's end to the target) against the plan's. A growth beyond [`LEG_REPLAN_M`] sets
+    /// the leg penalty and asks for a replan (V99 Fig. 3); a shrink lowers the penalty.
+    pub(super) fn mission_leg(&mut self, position: [f64; 2], remaining_m: f64) {
+        let m = &mut self.mission;
+        let (MissionPhase::Driving { target }, Some(seq)) = (m.phase, m.sequencer.as_mut()) else {
+            return;
+        };
+        let i = usize::from(target);
+        let Some(goal) = seq.targets().get(i).map(|t| t.position_m) else {
+            return;
+        };
+        // The penalty is of the leg from the rover's position, as the sequencer takes it.
+        let straight = libm::hypot(goal[0] - position[0], goal[1] - position[1]);
+        let extra = (remaining_m - straight * seq.model().detour_factor).max(0.0);
+        if !extra.is_finite() {
+            return;
+        }
+        let current = seq.leg_penalty(i);
+        let travelled = m
+            .last_replan_xy
+            .map_or(0.0, |q| libm::hypot(position[0] - q[0], position[1] - q[1]));
+        if travelled >= REPLAN_INTERVAL_M && !m.replan_due {
+            m.counters.travel_triggers = m.counters.travel_triggers.saturating_add(1);
+            m.replan_due = true;
+        }
+        if extra > current + LEG_REPLAN_M {
+            let _ = seq.set_leg_penalty(i, extra);
+            if !m.replan_due {
+                m.counters.leg_triggers = m.counters.leg_triggers.saturating_add(1);
+            }
+            m.replan_due = true;
+        } else if extra < current {
+            let _ = seq.set_leg_penalty(i, extra);
+        }
+    }
+
+    /// True when a replan waits for the background.
+    pub fn mission_replan_due(&self) -> bool {
+        self.mission.replan_due && self.ekf_running
+    }
+
+    /// Background: the replan (module doc) and its consequence: the next target becomes the
+    /// planner's goal, or the mission is done. Returns the work units used (one slice).
+    pub fn mission_background(&mut self, quantum: u32) -> u32 {
+        let Some(situation) = self.mission_situation() else {
+            return 0;
+        };
+        self.mission.replan_due = false;
+        self.mission.last_replan_xy = Some(situation.position_m);
+        self.mission_calibrate();
+        let m = &mut self.mission;
+        let (used, measured) = m.energy_used();
+        if !measured {
+            m.counters.power_missing = m.counters.power_missing.saturating_add(1);
+        }
+        m.counters.energy_used_j = used;
+        let committed = match m.phase {
+            MissionPhase::Driving { target } => Some(usize::from(target)),
+            _ => None,
+        };
+        let Some(seq) = m.sequencer.as_mut() else {
+            return 0;
+        };
+        if seq
+            .replan_committed(&situation, committed, COMMIT_HYSTERESIS_S)
+            .is_err()
+        {
+            m.counters.errors = m.counters.errors.saturating_add(1);
+            return quantum.max(1);
+        }
+        let c = seq.counters();
+        m.counters.replans = c.replans;
+        m.counters.reorders = c.reorders;
+        m.counters.dropped = (0..seq.targets().len())
+            .filter(|&i| matches!(seq.status(i), Some(TargetStatus::Dropped(_))))
+            .count() as u32;
+        let next = seq.next_goal();
+        match next {
+            Some((i, _)) if committed == Some(i) => {}
+            Some((i, goal)) => {
+                if committed.is_some() {
+                    m.counters.goal_switches = m.counters.goal_switches.saturating_add(1);
+                    seq.clear_leg_penalties();
+                }
+                self.mission_goal(i, goal);
+            }
+            None => {
+                m.phase = MissionPhase::Done;
+                self.mode = NavMode::Arrived;
+            }
+        }
+        quantum.max(1)
+    }
+
+    /// Scale the model's powers by the energy telemetry (module doc).
+    fn mission_calibrate(&mut self) {
+        let m = &mut self.mission;
+        let (used, measured) = m.energy_used();
+        let history = m.drive_s + m.stand_s;
+        let modelled = m.modelled_energy(&m.model);
+        if !measured || history < CALIBRATION_MIN_S || modelled <= 0.0 {
+            return;
+        }
+        let raw = used / modelled;
+        if !raw.is_finite() {
+            return;
+        }
+        let k = raw.clamp(CALIBRATION_RANGE[0], CALIBRATION_RANGE[1]);
+        if k != raw {
+            m.counters.calibration_clamps = m.counters.calibration_clamps.saturating_add(1);
+        }
+        let mut model = m.model;
+        model.drive_power_w *= k;
+        model.idle_power_w *= k;
+        if let Some(seq) = m.sequencer.as_mut() {
+            if seq.set_model(model).is_ok() {
+                m.counters.calibration_ratio = k;
+            }
+        }
+    }
+
+    /// Target `i` at `goal` (`N`, m) becomes the planner's goal: the planner starts a new
+    /// traverse (keeping its obstacles), the rover turns in place to face the goal and maps,
+    /// and guidance gets the straight line until the first plan.
+    fn mission_goal(&mut self, i: usize, goal: [f64; 2]) {
+        let x = self.ekf.state();
+        let position = [x.p_n.x, x.p_n.y];
+        let Some(h) = self.hazard.as_mut() else {
+            self.mission.counters.errors = self.mission.counters.errors.saturating_add(1);
+            return;
+        };
+        let face = libm::atan2(goal[1] - position[1], goal[0] - position[0]);
+        if h.restart(goal, Some(face)).is_err() {
+            self.mission.counters.errors = self.mission.counters.errors.saturating_add(1);
+            if let Some(seq) = self.mission.sequencer.as_mut() {
+                let _ = seq.unreachable(i);
+            }
+            self.mission.replan_due = true;
+            return;
+        }
+        // A target under the rover: guidance's line would be refused; the arrival check
+        // decides at the next cycle from the planner's verdict.
+        self.guidance = Path::<MAX_WAYPOINTS>::new(&[position, goal])
+            .ok()
+            .and_then(|p| Guidance::new(p, self.config.guidance).ok())
+            .or(self.guidance.take());
+        self.mission.phase = MissionPhase::Driving { target: i as u8 };
+        if self.mode == NavMode::Arrived {
+            self.mode = NavMode::Driving;
+        }
     }
 }

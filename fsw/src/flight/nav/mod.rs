@@ -45,7 +45,7 @@ mod guidance_adapter;
 pub mod hazard_nav;
 mod kin_aiding;
 pub mod loc_nav;
-mod mission;
+pub mod mission;
 pub mod protection;
 mod radius;
 #[cfg(test)]
@@ -57,6 +57,7 @@ use align::Alignment;
 pub use boresight::{Boresight, BoresightConfig};
 use diagnostics::Trajectories;
 pub use loc_nav::{LocCounters, LocFixReport, LocNav, LocalizationSettings};
+pub use mission::{MissionBudget, MissionCounters, MissionError, MissionPhase, TargetOutcome};
 use protection::{FaultResponse, Protection, ProtectionConfig};
 pub use radius::{RadiusScale, RadiusScaleConfig};
 use vo_gate::{CaptureMark, VoGateStatus};
