@@ -341,8 +341,8 @@ impl Sequencer {
     }
 
     /// The path planner found the way from the rover's position into target `i` longer than
-    /// the straight line allows (an unexpected obstacle, V99 Fig. 3): `extra_m` (m, finite,
-    /// >= 0) is added to the leg into `i` when it is the plan's first (from the situation's
+    /// the straight line allows (an unexpected obstacle, V99 Fig. 3): `extra_m` (m, finite and
+    /// not negative) is added to the leg into `i` when it is the plan's first (from the situation's
     /// position; the planner knows nothing of the ways from the other targets) until the next
     /// call or [`Self::clear_leg_penalties`]. Replan afterwards.
     pub fn set_leg_penalty(&mut self, i: usize, extra_m: f64) -> Result<(), SequencerError> {
