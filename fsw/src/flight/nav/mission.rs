@@ -252,6 +252,8 @@ impl Navigator {
         if !matches!(m.phase, MissionPhase::Driving { .. }) || m.replan_due {
             return;
         }
+        // The plan is checked with the powers the telemetry shows.
+        self.mission_calibrate();
         let Some(situation) = self.mission_situation() else {
             return;
         };
@@ -599,5 +601,216 @@ impl Navigator {
         if self.mode == NavMode::Arrived {
             self.mode = NavMode::Driving;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! MISSION-1..3: the sequencer in the navigator (issue 17).
+    use super::*;
+    use crate::estimation::CoreCov;
+
+    fn calibration() -> StereoCalibration {
+        StereoCalibration {
+            fx_px: 385.0,
+            fy_px: 385.0,
+            cx_px: 319.5,
+            cy_px: 239.5,
+            baseline_m: 0.084,
+            rot_rover_from_camera: [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            pos_camera_in_rover_m: [0.2, 0.0, -1.0],
+        }
+    }
+
+    fn navigator(goal_directed: bool) -> Navigator {
+        let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+        config.hazard_avoidance = goal_directed;
+        let mut nav = match Navigator::new(config, &[[0.0, 0.0], [5.0, 0.0]], &calibration()) {
+            Ok(n) => n,
+            Err(e) => panic!("navigator refused: {e:?}"),
+        };
+        nav.start_vo();
+        nav
+    }
+
+    /// The EKF running at `t_us`, at rest at `xy`, heading north.
+    fn ekf_at(nav: &mut Navigator, t_us: u64, xy: [f64; 2]) {
+        let mut x = NominalState::at_rest(t_us);
+        x.p_n = Vec3::new(xy[0], xy[1], 0.0);
+        let p0 = CoreCov::identity() * 1e-4;
+        assert!(nav.ekf.reset(x, &p0).is_ok());
+        nav.ekf_running = true;
+        nav.mode = NavMode::Driving;
+    }
+
+    fn target(x: f64, y: f64, priority: u8) -> Target {
+        Target {
+            position_m: [x, y],
+            priority,
+            window_open_s: 0.0,
+            window_close_s: 1e9,
+            dwell_s: 30.0,
+            dwell_energy_j: 0.0,
+        }
+    }
+
+    fn budget(energy_j: f64) -> MissionBudget {
+        MissionBudget {
+            energy_j,
+            end_s: 1e5,
+        }
+    }
+
+    fn reading(t_us: u64, energy_used_j: f64) -> PowerReading {
+        PowerReading {
+            t_us,
+            energy_used_j,
+            bus_power_w: 50.0,
+            valid: true,
+        }
+    }
+
+    /// MISSION-1: uplink checks; the first plan is made in the background once the EKF runs;
+    /// the rover turns to face the first target; arrival, dwell, visit and the next target.
+    #[test]
+    fn mission_1_plan_visit_and_next() {
+        let targets = [target(4.0, 0.0, 1), target(8.0, 0.0, 1)];
+        let m = ResourceModel::rocky8();
+        let mut path = navigator(false);
+        assert_eq!(
+            path.uplink_targets(&targets, m, budget(1e6)),
+            Err(MissionError::NotGoalDirected)
+        );
+        let mut nav = navigator(true);
+        assert_eq!(
+            nav.uplink_targets(&targets, m, budget(f64::NAN)),
+            Err(MissionError::BadBudget)
+        );
+        assert!(matches!(
+            nav.uplink_targets(&[target(f64::NAN, 0.0, 1)], m, budget(1e6)),
+            Err(MissionError::Sequencer(_))
+        ));
+        assert_eq!(nav.uplink_targets(&targets, m, budget(1e6)), Ok(()));
+        assert_eq!(nav.mission_phase(), MissionPhase::Planning);
+        // No plan before the EKF runs; the rover holds.
+        assert!(!nav.mission_replan_due());
+        ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
+        assert_eq!(nav.mission_command(), Some(()));
+        assert!(nav.mission_replan_due());
+        assert!(nav.mission_background(100) > 0);
+        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 0 });
+        assert_eq!(nav.mission_plan(), &[0, 1]);
+        assert_eq!(nav.mission_command(), None);
+        // Arrived: a 30 s dwell, held still, then visited and the next target planned.
+        ekf_at(&mut nav, 60_000_000, [4.0, 0.0]);
+        assert!(nav.mission_arrived());
+        assert_eq!(nav.mission_phase(), MissionPhase::Dwelling { target: 0 });
+        ekf_at(&mut nav, 89_000_000, [4.0, 0.0]);
+        assert_eq!(nav.mission_command(), Some(()));
+        assert_eq!(nav.mission_phase(), MissionPhase::Dwelling { target: 0 });
+        ekf_at(&mut nav, 90_000_001, [4.0, 0.0]);
+        assert_eq!(nav.mission_command(), Some(()));
+        assert_eq!(nav.mission_phase(), MissionPhase::Planning);
+        nav.mission_background(100);
+        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 1 });
+        assert_eq!(nav.visit_order(), &[0]);
+        assert_eq!(nav.target_outcome(0), Some(TargetOutcome::Visited));
+        // The planner gives up on target 1: dropped for good, the mission is done.
+        assert!(nav.mission_unreachable());
+        nav.mission_background(100);
+        assert_eq!(nav.target_outcome(1), Some(TargetOutcome::Unreachable));
+        assert_eq!(nav.mission_phase(), MissionPhase::Done);
+        assert_eq!(nav.mode(), NavMode::Arrived);
+        let c = nav.mission_counters();
+        assert_eq!((c.total, c.visited, c.dropped, c.unreachable), (2, 1, 1, 1));
+        // Without targets the arrival and the planner's verdicts are the path drive's.
+        assert!(!path.mission_arrived() && !path.mission_unreachable());
+    }
+
+    /// MISSION-2: V99 Fig. 3. The planner's way to the current target grows: the leg penalty
+    /// triggers a replan that switches to the other target (beyond the commitment's
+    /// hysteresis); a small growth changes nothing.
+    #[test]
+    fn mission_2_leg_growth_reorders() {
+        let targets = [target(10.0, 0.0, 1), target(4.0, 10.0, 1)];
+        let mut nav = navigator(true);
+        let m = ResourceModel::rocky8();
+        assert_eq!(nav.uplink_targets(&targets, m, budget(1e7)), Ok(()));
+        ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
+        nav.mission_background(100);
+        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 0 });
+        // At (4, 2), blocked: a small bend (1 m) is below the trigger.
+        ekf_at(&mut nav, 60_000_000, [4.0, 2.0]);
+        let straight = libm::hypot(6.0, 2.0) * m.detour_factor;
+        nav.mission_leg([4.0, 2.0], straight + 1.0);
+        assert_eq!(nav.mission_counters().leg_triggers, 0);
+        // 4.5 m travelled: the opportunity replan keeps target 0 (still the shorter plan).
+        assert_eq!(nav.mission_counters().travel_triggers, 1);
+        nav.mission_background(100);
+        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 0 });
+        assert!(!nav.mission_replan_due());
+        // RoverBug's boundary following: 14 m more to target 0 from here.
+        nav.mission_leg([4.0, 2.0], straight + 14.0);
+        assert!(nav.mission_replan_due());
+        nav.mission_background(100);
+        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 1 });
+        let c = nav.mission_counters();
+        assert_eq!((c.leg_triggers, c.goal_switches, c.reorders), (1, 1, 1));
+    }
+
+    /// MISSION-3: the energy telemetry. The plan is checked at each power reading; more energy
+    /// used than planned triggers a replan that drops the lowest priority; the powers are
+    /// calibrated from the measured energy; without readings the model's energy is used.
+    #[test]
+    fn mission_3_energy_trigger_calibration_and_drop() {
+        let targets = [target(5.0, 0.0, 2), target(5.0, 6.0, 1)];
+        let m = ResourceModel::rocky8();
+        let mut nav = navigator(true);
+        nav.power(&reading(500_000, 1000.0));
+        // Budget: 12 kJ (what the drive below uses) plus 1.5 times the plan under the model.
+        let mut probe = Sequencer::new(&targets, m).unwrap_or_else(|e| panic!("{e:?}"));
+        let at_start = Situation {
+            now_s: 1.0,
+            position_m: [0.0, 0.0],
+            energy_available_j: 1e9,
+            end_s: 1e5,
+        };
+        assert!(probe.replan(&at_start).is_ok());
+        let need = probe.timeline().last().map_or(0.0, |s| s.energy_j);
+        assert_eq!(
+            nav.uplink_targets(&targets, m, budget(12_000.0 + need * 1.5)),
+            Ok(())
+        );
+        ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
+        nav.mission_background(100);
+        assert_eq!(nav.mission_plan(), &[0, 1]);
+        assert_eq!(nav.mission_counters().power_missing, 0);
+        // 100 s driving: the model says 6 kJ; the power subsystem measures 12 kJ. Calibrated
+        // (twice the powers), the plan needs 2 x `need` > 1.5 x `need` left: a replan drops
+        // the lower priority.
+        for k in 0..=1000u64 {
+            ekf_at(&mut nav, 1_000_000 + k * 100_000, [0.0, 0.0]);
+            nav.last_wheel_rates = [1.0; 6];
+            nav.mission_book(true);
+        }
+        nav.power(&reading(101_000_000, 1000.0 + 12_000.0));
+        assert!(nav.mission_replan_due());
+        assert_eq!(nav.mission_counters().energy_triggers, 1);
+        nav.mission_background(100);
+        let c = nav.mission_counters();
+        assert!(
+            (c.calibration_ratio - 2.0).abs() < 0.01,
+            "{}",
+            c.calibration_ratio
+        );
+        assert!((c.energy_used_j - 12_000.0).abs() < 1e-6);
+        assert_eq!(nav.target_outcome(1), Some(TargetOutcome::DroppedEnergy));
+        assert_eq!(nav.mission_plan(), &[0]);
+        // A navigator whose power device never answered: the model's energy, counted.
+        let mut blind = navigator(true);
+        assert_eq!(blind.uplink_targets(&targets, m, budget(1e7)), Ok(()));
+        ekf_at(&mut blind, 1_000_000, [0.0, 0.0]);
+        blind.mission_background(100);
+        assert_eq!(blind.mission_counters().power_missing, 1);
     }
 }
