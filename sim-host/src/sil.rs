@@ -81,6 +81,8 @@ pub struct Variant {
     pub localization: bool,
     /// The uplinked map is registered wrongly: moved by [`MAP_TIE_FAULT_M`].
     pub map_tie_fault: bool,
+    /// The mission's energy budget replaced, kJ (SIL-SEQ-2's shortfall).
+    pub energy_budget_kj: Option<u32>,
 }
 
 /// The map-tie fault of SIL-LOC-2: 1.5 m (north 1.2 m, east -0.9 m), beyond the localization's
@@ -100,28 +102,34 @@ impl Variant {
         if self.lumped {
             scenario.slip_model = crate::scenario::SlipModelKind::Lumped;
         }
+        if let (Some(kj), Some(m)) = (self.energy_budget_kj, scenario.mission.as_mut()) {
+            m.energy_budget_j = f64::from(kj) * 1000.0;
+        }
     }
 
     /// Table text.
     pub fn label(&self) -> String {
         let mut parts = Vec::new();
         if self.no_slip {
-            parts.push("no slip");
+            parts.push("no slip".to_string());
         }
         if self.exact_dimensions {
-            parts.push("exact dimensions");
+            parts.push("exact dimensions".to_string());
         }
         if self.lumped {
-            parts.push("lumped slip model");
+            parts.push("lumped slip model".to_string());
         }
         if self.no_vo {
-            parts.push("no VO");
+            parts.push("no VO".to_string());
         }
         if self.localization {
-            parts.push("localization");
+            parts.push("localization".to_string());
         }
         if self.map_tie_fault {
-            parts.push("map 1.5 m off");
+            parts.push("map 1.5 m off".to_string());
+        }
+        if let Some(kj) = self.energy_budget_kj {
+            parts.push(format!("energy budget {kj} kJ"));
         }
         parts.join(", ")
     }
@@ -134,6 +142,15 @@ const BASE: Variant = Variant {
     no_vo: false,
     localization: false,
     map_tie_fault: false,
+    energy_budget_kj: None,
+};
+
+/// SIL-SEQ-2: `multi-target` with 40 kJ, less than the simulator's energy model needs for
+/// every target (about 56 kJ) but more than the flight software's a-priori model says the
+/// plan takes (about 30 kJ): only the power telemetry shows the shortfall.
+const ENERGY_SHORT: Variant = Variant {
+    energy_budget_kj: Some(40),
+    ..BASE
 };
 
 /// No slip, with the per-seed dimension and calibration errors (the gate's false alarms).
@@ -336,7 +353,7 @@ const EKF_HALF_PERCENT: Check = goal(
 );
 
 /// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
-pub const CASES: [Case; 28] = [
+pub const CASES: [Case; 29] = [
     Case {
         id: "SIL-GNC-1",
         scenario: "slope-10-cross",
@@ -799,6 +816,37 @@ pub const CASES: [Case; 28] = [
                 1.0,
                 "",
             ),
+        ],
+    },
+    Case {
+        id: "SIL-SEQ-1",
+        scenario: "multi-target",
+        no_slip_comp: false,
+        variant: BASE,
+        title: "Three science targets, the first behind an unknown wall: the sequencer reorders (V99 sec. 3, Fig. 3)",
+        checks: &[
+            req(
+                "every target visited within the tolerance (largest truth miss)",
+                |s| s.targets.as_ref().map(|_| s.goal_miss_m),
+                Compare::AtMost,
+                0.3,
+                "m",
+            ),
+            req(
+                "targets visited",
+                |s| s.targets.as_ref().map(|t| f64::from(t.visited)),
+                Compare::AtLeast,
+                3.0,
+                "",
+            ),
+            req(
+                "replans that changed the order (Fig. 3)",
+                |s| s.targets.as_ref().map(|t| f64::from(t.reorders)),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            NO_COLLISION,
         ],
     },
     Case {

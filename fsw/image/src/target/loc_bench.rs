@@ -80,7 +80,8 @@ impl LocBench {
     /// [`TRIALS`] replans of the on-board sequencer (issue 17, V99 sec. 3) on random problems
     /// of [`MAX_TARGETS`] targets over 30 m with random priorities, windows, dwells and energy
     /// (the largest plans it takes), each after a leg penalty and, every other one, a
-    /// localization request (into `stats`; a replan error counts as an error).
+    /// localization request, committed to one target as the navigator's replans are (into
+    /// `stats`; a replan error counts as an error).
     pub fn sequencer(&mut self, meter: &mut Meter, stats: &mut Stats) {
         let mut rng = Rng(0x5851_F42D_4C95_7F2D);
         for trial in 0..TRIALS {
@@ -117,7 +118,11 @@ impl LocBench {
             if trial % 2 == 1 {
                 seq.request_localization();
             }
-            let (r, n) = meter.measure(|| seq.replan(&situation));
+            // As the navigator replans while driving: committed to a target
+            // (`fsw::flight::nav::mission`), its hysteresis.
+            let committed = Some((trial + 3) % MAX_TARGETS);
+            let hysteresis = fsw::flight::nav::mission::COMMIT_HYSTERESIS_S;
+            let (r, n) = meter.measure(|| seq.replan_committed(&situation, committed, hysteresis));
             stats.add(n, r.is_ok());
         }
     }
