@@ -198,6 +198,12 @@ pub struct Plausibility {
     /// Readings in a row that continue a leaped time base before it is accepted as the
     /// device's new time base ([`DeviceHealth::resyncs`]).
     pub resync_readings: u32,
+    /// Largest bus power, W: ten times the power MER needs to drive (100 W, NASA, "Mars
+    /// Exploration Rover - Rover Energy"). A power reading above it is refused, and so is one
+    /// whose energy used grew faster than this since the last accepted reading (since boot for
+    /// the first): an energy leap would otherwise lock out every later reading, whose energy
+    /// used must not be lower.
+    pub bus_power_max_w: f64,
 }
 
 impl Default for Plausibility {
@@ -215,6 +221,7 @@ impl Plausibility {
         angle_margin_rad: 0.2,
         stamp_lead_factor: 4,
         resync_readings: 20,
+        bus_power_max_w: 1_000.0,
     };
 }
 
@@ -1039,10 +1046,11 @@ impl<P: Platform> Work<'_, P> {
     /// RG4 `power`: read the power subsystem (V99 sec. 3: the "current power reserves" the
     /// sequencer monitors). A call error is counted; a time stamp that does not advance goes
     /// through [`check_time`]; a reading the device flags invalid, with a non-finite or
-    /// negative energy or bus power, or with less energy used than the last accepted reading
-    /// (the battery's discharge integral never decreases) is counted invalid and not passed
-    /// on. A reading that passes is kept ([`FlightState::power`]) and handed to
-    /// [`Navigator::power`].
+    /// negative energy or bus power, with less energy used than the last accepted reading
+    /// (the battery's discharge integral never decreases), or beyond
+    /// [`Plausibility::bus_power_max_w`] (the bus power, or the growth of the energy used
+    /// since the last accepted reading) is counted invalid and not passed on. A reading that
+    /// passes is kept ([`FlightState::power`]) and handed to [`Navigator::power`].
     #[inline(never)]
     fn read_power(&mut self, tick: u64) {
         let health = &mut self.state.health[DeviceId::Power as usize];
@@ -1061,12 +1069,16 @@ impl<P: Platform> Work<'_, P> {
                 ) {
                     return;
                 }
+                let (t0_us, e0_j) = previous.map_or((0, 0.0), |p| (p.t_us, p.energy_used_j));
+                let elapsed_s = r.t_us.saturating_sub(t0_us) as f64 * 1e-6;
+                let max_w = self.limits.bus_power_max_w;
                 let plausible = r.valid
                     && r.energy_used_j.is_finite()
                     && r.bus_power_w.is_finite()
-                    && r.energy_used_j >= 0.0
+                    && r.energy_used_j >= e0_j
+                    && r.energy_used_j - e0_j <= max_w * elapsed_s
                     && r.bus_power_w >= 0.0
-                    && previous.is_none_or(|p| r.energy_used_j >= p.energy_used_j);
+                    && r.bus_power_w <= max_w;
                 if !plausible {
                     count_invalid(health);
                     return;

@@ -97,7 +97,7 @@ impl SunSensor for TestSun {
 }
 
 /// A power subsystem replaying a script of readings.
-struct TestPower(Script<PowerReading, 9>);
+struct TestPower(Script<PowerReading, 10>);
 impl Power for TestPower {
     type Error = ErrorKind;
     fn read(&mut self) -> Result<PowerReading, ErrorKind> {
@@ -107,7 +107,7 @@ impl Power for TestPower {
 
 /// A power subsystem that has no reading yet (`NotReady`, not a fault).
 fn no_power() -> TestPower {
-    TestPower(Script::new([Err(ErrorKind::NotReady); 9]))
+    TestPower(Script::new([Err(ErrorKind::NotReady); 10]))
 }
 
 struct RefusingTelemetry;
@@ -273,9 +273,10 @@ impl Platform for PowerPlatform {
 
 /// HAL-2 (issue 17): the RG4 `power` task keeps and hands to the navigator only plausible
 /// readings. A decreasing energy, a NaN energy, a reading the device flags invalid, a negative
-/// or infinite bus power are counted invalid, a backwards time stamp and a call error are
-/// counted as such, and none of them replaces the last accepted reading; the status telemetry
-/// carries the accepted energy and power.
+/// or infinite bus power, an energy leap (1e300 J, faster than the largest bus power) are
+/// counted invalid, a backwards time stamp and a call error are counted as such, and none of
+/// them replaces the last accepted reading (the leap does not lock out the next normal one);
+/// the status telemetry carries the accepted energy and power.
 #[test]
 fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
     // RG4 runs at ticks 3, 1003, 2003... (5 s apart); the stamps follow the frame time.
@@ -286,14 +287,14 @@ fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
         valid: true,
     };
     let first = reading(0, 10.0, 50.0);
-    let last = reading(7, 600.0, 40.0);
+    let last = reading(8, 600.0, 40.0);
     let flagged = PowerReading {
         valid: false,
         ..reading(3, 400.0, 50.0)
     };
     let backwards = PowerReading {
         t_us: 1_000,
-        ..reading(6, 550.0, 50.0)
+        ..reading(7, 550.0, 50.0)
     };
     let script = Script::new([
         Ok(first),
@@ -302,6 +303,7 @@ fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
         Ok(flagged),                    // the device says invalid
         Ok(reading(4, 450.0, -1.0)),    // negative power
         Ok(reading(5, 500.0, f64::INFINITY)), // non-finite power
+        Ok(reading(6, 1e300, 50.0)),    // an energy leap
         Ok(backwards),
         Ok(last),
         Err(ErrorKind::Timeout),
@@ -326,13 +328,13 @@ fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
         Err(e) => panic!("schedule refused: {e:?}"),
     };
     let power = |f: &Fsw<PowerPlatform>| f.state().health[DeviceId::Power as usize];
-    // The first reading is accepted; the next six are each refused and the first stays.
+    // The first reading is accepted; the next seven are each refused and the first stays.
     for _ in 0..4 {
         fsw.tick();
     }
     assert_eq!(fsw.state().power, Some(first));
     assert_eq!(fsw.nav().last_power(), Some(first));
-    for k in 1..7u64 {
+    for k in 1..8u64 {
         for _ in 0..1_000 {
             fsw.tick();
         }
@@ -346,9 +348,9 @@ fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
     let h = power(&fsw);
     assert_eq!(
         (h.good, h.invalid, h.time_backwards, h.errors),
-        (1, 5, 1, 0)
+        (1, 6, 1, 0)
     );
-    // The eighth reading is accepted, then the device fails.
+    // The ninth reading is accepted, then the device fails.
     for _ in 0..2_000 {
         fsw.tick();
     }
@@ -357,7 +359,7 @@ fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
     let h = power(&fsw);
     assert_eq!(
         (h.good, h.invalid, h.time_backwards, h.errors),
-        (2, 5, 1, 1)
+        (2, 6, 1, 1)
     );
     // The other devices' health is untouched by the power task.
     assert_eq!(fsw.state().health[DeviceId::Sun as usize].faults(), 0);
