@@ -317,9 +317,11 @@ mod tests {
         assert!((standing.energy_j() - AWAKE_POWER_W * 5.0).abs() < 1e-9);
     }
 
-    /// ENERGY-5: the soils' rolling resistance: the lumped presets' coefficient, and for the
-    /// terramechanics soils the rigid wheel's resistance at zero slip, non-negative, larger on
-    /// loose sand than on the firm loam.
+    /// ENERGY-5: the soils' rolling resistance: the lumped presets' coefficient (after the
+    /// per-seed draw), and for the terramechanics soils the rigid wheel's resistance at zero
+    /// slip: about 0.14 on the sandy loam; 0 (clamped) on the Ishigami regolith simulant, whose
+    /// Wong-Reece stress distribution gives a net pull at zero slip (a limit of the model,
+    /// `docs/simulator.md`).
     #[test]
     fn energy_5_rolling_resistance_of_the_soils() {
         use crate::terramechanics::Soil;
@@ -342,7 +344,8 @@ mod tests {
         let sand = rolling_resistance(&terra(Soil::ishigami_regolith_simulant()));
         let loam = rolling_resistance(&terra(Soil::sandy_loam()));
         std::eprintln!("c_rr: lumped sand {c:.4}, regolith simulant {sand:.4}, loam {loam:.4}");
-        assert!(sand.is_finite() && loam.is_finite() && sand >= 0.0 && loam >= 0.0);
+        assert!(loam > 0.05 && loam < 0.3, "{loam}");
+        assert_eq!(sand, 0.0);
     }
 
     /// ENERGY-6: the world integrates the model along its truth every step and the power
