@@ -62,8 +62,9 @@ impl DeviceHealth {
     }
 }
 
-/// Periodic status record (RG2): executive counters and device health.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+/// Periodic status record (RG2): executive counters, device health and the power subsystem's
+/// last accepted reading.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct FrameStatus {
     /// Minor-frame tick of the record.
     pub tick: u64,
@@ -71,12 +72,20 @@ pub struct FrameStatus {
     pub cycle_slips: u64,
     /// Latched timing fault (consecutive cycle slips).
     pub timing_fault: bool,
-    /// Health of the IMU, joints, stereo camera and sun sensor, in that order.
-    pub health: [DeviceHealth; 4],
+    /// Health of the IMU, joints, stereo camera, sun sensor and power subsystem, in that order
+    /// ([`crate::flight::DeviceId`]).
+    pub health: [DeviceHealth; crate::flight::DEVICE_COUNT],
     /// Stereo frames completed since boot.
     pub stereo_frames: u32,
     /// Telemetry records the sink refused (counted, then dropped).
     pub telemetry_dropped: u32,
+    /// Battery energy used since boot of the last accepted power reading, J (0 before the
+    /// first; [`rover_hal::PowerReading::energy_used_j`]). Double precision: a sol's drive is
+    /// about 10^6 J, which single precision would round to 0.1 J.
+    pub energy_used_j: f64,
+    /// Bus power of the last accepted power reading, W (0 before the first; single precision:
+    /// telemetry).
+    pub bus_power_w: f32,
 }
 
 /// Navigation status, sent every RG2 cycle (single precision: telemetry, not state).
@@ -214,9 +223,11 @@ mod tests {
                 invalid: u32::MAX,
                 time_jumps: u32::MAX,
                 resyncs: u32::MAX,
-            }; 4],
+            }; crate::flight::DEVICE_COUNT],
             stereo_frames: u32::MAX,
             telemetry_dropped: u32::MAX,
+            energy_used_j: f64::MAX,
+            bus_power_w: f32::MAX,
         };
         let mut buffer = [0u8; MAX_RECORD_BYTES];
         let bytes = match encode(RecordKind::FrameStatus, &record, &mut buffer) {
@@ -229,6 +240,11 @@ mod tests {
             Err(e) => panic!("decode failed: {e:?}"),
         };
         assert_eq!(decoded, record);
+        // Headroom left for the fields other changes add (reported when this test runs).
+        std::println!(
+            "FrameStatus worst case: {} of {MAX_RECORD_BYTES} bytes",
+            bytes.len()
+        );
         let mut small = [0u8; 8];
         assert_eq!(
             encode(RecordKind::FrameStatus, &record, &mut small),

@@ -4,13 +4,16 @@
 //! the navigator aligns, drives and arrives; inside a garbage burst it answers with errors of
 //! every `ErrorKind`, non-finite, huge or tiny values, stale, backwards or jumping time stamps,
 //! invalid flags, wrong-size or blank images and captures that are lost or never complete.
+//! The power subsystem reports the battery energy a standing or driving rover uses (a constant
+//! awake power plus a share for the commanded wheel rates, integrated over the frames), or
+//! garbage: errors, hostile numbers, negative or decreasing energy, invalid flags, bad stamps.
 
 use crate::rng::Rng;
 use fsw::estimation::ephemeris::SunEphemeris;
 use rover_hal::{
-    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
-    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
-    IMAGE_WIDTH_PX, WHEEL_COUNT,
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand, Power,
+    PowerReading, StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry,
+    IMAGE_PIXELS, IMAGE_WIDTH_PX, WHEEL_COUNT,
 };
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
@@ -19,9 +22,23 @@ use std::rc::Rc;
 pub const FRAME_US: u64 = 5_000;
 /// Mars gravity, m/s^2.
 const GRAVITY_M_S2: f64 = 3.711;
+/// Bus power of the plausible rover standing awake, W (the simulator's awake power, rounded).
+const AWAKE_POWER_W: f64 = 98.37;
+/// Bus power added by the plausible rover's wheels at the rate limit, W.
+const DRIVE_POWER_W: f64 = 20.0;
 
+/// Number of devices.
+pub const DEVICES: usize = 7;
 /// The devices, in the order of [`Shared::garbage`] and of the fault counts.
-pub const DEVICE_NAMES: [&str; 6] = ["clock", "imu", "mobility", "camera", "sun", "telemetry"];
+pub const DEVICE_NAMES: [&str; DEVICES] = [
+    "clock",
+    "imu",
+    "mobility",
+    "camera",
+    "sun",
+    "telemetry",
+    "power",
+];
 /// Index of each device.
 pub const CLOCK: usize = 0;
 /// IMU.
@@ -34,6 +51,8 @@ pub const CAMERA: usize = 3;
 pub const SUN: usize = 4;
 /// Telemetry sink.
 pub const TELEMETRY: usize = 5;
+/// Power subsystem.
+pub const POWER: usize = 6;
 
 /// Every error kind a device can answer.
 pub const ERROR_KINDS: [ErrorKind; 7] = [
@@ -62,11 +81,13 @@ pub struct Shared {
     pub t_us: u64,
     /// Per device: answer garbage with this probability per call in the current frame (0:
     /// plausible).
-    pub garbage: [f64; 6],
+    pub garbage: [f64; DEVICES],
     /// Garbage answers given, per device.
-    pub fault_counts: [u64; 6],
+    pub fault_counts: [u64; DEVICES],
     /// Calls answered, per device.
-    pub calls: [u64; 6],
+    pub calls: [u64; DEVICES],
+    /// The plausible battery energy used since the episode's start, J.
+    pub energy_j: f64,
     /// The plausible world: wheel angles integrated from the accepted commands.
     pub wheel_angle_rad: [f64; WHEEL_COUNT],
     /// The last accepted command (the plausible joints follow it).
@@ -100,9 +121,10 @@ impl Shared {
         Self {
             rng: Rng::new(seed),
             t_us: 0,
-            garbage: [0.0; 6],
-            fault_counts: [0; 6],
-            calls: [0; 6],
+            garbage: [0.0; DEVICES],
+            fault_counts: [0; DEVICES],
+            calls: [0; DEVICES],
+            energy_j: 0.0,
             wheel_angle_rad: [0.0; WHEEL_COUNT],
             command: MobilityCommand::default(),
             yaw_rad,
@@ -124,6 +146,20 @@ impl Shared {
         for i in 0..WHEEL_COUNT {
             self.wheel_angle_rad[i] += self.command.wheel_rate_rad_s[i] * dt;
         }
+        self.energy_j += self.bus_power_w() * dt;
+    }
+
+    /// Bus power of the plausible rover, W: awake, plus the drive's share for the mean
+    /// commanded wheel rate against the limit.
+    fn bus_power_w(&self) -> f64 {
+        let rate: f64 = self
+            .command
+            .wheel_rate_rad_s
+            .iter()
+            .map(|r| r.abs())
+            .sum::<f64>()
+            / WHEEL_COUNT as f64;
+        AWAKE_POWER_W + DRIVE_POWER_W * (rate / self.limits.0.max(1e-9)).min(1.0)
     }
 
     /// Whether this call of `device` gets a garbage answer (and count it).
@@ -699,6 +735,58 @@ impl StereoCamera for FuzzCamera {
         }
         self.capture = Capture::Idle;
         Ok(())
+    }
+}
+
+/// Power subsystem: the plausible battery energy and bus power, or garbage.
+pub struct FuzzPower {
+    shared: SharedRc,
+    last: u64,
+}
+
+impl FuzzPower {
+    /// A power subsystem on `shared`.
+    pub fn new(shared: SharedRc) -> Self {
+        Self { shared, last: 0 }
+    }
+}
+
+impl Power for FuzzPower {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<PowerReading, ErrorKind> {
+        let mut s = self.shared.borrow_mut();
+        let t = s.now();
+        let mut r = PowerReading {
+            t_us: t,
+            energy_used_j: s.energy_j,
+            bus_power_w: s.bus_power_w(),
+            valid: true,
+        };
+        if s.bad(POWER) {
+            if s.rng.chance(0.25) {
+                let e = s.error();
+                s.note(POWER, || format!("read -> Err({e:?})"));
+                return Err(e);
+            }
+            match s.rng.below(4) {
+                0 => {
+                    s.maybe(&mut r.energy_used_j);
+                    s.maybe(&mut r.bus_power_w);
+                }
+                1 => {
+                    // Less energy used than before (finite), or negative.
+                    r.energy_used_j -= s.rng.uniform(1e-9, 1e4);
+                }
+                2 => r.bus_power_w = -s.rng.uniform(0.0, 1e3),
+                _ => r.valid = false,
+            }
+            if s.rng.chance(0.4) {
+                r.t_us = s.stamp(t, self.last);
+            }
+            s.note(POWER, || format!("read -> {r:?}"));
+        }
+        self.last = r.t_us;
+        Ok(r)
     }
 }
 

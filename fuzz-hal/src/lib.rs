@@ -14,7 +14,9 @@
 //!   `|steer| <= steer_rad`), and no moving command once the navigator is `Safed`;
 //! - the EKF state and covariance finite, or the navigator `Safed`; `Safed` latched;
 //! - the executive consistent: the frame tick counts up by one, group runs, device health
-//!   counters, stereo frames, command and telemetry counters never decrease.
+//!   counters, stereo frames, command and telemetry counters never decrease;
+//! - the power reading the flight software keeps finite, non-negative, and its energy used
+//!   never decreasing.
 //!
 //! Everything is deterministic: the same seed and frame count give the same run (the clock's
 //! execution counter is simulated too).
@@ -23,8 +25,8 @@ pub mod devices;
 pub mod rng;
 
 use devices::{
-    FuzzCamera, FuzzClock, FuzzImu, FuzzMobility, FuzzSun, FuzzTelemetry, Shared, SharedRc,
-    DEVICE_NAMES,
+    FuzzCamera, FuzzClock, FuzzImu, FuzzMobility, FuzzPower, FuzzSun, FuzzTelemetry, Shared,
+    SharedRc, DEVICES, DEVICE_NAMES,
 };
 use fsw::estimation::ephemeris::SunEphemeris;
 use fsw::flight::nav::NavMode;
@@ -43,6 +45,7 @@ impl Platform for FuzzPlatform {
     type Mobility = FuzzMobility;
     type Camera = FuzzCamera;
     type Sun = FuzzSun;
+    type Power = FuzzPower;
     type Telemetry = FuzzTelemetry;
     type ImageMemory = fsw::rectify::ImageMemory<Vec<fsw::rectify::MapNode>, Vec<u8>>;
 }
@@ -76,6 +79,8 @@ pub enum ViolationKind {
     SafedNotLatched,
     /// An executive or health counter went backwards, or the tick did not count up by one.
     CountersInconsistent,
+    /// The kept power reading is non-finite or negative, or its energy used decreased.
+    PowerImplausible,
 }
 
 /// One invariant violation.
@@ -90,7 +95,7 @@ pub struct Violation {
     /// Frame of the run (0-based).
     pub frame: u64,
     /// Garbage probabilities per device of the frame (0: plausible).
-    pub garbage: [f64; 6],
+    pub garbage: [f64; DEVICES],
     /// Navigation mode after the frame.
     pub mode: NavMode,
     /// What exactly.
@@ -111,9 +116,9 @@ pub struct FuzzReport {
     /// The first violations, with details (at most [`MAX_KEPT`]).
     pub first: Vec<Violation>,
     /// Garbage answers given, per device ([`DEVICE_NAMES`]).
-    pub fault_counts: [u64; 6],
+    pub fault_counts: [u64; DEVICES],
     /// Device calls, per device.
-    pub calls: [u64; 6],
+    pub calls: [u64; DEVICES],
     /// Frames that ended in each navigation mode: aligning, driving, arrived, safed.
     pub mode_frames: [u64; 5],
     /// Episodes that reached driving, arrived, safed.
@@ -256,6 +261,7 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
             mobility: FuzzMobility::new(shared.clone()),
             camera: FuzzCamera::new(shared.clone(), config.vo),
             sun: FuzzSun::new(shared.clone()),
+            power: FuzzPower::new(shared.clone()),
             telemetry: FuzzTelemetry::new(shared.clone()),
             image_memory: fsw::rectify::ImageMemory {
                 map: Vec::new(),
@@ -276,6 +282,7 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
         let mut phase_left = plan.range(1_500, 8_000);
         let mut in_burst = false;
         let mut counters = monotonic_counters(&fsw);
+        let mut kept_energy: Option<f64> = None;
         let mut prev_mode = fsw.nav().mode();
         let mut reached = [false; 3];
         let mut stop_episode = false;
@@ -291,13 +298,13 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
                         plan.range(1, 200)
                     };
                     let intensity = [0.02, 0.2, 0.5, 1.0][plan.below(4) as usize];
-                    let mask = plan.range(1, 64);
+                    let mask = plan.range(1, 1 << DEVICES);
                     for (d, g) in s.garbage.iter_mut().enumerate() {
                         *g = if mask & (1 << d) != 0 { intensity } else { 0.0 };
                     }
                 } else {
                     phase_left = plan.range(50, 3_000);
-                    s.garbage = [0.0; 6];
+                    s.garbage = [0.0; DEVICES];
                 }
             }
             phase_left -= 1;
@@ -342,6 +349,21 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
                         ));
                     }
                     counters = now;
+                    let kept = fsw.state().power.map(|p| p.energy_used_j);
+                    if let Some(p) = fsw.state().power {
+                        let plausible = p.energy_used_j.is_finite()
+                            && p.bus_power_w.is_finite()
+                            && p.energy_used_j >= 0.0
+                            && p.bus_power_w >= 0.0
+                            && kept_energy.is_none_or(|e| p.energy_used_j >= e);
+                        if !plausible {
+                            found.push((
+                                ViolationKind::PowerImplausible,
+                                format!("{p:?} after {kept_energy:?} J"),
+                            ));
+                        }
+                    }
+                    kept_energy = kept.or(kept_energy);
                     if let Err(detail) = ekf_finite(&fsw) {
                         if mode != NavMode::Safed {
                             found.push((ViolationKind::EkfNotFinite, detail));

@@ -7,7 +7,8 @@ use crate::player::{Divergence, MobilityOutput, TapeHandle};
 use crate::tape::{Call, CallKind, PayloadSource};
 use rover_hal::{
     CaptureStatus, Clock, Error, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
-    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry,
+    Power, PowerReading, StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor,
+    Telemetry,
 };
 
 fn take<H: TapeHandle>(tape: &H, kind: CallKind) -> Option<Call> {
@@ -156,6 +157,36 @@ impl<H: TapeHandle> SunSensor for ReplaySun<H> {
     fn read(&mut self) -> Result<SunReading, ErrorKind> {
         match take(&self.tape, CallKind::SunRead) {
             Some(Call::SunRead(r)) => r,
+            _ => Err(ErrorKind::Other),
+        }
+    }
+}
+
+/// Power subsystem replaying `Power::read`.
+#[derive(Debug)]
+pub struct ReplayPower<H> {
+    tape: H,
+    recorded: bool,
+}
+
+impl<H: TapeHandle> ReplayPower<H> {
+    /// A power subsystem replaying `tape`. `recorded`: the tape carries the power reads
+    /// ([`crate::TapeHeader::has_power`]); a version-3 tape does not, and then every read
+    /// answers [`ErrorKind::NotReady`] (no reading: not a fault for the flight software)
+    /// without consuming a record.
+    pub fn new(tape: H, recorded: bool) -> Self {
+        Self { tape, recorded }
+    }
+}
+
+impl<H: TapeHandle> Power for ReplayPower<H> {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<PowerReading, ErrorKind> {
+        if !self.recorded {
+            return Err(ErrorKind::NotReady);
+        }
+        match take(&self.tape, CallKind::PowerRead) {
+            Some(Call::PowerRead(r)) => r,
             _ => Err(ErrorKind::Other),
         }
     }

@@ -4,7 +4,7 @@
 //! values digest equal exactly when they are bit-identical (`0.0` and `-0.0` differ, as do two
 //! NaNs with different payloads).
 
-use rover_hal::{ImuSample, JointState, MobilityCommand, SunReading};
+use rover_hal::{ImuSample, JointState, MobilityCommand, PowerReading, SunReading};
 
 /// FNV-1a 64 offset basis.
 const FNV_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
@@ -167,6 +167,15 @@ impl Digestible for SunReading {
         h.u64(self.t_us)
             .put(&self.sun_dir_rover)
             .bool(self.sun_in_view);
+    }
+}
+
+impl Digestible for PowerReading {
+    fn digest(&self, h: &mut Digest) {
+        h.u64(self.t_us)
+            .f64(self.energy_used_j)
+            .f64(self.bus_power_w)
+            .bool(self.valid);
     }
 }
 

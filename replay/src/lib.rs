@@ -2,8 +2,8 @@
 //!
 //! A **call tape** is the sequence of results of every HAL device call the flight software made,
 //! in call order, recorded while it ran in the simulator: IMU reads, joint reads, sun reads,
-//! mobility command and stop results, camera trigger, poll, frame and release results, telemetry
-//! send results and `Clock::now_us`. The stereo images the camera returned follow the poll that
+//! power reads, mobility command and stop results, camera trigger, poll, frame and release
+//! results, telemetry send results and `Clock::now_us`. The stereo images the camera returned follow the poll that
 //! reported them ready. `Clock::counter` is **not** recorded: it is the execution-time counter,
 //! which feeds only timing telemetry.
 //!

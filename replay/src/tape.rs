@@ -1,7 +1,8 @@
 //! The call-tape format: a header, then records, all little-endian.
 //!
 //! ```text
-//! header   "RVRTAPE1", then the fixed-size body of [`TapeHeader`] (HEADER_BYTES in all)
+//! header   "RVRTAPE4" (the last byte is the version; "RVRTAPE3" is read too), then the
+//!          fixed-size body of [`TapeHeader`] (HEADER_BYTES in all)
 //! record   tag: u8, len: u8, body: [u8; len]
 //! images   a record with tag IMAGES whose body is ImagesRef (id, left_len, right_len),
 //!          followed by left_len + right_len bytes of pixels (not counted in len)
@@ -12,14 +13,26 @@
 //! and the recording run's digest of that frame); the tape ends with [`Record::End`].
 //!
 //! Every decoder checks lengths and codes and returns a [`TapeError`] instead of panicking.
+//!
+//! Versions: 4 added the power subsystem's reads ([`Call::PowerRead`]); a version-3 tape has
+//! the same header and records without them, and still loads ([`TapeHeader::version`]: its
+//! replay power device answers `NotReady` without consuming a record,
+//! [`crate::devices::ReplayPower::new`]).
 
 use rover_hal::{
-    CaptureStatus, ErrorKind, ImuSample, JointState, LensCalibration, RawCamera, StereoCalibration,
-    SunReading, WHEEL_COUNT,
+    CaptureStatus, ErrorKind, ImuSample, JointState, LensCalibration, PowerReading, RawCamera,
+    StereoCalibration, SunReading, WHEEL_COUNT,
 };
 
-/// Magic bytes at the start of a tape (the last byte is the format version).
-pub const MAGIC: [u8; 8] = *b"RVRTAPE3";
+/// Magic bytes at the start of a tape written now (the last byte is the format version,
+/// [`VERSION`]).
+pub const MAGIC: [u8; 8] = *b"RVRTAPE4";
+/// Format version written now: 4, with the power subsystem's reads.
+pub const VERSION: u8 = b'4';
+/// Oldest format version read: 3 (no power reads; otherwise the same).
+pub const OLDEST_VERSION: u8 = b'3';
+/// The first version whose tapes carry [`Call::PowerRead`].
+pub const POWER_VERSION: u8 = b'4';
 /// Largest number of path waypoints a header carries.
 pub const MAX_WAYPOINTS: usize = 16;
 /// Number of flight-configuration parameters a header carries ([`TapeHeader::nav_params`]).
@@ -71,6 +84,9 @@ pub enum TapeError {
 /// software's construction needs (the path and the start pose).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TapeHeader {
+    /// Format version of the tape (the last byte of its magic, ASCII: `b'3'`, `b'4'`). Read
+    /// from the tape; [`TapeHeader::encode`] always writes [`VERSION`].
+    pub version: u8,
     /// Minor-frame period of the recording, microseconds.
     pub frame_period_us: u32,
     /// Frames recorded.
@@ -97,6 +113,11 @@ pub struct TapeHeader {
 }
 
 impl TapeHeader {
+    /// The tape carries the power subsystem's reads ([`Call::PowerRead`]; version 4 on).
+    pub fn has_power(&self) -> bool {
+        self.version >= POWER_VERSION
+    }
+
     /// The used waypoints.
     pub fn waypoints(&self) -> &[[f64; 2]] {
         let n = usize::from(self.waypoint_count).min(MAX_WAYPOINTS);
@@ -138,12 +159,20 @@ impl TapeHeader {
         Ok(w.pos)
     }
 
-    /// Decode from the first [`HEADER_BYTES`] of `bytes`.
+    /// Decode from the first [`HEADER_BYTES`] of `bytes` (versions [`OLDEST_VERSION`] to
+    /// [`VERSION`]).
     pub fn decode(bytes: &[u8]) -> Result<Self, TapeError> {
         let mut r = Reader::new(bytes);
-        if r.take(8)? != MAGIC {
-            return Err(TapeError::BadMagic);
-        }
+        let magic = r.take(8)?;
+        let version = match magic.split_last() {
+            Some((&v, stem))
+                if stem == MAGIC.get(..7).unwrap_or(&[])
+                    && (OLDEST_VERSION..=VERSION).contains(&v) =>
+            {
+                v
+            }
+            _ => return Err(TapeError::BadMagic),
+        };
         let frame_period_us = r.u32()?;
         let frames = r.u32()?;
         let seed = r.u64()?;
@@ -162,6 +191,7 @@ impl TapeHeader {
         let mut scenario = [0u8; NAME_BYTES];
         scenario.copy_from_slice(r.take(NAME_BYTES)?);
         Ok(Self {
+            version,
             frame_period_us,
             frames,
             seed,
@@ -231,6 +261,8 @@ pub enum CallKind {
     CameraRelease = 10,
     /// `Telemetry::send`.
     TelemetrySend = 11,
+    /// `Power::read` (tape version 4 on).
+    PowerRead = 12,
 }
 
 /// Record tag of [`Record::Images`].
@@ -265,6 +297,8 @@ pub enum Call {
     CameraRelease(Result<(), ErrorKind>),
     /// `Telemetry::send` (the record itself is an output).
     TelemetrySend(Result<(), ErrorKind>),
+    /// `Power::read` (tape version 4 on).
+    PowerRead(Result<PowerReading, ErrorKind>),
 }
 
 impl Call {
@@ -282,6 +316,7 @@ impl Call {
             Call::CameraFrame(_) => CallKind::CameraFrame,
             Call::CameraRelease(_) => CallKind::CameraRelease,
             Call::TelemetrySend(_) => CallKind::TelemetrySend,
+            Call::PowerRead(_) => CallKind::PowerRead,
         }
     }
 }
@@ -438,6 +473,12 @@ fn encode_call(call: &Call, w: &mut Writer<'_>) -> Result<(), TapeError> {
             w.f64s(&s.sun_dir_rover)?;
             w.bool(s.sun_in_view)
         }),
+        Call::PowerRead(r) => put_result(w, r, |w, p| {
+            w.u64(p.t_us)?;
+            w.f64(p.energy_used_j)?;
+            w.f64(p.bus_power_w)?;
+            w.bool(p.valid)
+        }),
         Call::CameraPoll(r) => put_result(w, r, |w, s| {
             w.u8(match s {
                 CaptureStatus::Idle => 0,
@@ -520,6 +561,14 @@ fn decode_call(tag: u8, r: &mut Reader<'_>) -> Result<Call, TapeError> {
         })?),
         10 => Call::CameraRelease(get_result(r, unit)?),
         11 => Call::TelemetrySend(get_result(r, unit)?),
+        12 => Call::PowerRead(get_result(r, |r| {
+            Ok(PowerReading {
+                t_us: r.u64()?,
+                energy_used_j: r.f64()?,
+                bus_power_w: r.f64()?,
+                valid: r.bool()?,
+            })
+        })?),
         t => return Err(TapeError::UnknownTag(t)),
     })
 }

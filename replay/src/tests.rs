@@ -1,7 +1,8 @@
 //! Host tests: tape round trips, malformed tapes, divergence detection, image loading.
 
 use crate::devices::{
-    ReplayClock, ReplayImu, ReplayMobility, ReplayStereo, ReplaySun, ReplayTelemetry, ZeroCounter,
+    ReplayClock, ReplayImu, ReplayMobility, ReplayPower, ReplayStereo, ReplaySun, ReplayTelemetry,
+    ZeroCounter,
 };
 use crate::player::{Divergence, MobilityOutput, Player};
 use crate::tape::{
@@ -10,8 +11,8 @@ use crate::tape::{
 };
 use crate::{Call, CallKind, Digest, FrameInfo, ImagesRef, Record, TapeError, TapeHeader};
 use rover_hal::{
-    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
-    StereoCalibration, StereoCamera, SunReading, SunSensor, Telemetry,
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand, Power,
+    PowerReading, StereoCalibration, StereoCamera, SunReading, SunSensor, Telemetry,
 };
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -36,6 +37,7 @@ fn header() -> TapeHeader {
     let mut waypoints = [[0.0; 2]; MAX_WAYPOINTS];
     waypoints[1] = [4.5, -0.0];
     TapeHeader {
+        version: crate::tape::VERSION,
         frame_period_us: 5000,
         frames: 2,
         seed: 7,
@@ -96,6 +98,13 @@ fn every_call() -> Vec<Call> {
         Call::CameraFrame(Err(ErrorKind::NotReady)),
         Call::CameraRelease(Ok(())),
         Call::TelemetrySend(Err(ErrorKind::Other)),
+        Call::PowerRead(Ok(PowerReading {
+            t_us: 15_000,
+            energy_used_j: 1234.5,
+            bus_power_w: f64::NAN,
+            valid: false,
+        })),
+        Call::PowerRead(Err(ErrorKind::Hardware)),
     ]
 }
 
@@ -148,6 +157,28 @@ fn header_round_trips_and_checks() {
         TapeHeader::decode(&buf[..HEADER_BYTES - 1]),
         Err(TapeError::Truncated)
     );
+    // Version 3 (before the power reads) still loads, and says so; other versions do not.
+    let mut v3 = buf;
+    v3[7] = b'3';
+    let old = TapeHeader::decode(&v3).expect("version 3");
+    assert_eq!((old.version, old.has_power()), (b'3', false));
+    assert_eq!(
+        TapeHeader {
+            version: b'4',
+            ..old
+        },
+        h
+    );
+    assert!(h.has_power());
+    for v in [b'2', b'5', b'0'] {
+        let mut other = buf;
+        other[7] = v;
+        assert_eq!(TapeHeader::decode(&other), Err(TapeError::BadMagic));
+    }
+    // Encoding writes the current version whatever the header says.
+    let mut again = [0u8; HEADER_BYTES];
+    assert_eq!(old.encode(&mut again), Ok(HEADER_BYTES));
+    assert_eq!(again, buf);
     let mut too_many = h;
     too_many.waypoint_count = MAX_WAYPOINTS as u8 + 1;
     assert_eq!(too_many.encode(&mut buf), Err(TapeError::BadHeader));
@@ -237,6 +268,12 @@ fn replay_devices_return_the_tape_in_order() {
         accel_m_s2: [0.0, 0.0, -3.711],
         valid: true,
     };
+    let power = PowerReading {
+        t_us: 10_000,
+        energy_used_j: 512.25,
+        bus_power_w: 98.5,
+        valid: true,
+    };
     let pixels: Vec<u8> = (0..16u8).collect();
     let frame = FrameInfo {
         capture_t_us: 5000,
@@ -265,6 +302,7 @@ fn replay_devices_return_the_tape_in_order() {
             Record::Call(Call::MobilityStop(Ok(()))),
             Record::Call(Call::TelemetrySend(Ok(()))),
             Record::Call(Call::SunRead(Err(ErrorKind::Timeout))),
+            Record::Call(Call::PowerRead(Ok(power))),
         ],
     ];
     let bytes = tape_bytes(&frames, &pixels);
@@ -275,6 +313,7 @@ fn replay_devices_return_the_tape_in_order() {
     let mut imu = ReplayImu::new(tape.clone());
     let mut mobility = ReplayMobility::new(tape.clone());
     let mut sun = ReplaySun::new(tape.clone());
+    let mut power_device = ReplayPower::new(tape.clone(), reader.header().has_power());
     let mut telemetry = ReplayTelemetry::new(tape.clone());
     let slots = [[vec![0u8; 8], vec![0u8; 8]], [vec![0u8; 8], vec![0u8; 8]]];
     let mut camera =
@@ -322,6 +361,7 @@ fn replay_devices_return_the_tape_in_order() {
     assert_eq!(mobility.stop(), Ok(()));
     assert_eq!(telemetry.send(&[1, 2, 3]), Ok(()));
     assert_eq!(sun.read(), Err(ErrorKind::Timeout));
+    assert_eq!(power_device.read(), Ok(power));
     {
         let p = tape.borrow();
         let out = p.outputs();
@@ -339,7 +379,50 @@ fn replay_devices_return_the_tape_in_order() {
         Ok(FrameMark::End)
     );
     assert_eq!(tape.borrow().divergence(), None);
-    assert_eq!(tape.borrow().calls(), 10);
+    assert_eq!(tape.borrow().calls(), 11);
+}
+
+/// A version-3 tape has no power reads: its replay power device answers `NotReady` without
+/// consuming a record, so the other devices replay in order; on a version-4 tape the same
+/// call is a divergence when the tape has no power read next.
+#[test]
+fn version_3_tapes_replay_without_power_reads() {
+    let frames = vec![vec![
+        Record::Call(Call::SunRead(Err(ErrorKind::NotReady))),
+        Record::Call(Call::TelemetrySend(Ok(()))),
+    ]];
+    let mut bytes = tape_bytes(&frames, &[]);
+    bytes[7] = b'3';
+    let tape: Shared = Rc::new(RefCell::new(Player::new()));
+    let mut reader = TapeReader::open(SliceSource::new(&bytes)).expect("open");
+    assert!(!reader.header().has_power());
+    reader.load_frame(&mut tape.borrow_mut()).expect("frame");
+    let mut sun = ReplaySun::new(tape.clone());
+    let mut power = ReplayPower::new(tape.clone(), reader.header().has_power());
+    let mut telemetry = ReplayTelemetry::new(tape.clone());
+    assert_eq!(sun.read(), Err(ErrorKind::NotReady));
+    assert_eq!(power.read(), Err(ErrorKind::NotReady));
+    assert_eq!(telemetry.send(&[7]), Ok(()));
+    assert_eq!(tape.borrow_mut().end_frame(), Ok(()));
+    assert_eq!(tape.borrow().divergence(), None);
+
+    let bytes = tape_bytes(&frames, &[]);
+    let tape: Shared = Rc::new(RefCell::new(Player::new()));
+    let mut reader = TapeReader::open(SliceSource::new(&bytes)).expect("open");
+    assert!(reader.header().has_power());
+    reader.load_frame(&mut tape.borrow_mut()).expect("frame");
+    let mut sun = ReplaySun::new(tape.clone());
+    let mut power = ReplayPower::new(tape.clone(), reader.header().has_power());
+    assert_eq!(sun.read(), Err(ErrorKind::NotReady));
+    assert_eq!(power.read(), Err(ErrorKind::Other));
+    assert_eq!(
+        tape.borrow().divergence(),
+        Some(Divergence::UnexpectedCall {
+            call: 1,
+            expected: Some(CallKind::TelemetrySend),
+            got: CallKind::PowerRead,
+        })
+    );
 }
 
 #[test]

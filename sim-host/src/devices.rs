@@ -5,8 +5,9 @@
 //! nanoseconds, used for timing statistics only.
 
 use rover_hal::{
-    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
-    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand, Power,
+    PowerReading, StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry,
+    IMAGE_PIXELS,
 };
 use std::cell::Cell;
 use std::rc::Rc;
@@ -284,6 +285,37 @@ impl SunSensor for FixedSun {
             t_us: self.time.now_us(),
             sun_dir_rover: [c, 0.0, -s],
             sun_in_view: true,
+        })
+    }
+}
+
+/// Power subsystem of a rover standing awake: a constant bus power integrated over the
+/// simulated time (`energy_used_j = P t`), `P` the truth energy model's awake power
+/// ([`crate::energy::AWAKE_POWER_W`]: a standing rover draws nothing for its motors).
+pub struct ConstantPower {
+    time: SimTime,
+    power_w: f64,
+}
+
+impl ConstantPower {
+    /// A power subsystem reading `time`, drawing [`crate::energy::AWAKE_POWER_W`].
+    pub fn new(time: SimTime) -> Self {
+        Self {
+            time,
+            power_w: crate::energy::AWAKE_POWER_W,
+        }
+    }
+}
+
+impl Power for ConstantPower {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<PowerReading, ErrorKind> {
+        let t_us = self.time.now_us();
+        Ok(PowerReading {
+            t_us,
+            energy_used_j: self.power_w * t_us as f64 * 1e-6,
+            bus_power_w: self.power_w,
+            valid: true,
         })
     }
 }

@@ -7,8 +7,9 @@ use crate::sensors::faults::{FaultDevice, FaultKind};
 use crate::world::World;
 use nalgebra::Vector3;
 use rover_hal::{
-    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
-    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, IMAGE_PIXELS,
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand, Power,
+    PowerReading, StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor,
+    IMAGE_PIXELS,
 };
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -290,6 +291,65 @@ impl SunSensor for WorldSun {
             |s| s.sun_dir_rover = [f64::NAN; 3],
             |s, t| s.t_us = t,
         )
+    }
+}
+
+/// Power subsystem device: the truth energy model's battery energy used since boot
+/// ([`crate::energy`], integrated by the world every step) and the mean bus power since the
+/// previous reading it returned (since boot for the first), `valid` true; the scenario's
+/// `power` faults (dropout, stuck, NaN, invalid, time jump) apply.
+pub struct WorldPower {
+    world: SharedWorld,
+    last: Option<PowerReading>,
+    /// Truth time and energy of the previous reading returned, for its mean power.
+    previous: (u64, f64),
+}
+
+impl WorldPower {
+    /// A power subsystem on `world`.
+    pub fn new(world: SharedWorld) -> Self {
+        Self {
+            world,
+            last: None,
+            previous: (0, 0.0),
+        }
+    }
+}
+
+impl Power for WorldPower {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<PowerReading, ErrorKind> {
+        let w = self.world.borrow();
+        let t = w.truth.t_us;
+        let energy_j = w.energy.energy_j();
+        let (t0, e0) = self.previous;
+        let bus_power_w = if t > t0 {
+            (energy_j - e0) / ((t - t0) as f64 * 1e-6)
+        } else {
+            w.energy.power_w()
+        };
+        let fresh = PowerReading {
+            t_us: t,
+            energy_used_j: energy_j,
+            bus_power_w,
+            valid: w
+                .faults
+                .active(FaultDevice::Power, FaultKind::Invalid, t)
+                .is_none(),
+        };
+        let reading = faulted(
+            &w,
+            FaultDevice::Power,
+            fresh,
+            &mut self.last,
+            |p| {
+                p.energy_used_j = f64::NAN;
+                p.bus_power_w = f64::NAN;
+            },
+            |p, t| p.t_us = t,
+        )?;
+        self.previous = (t, energy_j);
+        Ok(reading)
     }
 }
 

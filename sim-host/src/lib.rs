@@ -12,6 +12,7 @@
 //! - [`camera`]: the stereo renderer interface; [`render`]: the rasterising hazcam renderer and
 //!   the procedural albedo texture.
 //! - [`world`]: the truth state and its step; [`hal_devices`]: the HAL devices on it.
+//! - [`energy`]: the truth energy model (battery power and energy used along the truth state).
 //! - [`driver`]: the simulator's reference driver (not flight code).
 //! - [`hazards`]: the truth-side hazard check (collisions of the rover with rocks and blocks).
 //! - [`scenario`], [`sim`], [`output`], [`report`]: scenario files, runs, outputs;
@@ -34,6 +35,7 @@ pub mod descent_map;
 pub mod detection;
 pub mod devices;
 pub mod driver;
+pub mod energy;
 pub mod hal_devices;
 pub mod hazards;
 pub mod output;

@@ -2,7 +2,7 @@
 //! decorator and write the call tape (format: `rover_replay::tape`).
 //!
 //! Each decorator appends the result of every call to the tape in call order: clock `now_us`,
-//! IMU, joints, sun, mobility command and stop results, camera trigger, poll, frame and release,
+//! IMU, joints, sun, power, mobility command and stop results, camera trigger, poll, frame and release,
 //! telemetry send results. When a camera poll reports a capture ready, the decorator borrows the
 //! pair (`StereoCamera::frame` is a query) and appends the pixels after the poll's record, once
 //! per capture. `Clock::counter` is not recorded (timing telemetry only). After every frame the
@@ -11,7 +11,9 @@
 
 use crate::camera::{StereoRenderer, TexturedRenderer};
 use crate::devices::{hazcam_calibration, CountingTelemetry};
-use crate::hal_devices::{CounterMode, WorldClock, WorldImu, WorldMobility, WorldStereo, WorldSun};
+use crate::hal_devices::{
+    CounterMode, WorldClock, WorldImu, WorldMobility, WorldPower, WorldStereo, WorldSun,
+};
 use crate::scenario::Scenario;
 use crate::sim::{run_with, RunHooks, RunOptions, WorldPlatform};
 use crate::world::FRAME_US;
@@ -19,7 +21,8 @@ use fsw::flight::{Devices, Fsw, Platform};
 use fsw_image::flight_replay::frame_digest;
 use rover_hal::{
     CaptureStatus, Clock, Error, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
-    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry,
+    Power, PowerReading, StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor,
+    Telemetry,
 };
 use rover_replay::tape::{
     encode_record, HEADER_BYTES, MAX_RECORD_BYTES, MAX_WAYPOINTS, NAME_BYTES,
@@ -181,6 +184,15 @@ impl<D: SunSensor> SunSensor for Rec<D> {
     }
 }
 
+impl<D: Power> Power for Rec<D> {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<PowerReading, ErrorKind> {
+        let r = kind(self.inner.read());
+        self.rec.borrow_mut().call(Call::PowerRead(r));
+        r
+    }
+}
+
 impl<D: Telemetry> Telemetry for Rec<D> {
     type Error = ErrorKind;
     fn send(&mut self, record: &[u8]) -> Result<(), ErrorKind> {
@@ -258,6 +270,7 @@ impl Platform for RecordingPlatform {
     type Mobility = Rec<WorldMobility>;
     type Camera = Rec<WorldStereo>;
     type Sun = Rec<WorldSun>;
+    type Power = Rec<WorldPower>;
     type Telemetry = Rec<CountingTelemetry>;
     type ImageMemory = crate::devices::HostImageMemory;
 }
@@ -276,6 +289,7 @@ impl RunHooks for Hooks {
             mobility: Rec::new(d.mobility, rec),
             camera: Rec::new(d.camera, rec),
             sun: Rec::new(d.sun, rec),
+            power: Rec::new(d.power, rec),
             telemetry: Rec::new(d.telemetry, rec),
             image_memory: d.image_memory,
         }
@@ -368,6 +382,7 @@ fn header(scenario: &Scenario, seed: u64, frames: u64) -> anyhow::Result<TapeHea
     let n = bytes.len().min(NAME_BYTES);
     name[..n].copy_from_slice(&bytes[..n]);
     Ok(TapeHeader {
+        version: rover_replay::tape::VERSION,
         frame_period_us: FRAME_US as u32,
         frames: u32::try_from(frames)?,
         seed,

@@ -6,7 +6,8 @@ use fsw::flight::Platform;
 use fsw_image::flight_replay::{build_fsw, FlightSetup, Replay};
 use rover_hal::IMAGE_PIXELS;
 use rover_replay::devices::{
-    ReplayClock, ReplayImu, ReplayMobility, ReplayStereo, ReplaySun, ReplayTelemetry, ZeroCounter,
+    ReplayClock, ReplayImu, ReplayMobility, ReplayPower, ReplayStereo, ReplaySun, ReplayTelemetry,
+    ZeroCounter,
 };
 use rover_replay::tape::SliceSource;
 use rover_replay::{Divergence, Player};
@@ -24,6 +25,7 @@ impl<'a> Platform for HostReplayPlatform<'a> {
     type Mobility = ReplayMobility<Tape>;
     type Camera = ReplayStereo<Tape, SliceSource<'a>, Vec<u8>>;
     type Sun = ReplaySun<Tape>;
+    type Power = ReplayPower<Tape>;
     type Telemetry = ReplayTelemetry<Tape>;
     type ImageMemory = crate::devices::HostImageMemory;
 }
@@ -72,6 +74,7 @@ pub fn replay(tape: &[u8]) -> anyhow::Result<ReplayOutcome> {
         )
         .with_lens(header.lens),
         sun: ReplaySun::new(player.clone()),
+        power: ReplayPower::new(player.clone(), header.has_power()),
         telemetry: ReplayTelemetry::new(player.clone()),
         image_memory: crate::devices::host_image_memory(),
     };
@@ -226,5 +229,32 @@ mod tests {
             outcome.divergence
         );
         assert!(!outcome.passed());
+
+        // A missing power read (RG4, recorded since tape version 4): the same.
+        let Some((pos, _)) = all
+            .iter()
+            .find(|(_, r)| matches!(r, Record::Call(Call::PowerRead(Ok(_)))))
+            .copied()
+        else {
+            panic!("no power read on the tape")
+        };
+        let len = 2 + usize::from(rec.tape[pos + 1]);
+        let mut tape = rec.tape.clone();
+        tape.drain(pos..pos + len);
+        let outcome = match replay(&tape) {
+            Ok(o) => o,
+            Err(e) => panic!("replay: {e}"),
+        };
+        assert!(
+            matches!(
+                outcome.divergence,
+                Some(Divergence::UnexpectedCall {
+                    got: CallKind::PowerRead,
+                    ..
+                })
+            ),
+            "{:?}",
+            outcome.divergence
+        );
     }
 }

@@ -1,7 +1,8 @@
 //! Run the flight software on the simulated devices and summarise the executive's statistics.
 
 use crate::devices::{
-    CountingTelemetry, FixedSun, GreyStereo, SimClock, SimTime, StillImu, StillMobility,
+    ConstantPower, CountingTelemetry, FixedSun, GreyStereo, SimClock, SimTime, StillImu,
+    StillMobility,
 };
 use fsw::exec::ExecConfig;
 use fsw::flight::{Devices, Fsw, FswConfig, Platform};
@@ -15,6 +16,7 @@ impl Platform for SimPlatform {
     type Mobility = StillMobility;
     type Camera = GreyStereo;
     type Sun = FixedSun;
+    type Power = ConstantPower;
     type Telemetry = CountingTelemetry;
     type ImageMemory = crate::devices::HostImageMemory;
 }
@@ -61,6 +63,7 @@ pub fn run_still(frames: u64) -> anyhow::Result<RunSummary> {
         mobility: StillMobility::new(time.clone()),
         camera: GreyStereo::new(time.clone(), 3),
         sun: FixedSun::new(time.clone()),
+        power: ConstantPower::new(time.clone()),
         telemetry: CountingTelemetry::default(),
         image_memory: crate::devices::host_image_memory(),
     };

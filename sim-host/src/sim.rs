@@ -11,7 +11,8 @@ use crate::camera::{FlatGreyRenderer, StereoRenderer};
 use crate::devices::CountingTelemetry;
 use crate::driver::{closest_arc, CommandSource, ReferenceDriver};
 use crate::hal_devices::{
-    CounterMode, SharedWorld, WorldClock, WorldImu, WorldMobility, WorldStereo, WorldSun,
+    CounterMode, SharedWorld, WorldClock, WorldImu, WorldMobility, WorldPower, WorldStereo,
+    WorldSun,
 };
 use crate::scenario::{DriverMode, Scenario};
 use crate::vehicle::placement::BodyPose;
@@ -30,6 +31,7 @@ impl Platform for WorldPlatform {
     type Mobility = WorldMobility;
     type Camera = WorldStereo;
     type Sun = WorldSun;
+    type Power = WorldPower;
     type Telemetry = CountingTelemetry;
     type ImageMemory = crate::devices::HostImageMemory;
 }
@@ -212,8 +214,15 @@ pub struct RunResult {
     /// Truth steps whose twist exceeded the quasi-static bounds and was scaled down
     /// ([`crate::world::World::twist_caps`]).
     pub truth_twist_caps: u64,
-    /// Per-device health counters of the flight software: IMU, joints, camera, sun.
-    pub device_health: [fsw::telemetry::DeviceHealth; 4],
+    /// Per-device health counters of the flight software: IMU, joints, camera, sun, power.
+    pub device_health: [fsw::telemetry::DeviceHealth; fsw::flight::DEVICE_COUNT],
+    /// Battery energy used over the run by the truth energy model, J ([`crate::energy`]).
+    pub energy_used_j: f64,
+    /// Mean electrical power of the truth energy model over the run, W.
+    pub mean_power_w: f64,
+    /// The energy used of the last power reading the flight software accepted, J (`None`:
+    /// it accepted none).
+    pub fsw_energy_used_j: Option<f64>,
     /// Stereo frames the flight software completed.
     pub stereo_frames: u32,
     /// Navigation counters of the flight software at the end.
@@ -477,6 +486,7 @@ pub fn run_with<H: RunHooks>(
             seed,
         ),
         sun: WorldSun::new(world.clone()),
+        power: WorldPower::new(world.clone()),
         telemetry: CountingTelemetry::with_refusal(crate::hal_devices::telemetry_faults(
             world.clone(),
         )),
@@ -696,6 +706,9 @@ pub fn run_with<H: RunHooks>(
         truth_inertia_limits: w.inertia_limits,
         truth_twist_caps: w.twist_caps,
         device_health: state.health,
+        energy_used_j: w.energy.energy_j(),
+        mean_power_w: w.energy.mean_power_w(),
+        fsw_energy_used_j: state.power.map(|p| p.energy_used_j),
         stereo_frames: state.stereo_frames,
         nav: *fsw.nav().counters(),
         nav_mode: fsw.nav().mode(),

@@ -168,6 +168,9 @@ pub struct World {
     pub hazcam: HazcamModel,
     /// Faults.
     pub faults: Faults,
+    /// The truth energy model and the battery energy used so far ([`crate::energy`]),
+    /// integrated every step.
+    pub energy: crate::energy::EnergyMeter,
     /// Host nanoseconds spent inside simulated devices doing the simulator's own work (image
     /// rendering), subtracted from the execution counter so that the flight software's timing
     /// figures measure flight code, not the simulator.
@@ -299,6 +302,7 @@ impl World {
                 &mut streams.slip,
             )),
         };
+        let energy = crate::energy::EnergyMeter::new(crate::energy::EnergyModel::for_slip(&slip));
         let imu = ImuModel::new(
             scenario.sensors.imu,
             &mut streams.imu,
@@ -363,6 +367,7 @@ impl World {
             site: scenario.site,
             hazcam,
             faults: Faults::new(scenario.faults.clone()),
+            energy,
             streams,
             encoder_every: u64::from(200 / scenario.sensors.encoder_hz),
             sun_every: u64::from(200 / scenario.sensors.sun_hz),
@@ -738,6 +743,10 @@ impl World {
         t.t_us = t.t_us.saturating_add(FRAME_US);
         self.steps += 1;
         self.update_wheels();
+        // Energy: the power of this step's truth state (motor rates, pitch, motion) over it.
+        let (theta_up, rim_speed) =
+            crate::energy::drive_state(&self.truth, &self.geometry.wheel_radius_m);
+        self.energy.step(theta_up, rim_speed, dt);
         // Sensors.
         let rot1 = self.truth.pose.rot_w_from_r();
         let p0 = Vector3::from(pose0.pos_m);

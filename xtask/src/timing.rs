@@ -484,7 +484,7 @@ fn groups(m: &Measured) -> Vec<Group> {
             name: "RG4",
             period_s: 5.0,
             insns: exec_group_insns(m, "RG4"),
-            content: "sun sensor read and heading update".into(),
+            content: "sun sensor read and heading update; power subsystem read and checks".into(),
         },
         Group {
             name: "VO",

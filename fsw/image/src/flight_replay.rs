@@ -169,6 +169,7 @@ pub fn digest_frame(
     h.put(&state.imu)
         .put(&state.joints)
         .put(&state.sun)
+        .put(&state.power)
         .put(&state.capture_pending_t_us)
         .put(&state.last_capture_t_us);
     for d in &state.health {
@@ -278,7 +279,10 @@ fn digest_telemetry(h: &mut Digest, record: &[u8]) {
             for d in &s.health {
                 digest_health(h, d);
             }
-            h.u32(s.stereo_frames).u32(s.telemetry_dropped);
+            h.u32(s.stereo_frames)
+                .u32(s.telemetry_dropped)
+                .f64(s.energy_used_j)
+                .u32(s.bus_power_w.to_bits());
         }
         None => {
             h.u8(0xFF).u32(record.len() as u32).bytes(record);

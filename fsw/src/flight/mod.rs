@@ -9,7 +9,7 @@
 //! | RG1 | 200 Hz | `imu`: IMU read and checks; `propagate`: EKF propagation (eq. 26-27) |
 //! | RG2 | 20 Hz | `joints`: joint read and checks; `odometry`: kinematic interval, gate (eq. 46), EKF update or slip vector; `guidance`: carrot and slip loops (eq. 47-49), inverse kinematics, motor command; `telemetry`: status and navigation records |
 //! | RG3 | 5 Hz | `stereo`: capture policy (H04 sec. 2: every 0.25 m or 10 deg of EKF motion, at the latest every 10 s; [`nav::Navigator::capture_due`]), capture trigger and clone (eq. 41); a capture not completed within [`CAPTURE_TIMEOUT_FRAMES`] is timed out |
-//! | RG4 | 0.2 Hz | `sun`: sun read and heading update (RB sec. 5.1) |
+//! | RG4 | 0.2 Hz | `sun`: sun read and heading update (RB sec. 5.1); `power`: power-subsystem read and checks, the battery energy used handed to the navigator (V99 sec. 3) |
 //! | background | every frame | stereo polling, rectification of raw pairs, visual odometry work items, VO gate and fusion at the capture clones |
 //!
 //! Every device reading is checked (error, device-flagged invalid, non-finite, time stamp not
@@ -28,8 +28,8 @@ use crate::telemetry::{
 };
 use nav::{NavConfig, NavError, Navigator};
 use rover_hal::{
-    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, StereoCamera,
-    SunReading, SunSensor, Telemetry,
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, Power, PowerReading,
+    StereoCamera, SunReading, SunSensor, Telemetry,
 };
 
 /// The set of device types a platform provides (the simulator or the rover CPU).
@@ -44,6 +44,8 @@ pub trait Platform {
     type Camera: StereoCamera;
     /// Sun sensor.
     type Sun: SunSensor;
+    /// Power subsystem (battery energy used, bus power).
+    type Power: Power;
     /// Telemetry sink.
     type Telemetry: Telemetry;
     /// Image memory of the stereo rectification (map and rectified pair; external RAM on the
@@ -63,6 +65,8 @@ pub struct Devices<P: Platform> {
     pub camera: P::Camera,
     /// Sun sensor.
     pub sun: P::Sun,
+    /// Power subsystem.
+    pub power: P::Power,
     /// Telemetry sink.
     pub telemetry: P::Telemetry,
     /// Image memory of the stereo rectification ([`crate::rectify`]).
@@ -72,7 +76,7 @@ pub struct Devices<P: Platform> {
 /// Number of rate groups in the flight schedule.
 pub const GROUP_COUNT: usize = 4;
 /// Number of tasks in the flight schedule.
-pub const TASK_COUNT: usize = 8;
+pub const TASK_COUNT: usize = 9;
 
 /// Rate-group table (ARCHITECTURE.md sec. 4). Divisors are relative to the 200 Hz minor frame.
 pub const SCHEDULE_GROUPS: [GroupConfig; GROUP_COUNT] = [
@@ -151,6 +155,11 @@ pub const SCHEDULE_TASKS: [TaskConfig; TASK_COUNT] = [
         group: 3,
         budget_us: 300,
     },
+    TaskConfig {
+        name: "power",
+        group: 3,
+        budget_us: 100,
+    },
 ];
 
 /// Everything the flight software is configured with.
@@ -189,6 +198,12 @@ pub struct Plausibility {
     /// Readings in a row that continue a leaped time base before it is accepted as the
     /// device's new time base ([`DeviceHealth::resyncs`]).
     pub resync_readings: u32,
+    /// Largest bus power, W: ten times the power MER needs to drive (100 W, NASA, "Mars
+    /// Exploration Rover - Rover Energy"). A power reading above it is refused, and so is one
+    /// whose energy used grew faster than this since the last accepted reading (since boot for
+    /// the first): an energy leap would otherwise lock out every later reading, whose energy
+    /// used must not be lower.
+    pub bus_power_max_w: f64,
 }
 
 impl Default for Plausibility {
@@ -206,6 +221,7 @@ impl Plausibility {
         angle_margin_rad: 0.2,
         stamp_lead_factor: 4,
         resync_readings: 20,
+        bus_power_max_w: 1_000.0,
     };
 }
 
@@ -266,7 +282,12 @@ pub enum DeviceId {
     Camera = 2,
     /// Sun sensor.
     Sun = 3,
+    /// Power subsystem.
+    Power = 4,
 }
+
+/// Number of devices with health counters ([`DeviceId`]).
+pub const DEVICE_COUNT: usize = 5;
 
 /// Flight state apart from the devices and the executive.
 #[derive(Debug, Clone, Default)]
@@ -277,6 +298,9 @@ pub struct FlightState {
     pub joints: Option<JointState>,
     /// Last sun reading with the sun in view that passed the checks.
     pub sun: Option<SunReading>,
+    /// Last power reading that passed the checks (valid, finite, non-negative, the energy
+    /// used not lower than the previous accepted reading's).
+    pub power: Option<PowerReading>,
     /// Time stamp of the capture in progress, microseconds since boot.
     pub capture_pending_t_us: Option<u64>,
     /// Minor-frame tick at which the capture in progress was triggered.
@@ -284,9 +308,9 @@ pub struct FlightState {
     /// Time stamp of the last completed stereo capture, microseconds since boot.
     pub last_capture_t_us: Option<u64>,
     /// Device health counters, indexed by [`DeviceId`].
-    pub health: [DeviceHealth; 4],
+    pub health: [DeviceHealth; DEVICE_COUNT],
     /// Time-base state of each device, indexed by [`DeviceId`].
-    pub time_bases: [TimeBase; 4],
+    pub time_bases: [TimeBase; DEVICE_COUNT],
     /// Stereo frames completed.
     pub stereo_frames: u32,
     /// Telemetry records the sink refused.
@@ -317,14 +341,15 @@ impl FlightState {
         imu: None,
         joints: None,
         sun: None,
+        power: None,
         capture_pending_t_us: None,
         capture_pending_tick: 0,
         last_capture_t_us: None,
-        health: [DeviceHealth::EMPTY; 4],
+        health: [DeviceHealth::EMPTY; DEVICE_COUNT],
         time_bases: [TimeBase {
             last_tick: 0,
             candidate: None,
-        }; 4],
+        }; DEVICE_COUNT],
         stereo_frames: 0,
         telemetry_dropped: 0,
         exec_status: (0, false),
@@ -374,6 +399,7 @@ struct DevicesNoClock<P: Platform> {
     mobility: P::Mobility,
     camera: P::Camera,
     sun: P::Sun,
+    power: P::Power,
     telemetry: P::Telemetry,
     image_memory: P::ImageMemory,
 }
@@ -444,6 +470,7 @@ impl<P: Platform> Fsw<P> {
             mobility,
             camera,
             sun,
+            power,
             telemetry,
             image_memory,
         } = devices;
@@ -453,6 +480,7 @@ impl<P: Platform> Fsw<P> {
                 mobility,
                 camera,
                 sun,
+                power,
                 telemetry,
                 image_memory,
             },
@@ -786,6 +814,8 @@ impl<P: Platform> Work<'_, P> {
             health: self.state.health,
             stereo_frames: self.state.stereo_frames,
             telemetry_dropped: self.state.telemetry_dropped,
+            energy_used_j: self.state.power.map_or(0.0, |p| p.energy_used_j),
+            bus_power_w: self.state.power.map_or(0.0, |p| p.bus_power_w as f32),
         };
         self.send(RecordKind::FrameStatus, &record);
         let nav = NavTelemetry::from_navigator(tick, self.nav);
@@ -1028,6 +1058,54 @@ impl<P: Platform> Work<'_, P> {
             }
         }
     }
+
+    /// RG4 `power`: read the power subsystem (V99 sec. 3: the "current power reserves" the
+    /// sequencer monitors). A call error is counted; a time stamp that does not advance goes
+    /// through [`check_time`]; a reading the device flags invalid, with a non-finite or
+    /// negative energy or bus power, with less energy used than the last accepted reading
+    /// (the battery's discharge integral never decreases), or beyond
+    /// [`Plausibility::bus_power_max_w`] (the bus power, or the growth of the energy used
+    /// since the last accepted reading) is counted invalid and not passed on. A reading that
+    /// passes is kept ([`FlightState::power`]) and handed to [`Navigator::power`].
+    #[inline(never)]
+    fn read_power(&mut self, tick: u64) {
+        let health = &mut self.state.health[DeviceId::Power as usize];
+        let base = &mut self.state.time_bases[DeviceId::Power as usize];
+        match self.devices.power.read() {
+            Err(e) => count_error(health, rover_hal::Error::kind(&e)),
+            Ok(r) => {
+                let previous = self.state.power;
+                if !check_time(
+                    health,
+                    base,
+                    previous.map(|p| p.t_us),
+                    r.t_us,
+                    tick,
+                    self.limits,
+                ) {
+                    return;
+                }
+                let (t0_us, e0_j) = previous.map_or((0, 0.0), |p| (p.t_us, p.energy_used_j));
+                let elapsed_s = r.t_us.saturating_sub(t0_us) as f64 * 1e-6;
+                let max_w = self.limits.bus_power_max_w;
+                let plausible = r.valid
+                    && r.energy_used_j.is_finite()
+                    && r.bus_power_w.is_finite()
+                    && r.energy_used_j >= e0_j
+                    && r.energy_used_j - e0_j <= max_w * elapsed_s
+                    && r.bus_power_w >= 0.0
+                    && r.bus_power_w <= max_w;
+                if !plausible {
+                    count_invalid(health);
+                    return;
+                }
+                health.good = health.good.saturating_add(1);
+                base.accept(tick);
+                self.state.power = Some(r);
+                self.nav.power(&r);
+            }
+        }
+    }
 }
 
 // The tasks and the background are `#[inline(never)]` (here, in `Work` and in the navigator's
@@ -1046,6 +1124,7 @@ impl<P: Platform> TaskSet for Work<'_, P> {
             5 => self.send_status(tick),
             6 => self.trigger_stereo(tick),
             7 => self.read_sun(tick),
+            8 => self.read_power(tick),
             _ => {}
         }
     }

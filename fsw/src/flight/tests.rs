@@ -96,6 +96,20 @@ impl SunSensor for TestSun {
     }
 }
 
+/// A power subsystem replaying a script of readings.
+struct TestPower(Script<PowerReading, 10>);
+impl Power for TestPower {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<PowerReading, ErrorKind> {
+        self.0.pop()
+    }
+}
+
+/// A power subsystem that has no reading yet (`NotReady`, not a fault).
+fn no_power() -> TestPower {
+    TestPower(Script::new([Err(ErrorKind::NotReady); 10]))
+}
+
 struct RefusingTelemetry;
 impl Telemetry for RefusingTelemetry {
     type Error = ErrorKind;
@@ -111,6 +125,7 @@ impl Platform for TestPlatform {
     type Mobility = TestMobility;
     type Camera = StuckCamera;
     type Sun = TestSun;
+    type Power = TestPower;
     type Telemetry = RefusingTelemetry;
     type ImageMemory =
         crate::rectify::ImageMemory<std::vec::Vec<crate::rectify::MapNode>, std::vec::Vec<u8>>;
@@ -179,6 +194,7 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
         mobility: TestMobility(joint_script),
         camera: StuckCamera(None),
         sun: TestSun(sun_script),
+        power: no_power(),
         telemetry: RefusingTelemetry,
         image_memory: crate::rectify::ImageMemory {
             map: std::vec::Vec::new(),
@@ -225,6 +241,138 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
     assert_eq!(s.health[DeviceId::Camera as usize].faults(), 0);
     assert!(s.capture_pending_t_us.is_none());
     assert_eq!(s.stereo_frames, 0);
+}
+
+/// The last `FrameStatus` record the flight software sent (the navigation records are
+/// accepted and ignored).
+struct StatusTelemetry(Option<crate::telemetry::FrameStatus>);
+impl Telemetry for StatusTelemetry {
+    type Error = ErrorKind;
+    fn send(&mut self, record: &[u8]) -> Result<(), ErrorKind> {
+        if let Some((&tag, body)) = record.split_first() {
+            if tag == RecordKind::FrameStatus as u8 {
+                self.0 = Some(postcard::from_bytes(body).map_err(|_| ErrorKind::InvalidData)?);
+            }
+        }
+        Ok(())
+    }
+}
+
+struct PowerPlatform;
+impl Platform for PowerPlatform {
+    type Clock = TestClock;
+    type Imu = TestImu;
+    type Mobility = TestMobility;
+    type Camera = StuckCamera;
+    type Sun = TestSun;
+    type Power = TestPower;
+    type Telemetry = StatusTelemetry;
+    type ImageMemory =
+        crate::rectify::ImageMemory<std::vec::Vec<crate::rectify::MapNode>, std::vec::Vec<u8>>;
+}
+
+/// HAL-2 (issue 17): the RG4 `power` task keeps and hands to the navigator only plausible
+/// readings. A decreasing energy, a NaN energy, a reading the device flags invalid, a negative
+/// or infinite bus power, an energy leap (1e300 J, faster than the largest bus power) are
+/// counted invalid, a backwards time stamp and a call error are counted as such, and none of
+/// them replaces the last accepted reading (the leap does not lock out the next normal one);
+/// the status telemetry carries the accepted energy and power.
+#[test]
+fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
+    // RG4 runs at ticks 3, 1003, 2003... (5 s apart); the stamps follow the frame time.
+    let reading = |k: u64, energy_used_j: f64, bus_power_w: f64| PowerReading {
+        t_us: 5_000 * (1_000 * k + 3),
+        energy_used_j,
+        bus_power_w,
+        valid: true,
+    };
+    let first = reading(0, 10.0, 50.0);
+    let last = reading(8, 600.0, 40.0);
+    let flagged = PowerReading {
+        valid: false,
+        ..reading(3, 400.0, 50.0)
+    };
+    let backwards = PowerReading {
+        t_us: 1_000,
+        ..reading(7, 550.0, 50.0)
+    };
+    let script = Script::new([
+        Ok(first),
+        Ok(reading(1, 5.0, 50.0)),      // less energy used than before
+        Ok(reading(2, f64::NAN, 50.0)), // non-finite energy
+        Ok(flagged),                    // the device says invalid
+        Ok(reading(4, 450.0, -1.0)),    // negative power
+        Ok(reading(5, 500.0, f64::INFINITY)), // non-finite power
+        Ok(reading(6, 1e300, 50.0)),    // an energy leap
+        Ok(backwards),
+        Ok(last),
+        Err(ErrorKind::Timeout),
+    ]);
+    let devices = Devices::<PowerPlatform> {
+        clock: TestClock,
+        imu: TestImu(Script::new([Err(ErrorKind::NotReady); 7])),
+        mobility: TestMobility(Script::new([Err(ErrorKind::NotReady); 4])),
+        camera: StuckCamera(None),
+        sun: TestSun(Script::new([Err(ErrorKind::NotReady); 3])),
+        power: TestPower(script),
+        telemetry: StatusTelemetry(None),
+        image_memory: crate::rectify::ImageMemory {
+            map: std::vec::Vec::new(),
+            left: std::vec::Vec::new(),
+            right: std::vec::Vec::new(),
+        },
+    };
+    let config = FswConfig::rocky8([0.0; 3], 0.0);
+    let mut fsw = match Fsw::new(devices, &config, &[[0.0, 0.0], [1.0, 0.0]]) {
+        Ok(f) => f,
+        Err(e) => panic!("schedule refused: {e:?}"),
+    };
+    let power = |f: &Fsw<PowerPlatform>| f.state().health[DeviceId::Power as usize];
+    // The first reading is accepted; the next seven are each refused and the first stays.
+    for _ in 0..4 {
+        fsw.tick();
+    }
+    assert_eq!(fsw.state().power, Some(first));
+    assert_eq!(fsw.nav().last_power(), Some(first));
+    for k in 1..8u64 {
+        for _ in 0..1_000 {
+            fsw.tick();
+        }
+        assert_eq!(fsw.state().power, Some(first), "reading {k} refused");
+        assert_eq!(
+            fsw.nav().last_power(),
+            Some(first),
+            "reading {k} not passed on"
+        );
+    }
+    let h = power(&fsw);
+    assert_eq!(
+        (h.good, h.invalid, h.time_backwards, h.errors),
+        (1, 6, 1, 0)
+    );
+    // The ninth reading is accepted, then the device fails.
+    for _ in 0..2_000 {
+        fsw.tick();
+    }
+    assert_eq!(fsw.state().power, Some(last));
+    assert_eq!(fsw.nav().last_power(), Some(last));
+    let h = power(&fsw);
+    assert_eq!(
+        (h.good, h.invalid, h.time_backwards, h.errors),
+        (2, 6, 1, 1)
+    );
+    // The other devices' health is untouched by the power task.
+    assert_eq!(fsw.state().health[DeviceId::Sun as usize].faults(), 0);
+    // The status telemetry (RG2) carries the accepted reading and the power health.
+    for _ in 0..10 {
+        fsw.tick();
+    }
+    let Some(status) = fsw.devices.as_ref().and_then(|a| a.devices.telemetry.0) else {
+        panic!("no status record");
+    };
+    assert_eq!(status.energy_used_j, 600.0);
+    assert_eq!(status.bus_power_w, 40.0);
+    assert_eq!(status.health[DeviceId::Power as usize], h);
 }
 
 /// NAV-1: the navigator aligns on 400 samples at rest (tilt from gravity, heading from the sun
@@ -511,6 +659,7 @@ fn fp_3_implausible_values_and_time_leaps() {
         mobility: TestMobility(Script::new([Err(ErrorKind::NotReady); 4])),
         camera: StuckCamera(None),
         sun: TestSun(Script::new([Err(ErrorKind::NotReady); 3])),
+        power: no_power(),
         telemetry: RefusingTelemetry,
         image_memory: crate::rectify::ImageMemory {
             map: std::vec::Vec::new(),
@@ -667,6 +816,7 @@ fn fsw_with_lens(
         mobility: TestMobility(Script::new([Err(ErrorKind::NotReady); 4])),
         camera: HazcamCamera(StuckCamera(lens)),
         sun: TestSun(Script::new([Err(ErrorKind::NotReady); 3])),
+        power: no_power(),
         telemetry: RefusingTelemetry,
         image_memory: crate::rectify::ImageMemory {
             map: vec![crate::rectify::MapNode::default(); n(crate::rectify::MAP_NODES)],
@@ -723,6 +873,7 @@ impl Platform for HazcamPlatform {
     type Mobility = TestMobility;
     type Camera = HazcamCamera;
     type Sun = TestSun;
+    type Power = TestPower;
     type Telemetry = RefusingTelemetry;
     type ImageMemory =
         crate::rectify::ImageMemory<std::vec::Vec<crate::rectify::MapNode>, std::vec::Vec<u8>>;

@@ -192,6 +192,18 @@ pub const METRICS: &[MetricDef] = &[
         "largest rocker angle",
         false,
     ),
+    m(
+        "energy.used_j",
+        "J",
+        "battery energy used (truth energy model)",
+        false,
+    ),
+    m(
+        "energy.mean_power_w",
+        "W",
+        "mean electrical power (truth energy model)",
+        false,
+    ),
 ];
 
 /// Check that `name` is a metric ([`METRICS`] or `nav.<counter>`).

@@ -95,6 +95,19 @@ pub struct VoSummary {
     pub last_error: Option<String>,
 }
 
+/// Battery energy of a run: the simulator's truth energy model (`sim_host::energy`) and the
+/// flight software's last accepted power reading.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct EnergySummary {
+    /// Truth energy used over the run, J.
+    pub used_j: f64,
+    /// Truth mean electrical power over the run, W.
+    pub mean_power_w: f64,
+    /// Energy used of the last power reading the flight software accepted, J (null: none
+    /// accepted).
+    pub fsw_used_j: Option<f64>,
+}
+
 /// Timing of one rate group.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct GroupTimingJson {
@@ -164,6 +177,8 @@ pub struct Summary {
     pub device_health: serde_json::Map<String, serde_json::Value>,
     /// Stereo frames completed by the flight software.
     pub stereo_frames: u32,
+    /// Battery energy.
+    pub energy: EnergySummary,
     /// Who drove (`flight` or `reference`).
     pub driver: String,
     /// Slip compensation on.
@@ -583,7 +598,7 @@ pub fn summarise(run: &RunResult) -> Summary {
         },
         timing,
         device_faults: run.device_faults,
-        device_health: ["imu", "joints", "camera", "sun"]
+        device_health: ["imu", "joints", "camera", "sun", "power"]
             .iter()
             .zip(run.device_health.iter())
             .map(|(k, h)| {
@@ -594,6 +609,11 @@ pub fn summarise(run: &RunResult) -> Summary {
             })
             .collect(),
         stereo_frames: run.stereo_frames,
+        energy: EnergySummary {
+            used_j: run.energy_used_j,
+            mean_power_w: run.mean_power_w,
+            fsw_used_j: run.fsw_energy_used_j,
+        },
         driver: run.driver.clone(),
         slip_compensation: run.slip_compensation,
         nav_mode: format!("{:?}", run.nav_mode),

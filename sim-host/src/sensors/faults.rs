@@ -6,9 +6,9 @@
 //! | device | kind | effect | `value` (default) |
 //! |---|---|---|---|
 //! | any sensor | `dropout` | `ErrorKind::Timeout` | |
-//! | imu, joints, sun | `stuck` | last values repeated with fresh stamps (joints with `wheel`: that wheel's drive and steering values only) | |
-//! | imu, joints, sun | `nan` | NaN values (imu: gyro; joints: the wheel's drive angle, rate and steering, all wheels and the rocker without `wheel`; sun: vector) | |
-//! | imu, joints | `invalid` | the device's own validity flag false (imu `valid`, joints `wheel_valid[wheel]`, all wheels without `wheel`) | |
+//! | imu, joints, sun, power | `stuck` | last values repeated with fresh stamps (joints with `wheel`: that wheel's drive and steering values only) | |
+//! | imu, joints, sun, power | `nan` | NaN values (imu: gyro; joints: the wheel's drive angle, rate and steering, all wheels and the rocker without `wheel`; sun: vector; power: energy used and bus power) | |
+//! | imu, joints, power | `invalid` | the device's own validity flag false (imu `valid`, joints `wheel_valid[wheel]`, all wheels without `wheel`, power `valid`) | |
 //! | imu | `gyro_bias` | `value` added to the gyro axis `axis` (all axes without `axis`) | rad/s (0.01) |
 //! | imu | `accel_bias` | `value` added to the accelerometer axis `axis` (all without) | m/s^2 (0.5) |
 //! | imu | `gyro_saturation` | gyro axes clipped to `+-value` | rad/s (0.1) |
@@ -55,6 +55,8 @@ pub enum FaultDevice {
     Ground,
     /// Telemetry sink.
     Telemetry,
+    /// Power subsystem (battery energy used, bus power).
+    Power,
 }
 
 /// What goes wrong.
@@ -121,16 +123,16 @@ impl FaultKind {
     fn devices(self) -> &'static [FaultDevice] {
         use FaultDevice::*;
         match self {
-            FaultKind::Dropout => &[Imu, Joints, Camera, Sun, Clock, Telemetry],
-            FaultKind::Stuck => &[Imu, Joints, Camera, Sun, Clock],
-            FaultKind::Nan => &[Imu, Joints, Sun],
+            FaultKind::Dropout => &[Imu, Joints, Camera, Sun, Clock, Telemetry, Power],
+            FaultKind::Stuck => &[Imu, Joints, Camera, Sun, Clock, Power],
+            FaultKind::Nan => &[Imu, Joints, Sun, Power],
             FaultKind::BlackFrame
             | FaultKind::LostCapture
             | FaultKind::NeverComplete
             | FaultKind::Noise
             | FaultKind::Stripes => &[Camera],
-            FaultKind::TimeJump => &[Imu, Joints, Camera, Sun, Clock],
-            FaultKind::Invalid => &[Imu, Joints],
+            FaultKind::TimeJump => &[Imu, Joints, Camera, Sun, Clock, Power],
+            FaultKind::Invalid => &[Imu, Joints, Power],
             FaultKind::GyroBias
             | FaultKind::AccelBias
             | FaultKind::GyroSaturation

@@ -13,11 +13,12 @@ use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use cortex_m::peripheral::{SCB, SYST};
 use fsw::rectify::{MapNode, MAP_NODES};
 use rover_hal::{
-    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand,
-    StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry, IMAGE_PIXELS,
+    CaptureStatus, Clock, ErrorKind, Imu, ImuSample, JointState, Mobility, MobilityCommand, Power,
+    PowerReading, StereoCalibration, StereoCamera, StereoFrame, SunReading, SunSensor, Telemetry,
+    IMAGE_PIXELS,
 };
 use rover_replay::devices::{
-    ReplayClock, ReplayImu, ReplayMobility, ReplayStereo, ReplaySun, ReplayTelemetry,
+    ReplayClock, ReplayImu, ReplayMobility, ReplayPower, ReplayStereo, ReplaySun, ReplayTelemetry,
 };
 use rover_replay::Player;
 
@@ -28,6 +29,10 @@ use super::CORE_CLOCK_HZ;
 const MARS_GRAVITY_M_S2: f64 = 3.711;
 /// Minor-frame period, microseconds (simulated sensor time advances by this per SysTick).
 const FRAME_US: u64 = 5_000;
+/// Bus power of the rover standing awake, W: the host simulator's awake power (its truth energy
+/// model, `docs/simulator.md` "Energy model": a standing rover draws nothing for its motors),
+/// rounded to 0.01 W.
+const STILL_BUS_POWER_W: f64 = 98.37;
 
 /// The rover CPU's device types.
 pub struct TargetPlatform;
@@ -38,6 +43,7 @@ impl fsw::flight::Platform for TargetPlatform {
     type Mobility = TargetMobility;
     type Camera = TargetCamera;
     type Sun = TargetSun;
+    type Power = TargetPower;
     type Telemetry = TargetTelemetry;
     type ImageMemory = TargetImageMemory;
 }
@@ -139,6 +145,14 @@ pub enum TargetSun {
     Still(FixedSun),
     /// Replay.
     Replay(ReplaySun<Tape>),
+}
+
+/// Power subsystem.
+pub enum TargetPower {
+    /// Still run.
+    Still(ConstantPower),
+    /// Replay.
+    Replay(ReplayPower<Tape>),
 }
 
 /// Telemetry sink.
@@ -246,6 +260,16 @@ impl StereoCamera for TargetCamera {
 impl SunSensor for TargetSun {
     type Error = ErrorKind;
     fn read(&mut self) -> Result<SunReading, ErrorKind> {
+        match self {
+            Self::Still(d) => d.read(),
+            Self::Replay(d) => d.read(),
+        }
+    }
+}
+
+impl Power for TargetPower {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<PowerReading, ErrorKind> {
         match self {
             Self::Still(d) => d.read(),
             Self::Replay(d) => d.read(),
@@ -501,6 +525,32 @@ impl SunSensor for FixedSun {
             t_us: frame_time_us(self.ticks),
             sun_dir_rover: [0.866_025_403_784_438_6, 0.0, -0.5],
             sun_in_view: true,
+        })
+    }
+}
+
+/// Power subsystem of a rover standing awake: a constant bus power
+/// ([`STILL_BUS_POWER_W`]) integrated over the SysTick time, `energy_used_j = P t`.
+pub struct ConstantPower {
+    ticks: &'static AtomicU32,
+}
+
+impl ConstantPower {
+    /// A power subsystem stamped from the SysTick count.
+    pub fn new(ticks: &'static AtomicU32) -> Self {
+        Self { ticks }
+    }
+}
+
+impl Power for ConstantPower {
+    type Error = ErrorKind;
+    fn read(&mut self) -> Result<PowerReading, ErrorKind> {
+        let t_us = frame_time_us(self.ticks);
+        Ok(PowerReading {
+            t_us,
+            energy_used_j: STILL_BUS_POWER_W * t_us as f64 * 1e-6,
+            bus_power_w: STILL_BUS_POWER_W,
+            valid: true,
         })
     }
 }

@@ -4,7 +4,7 @@
 
 use super::devices::{
     self, take_image_buffers, ExtramStereo, SystickClock, TargetCamera, TargetClock, TargetImu,
-    TargetMobility, TargetPlatform, TargetSun, TargetTelemetry,
+    TargetMobility, TargetPlatform, TargetPower, TargetSun, TargetTelemetry,
 };
 use super::{report, CORE_CLOCK_HZ, SYSTICKS};
 use core::sync::atomic::Ordering;
@@ -36,6 +36,7 @@ pub fn run(mut core: cortex_m::Peripherals) -> bool {
         mobility: TargetMobility::Still(devices::StillMobility::new(&SYSTICKS)),
         camera: TargetCamera::Still(ExtramStereo::new([left, right], &SYSTICKS)),
         sun: TargetSun::Still(devices::FixedSun::new(&SYSTICKS)),
+        power: TargetPower::Still(devices::ConstantPower::new(&SYSTICKS)),
         telemetry: TargetTelemetry::Counting(devices::CountingTelemetry::default()),
         // The still camera delivers a rectified test pattern: no rectification memory.
         image_memory: fsw::rectify::ImageMemory {

@@ -7,7 +7,7 @@
 use super::bench::Bench;
 use super::devices::{
     player, take_image_buffers, take_rectify_maps, SystickClock, TargetCamera, TargetClock,
-    TargetImu, TargetMobility, TargetPlatform, TargetSun, TargetTelemetry,
+    TargetImu, TargetMobility, TargetPlatform, TargetPower, TargetSun, TargetTelemetry,
 };
 use super::measure::{
     repaint_stack, stack_high_water, stack_region, Meter, Stats, INSNS_PER_COUNT,
@@ -20,7 +20,7 @@ use fsw::exec::ExecConfig;
 use fsw::flight::{Devices, GROUP_COUNT};
 use fsw_image::flight_replay::{FlightSetup, Replay};
 use rover_replay::devices::{
-    ReplayClock, ReplayImu, ReplayMobility, ReplayStereo, ReplaySun, ReplayTelemetry,
+    ReplayClock, ReplayImu, ReplayMobility, ReplayPower, ReplayStereo, ReplaySun, ReplayTelemetry,
 };
 use rover_replay::tape::TapeReader;
 
@@ -137,6 +137,7 @@ pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
             ReplayStereo::new(tape, payload, slots, header.calibration).with_lens(header.lens),
         ),
         sun: TargetSun::Replay(ReplaySun::new(tape)),
+        power: TargetPower::Replay(ReplayPower::new(tape, header.has_power())),
         telemetry: TargetTelemetry::Replay(ReplayTelemetry::new(tape)),
         image_memory: fsw::rectify::ImageMemory {
             map: &mut map_fsw[..],
