@@ -145,13 +145,36 @@ const BASE: Variant = Variant {
     energy_budget_kj: None,
 };
 
-/// SIL-SEQ-2: `multi-target` with 40 kJ, less than the simulator's energy model needs for
-/// every target (about 56 kJ) but more than the flight software's a-priori model says the
-/// plan takes (about 30 kJ): only the power telemetry shows the shortfall.
+/// SIL-SEQ-2: `multi-target` with 54 kJ, less than the simulator's energy model needs for
+/// every target (56 kJ) but far more than the flight software's a-priori model says the plan
+/// takes (about 30 kJ): only the power telemetry shows the shortfall.
 const ENERGY_SHORT: Variant = Variant {
-    energy_budget_kj: Some(40),
+    energy_budget_kj: Some(54),
     ..BASE
 };
+
+/// Requirement: the truth energy of the run within the mission's budget (ratio).
+const WITHIN_ENERGY_BUDGET: Check = req(
+    "truth energy used / the mission's budget",
+    |s| {
+        s.targets
+            .as_ref()
+            .map(|t| s.energy.used_j / t.energy_budget_j)
+    },
+    Compare::AtMost,
+    1.0,
+    "",
+);
+
+/// Outcome `outcome` of target `i` as a flag.
+fn target_is(s: &Summary, i: usize, outcome: &str) -> Option<f64> {
+    let t = s.targets.as_ref()?;
+    Some(if t.outcomes.get(i).map(String::as_str) == Some(outcome) {
+        1.0
+    } else {
+        0.0
+    })
+}
 
 /// No slip, with the per-seed dimension and calibration errors (the gate's false alarms).
 const NO_SLIP: Variant = Variant {
@@ -353,7 +376,7 @@ const EKF_HALF_PERCENT: Check = goal(
 );
 
 /// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
-pub const CASES: [Case; 29] = [
+pub const CASES: [Case; 30] = [
     Case {
         id: "SIL-GNC-1",
         scenario: "slope-10-cross",
@@ -844,6 +867,46 @@ pub const CASES: [Case; 29] = [
                 |s| s.targets.as_ref().map(|t| f64::from(t.reorders)),
                 Compare::AtLeast,
                 1.0,
+                "",
+            ),
+            WITHIN_ENERGY_BUDGET,
+            NO_COLLISION,
+        ],
+    },
+    Case {
+        id: "SIL-SEQ-2",
+        scenario: "multi-target",
+        no_slip_comp: false,
+        variant: ENERGY_SHORT,
+        title: "As SIL-SEQ-1 with energy for two targets only, which the a-priori model does not show: the power telemetry drops the least important (V99 sec. 3)",
+        checks: &[
+            req(
+                "least important target (T2) dropped for energy",
+                |s| target_is(s, 2, "DroppedEnergy"),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            req(
+                "most important target (T0) visited",
+                |s| target_is(s, 0, "Visited"),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            WITHIN_ENERGY_BUDGET,
+            req(
+                "replans triggered by the energy telemetry",
+                |s| s.targets.as_ref().map(|t| f64::from(t.energy_triggers)),
+                Compare::AtLeast,
+                1.0,
+                "",
+            ),
+            goal(
+                "fitted power / truth mean power (drive)",
+                |s| s.targets.as_ref().map(|t| t.fsw_power_w[0] / s.energy.mean_power_w),
+                Compare::AtMost,
+                1.05,
                 "",
             ),
             NO_COLLISION,

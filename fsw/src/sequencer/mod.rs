@@ -551,6 +551,51 @@ impl Sequencer {
                 }
             }
         }
+        // Priority repair: a dropped target displaces lower-priority ones (the lowest first)
+        // when that makes it fit. Insertion in priority order already keeps the higher
+        // priorities, except where a target fits only behind another one (a leg penalty on the
+        // way from the rover: the insertion into the empty plan put it first).
+        for &c in &candidates {
+            // The displaced targets leave for the reason the displacing one was dropped.
+            let Some(TargetStatus::Dropped(reason)) = status.get(usize::from(c)).copied() else {
+                continue;
+            };
+            if reason == DropReason::Unreachable {
+                continue;
+            }
+            let Some(prio) = self.targets.get(usize::from(c)).map(|t| t.priority) else {
+                continue;
+            };
+            let mut trial = order.clone();
+            let mut removed: Vec<u8, MAX_TARGETS> = Vec::new();
+            for _ in 0..MAX_TARGETS {
+                if let Ok((o, _)) = self.insert(situation, &trial, c) {
+                    order = o;
+                    if let Some(s) = status.get_mut(usize::from(c)) {
+                        *s = TargetStatus::Pending;
+                    }
+                    for &r in &removed {
+                        if let Some(s) = status.get_mut(usize::from(r)) {
+                            *s = TargetStatus::Dropped(reason);
+                        }
+                    }
+                    break;
+                }
+                // The lowest priority below `prio` in the trial (the last of equal ones).
+                let victim = trial
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(k, &o)| {
+                        let p = self.targets.get(usize::from(o))?.priority;
+                        (p < prio).then_some((k, p))
+                    })
+                    .min_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)));
+                let Some((k, _)) = victim else {
+                    break;
+                };
+                let _ = removed.push(trial.remove(k));
+            }
+        }
         // Or-opt: move one target to another position while the plan gets shorter.
         for _ in 0..MAX_TARGETS * MAX_TARGETS {
             let Ok(current) = self.evaluate(situation, &order, None) else {

@@ -326,3 +326,33 @@ fn seq_5_unreachable_commitment_and_recalibration() {
     hungry.speed_m_s = 0.0;
     assert!(seq.set_model(hungry).is_err());
 }
+
+/// SEQ-6: priority repair. The most important target fits only behind another one (a leg
+/// penalty on the way from the rover); the energy allows two targets: the least important is
+/// dropped, not the most important (insertion into the empty plan alone would drop it).
+#[test]
+fn seq_6_a_penalised_high_priority_target_displaces_the_lowest() {
+    let targets = [
+        target(10.0, 0.0, 3),
+        target(2.0, 10.0, 2),
+        target(-8.0, 12.0, 1),
+    ];
+    let mut seq = Sequencer::new(&targets, ResourceModel::rocky8()).unwrap();
+    seq.set_leg_penalty(0, 40.0).unwrap();
+    // Energy of [1, 0] (no penalty: target 0 is not first) with a little to spare.
+    let mut timeline = Vec::new();
+    seq.evaluate(&situation(1e9), &[1, 0], Some(&mut timeline))
+        .unwrap();
+    let need = timeline[1].energy_j;
+    // Target 0 alone, first with its penalty, needs more than that.
+    assert!(seq.evaluate(&situation(need * 1.02), &[0], None).is_err());
+    let tight = situation(need * 1.02);
+    seq.replan(&tight).unwrap();
+    assert_eq!(seq.plan(), &[1, 0]);
+    assert_eq!(
+        seq.status(2),
+        Some(TargetStatus::Dropped(DropReason::Energy))
+    );
+    assert_eq!(seq.check(&tight), Ok(()));
+    independent_check(&seq, &tight).unwrap();
+}

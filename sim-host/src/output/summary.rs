@@ -306,8 +306,14 @@ pub struct TargetsSummary {
     pub energy_budget_j: f64,
     /// Energy used since the uplink as the flight software counted it at its last replan, J.
     pub fsw_energy_used_j: f64,
-    /// The flight software's power calibration (measured over its model's energy).
+    /// The flight software's power calibration: its fitted drive power over its a-priori
+    /// model's.
     pub calibration_ratio: f64,
+    /// The flight software's drive and idle powers at its last calibration, W (the simulator's
+    /// truth: `energy.mean_power_w`).
+    pub fsw_power_w: [f64; 2],
+    /// Calibrations by the two-power fit (the others scaled by one ratio).
+    pub power_fits: u32,
     /// Final phase of the mission.
     pub phase: String,
 }
@@ -528,6 +534,8 @@ pub fn summarise(run: &RunResult) -> Summary {
             energy_budget_j: m.energy_budget_j,
             fsw_energy_used_j: m.counters.energy_used_j,
             calibration_ratio: m.counters.calibration_ratio,
+            fsw_power_w: [m.counters.drive_power_w, m.counters.idle_power_w],
+            power_fits: m.counters.power_fits,
             phase: format!("{:?}", m.phase),
         }),
         localization: run.localization.as_ref().map(|l| {

@@ -17,10 +17,15 @@
 //!   targets: V99 Fig. 3's reorder).
 //! - **Commitment**: a replan switches the rover to another target only when that saves more
 //!   than [`COMMIT_HYSTERESIS_S`] of plan time (no dithering between targets).
-//! - **Calibration**: before each replan the model's drive and idle powers are scaled by the
-//!   ratio of the energy measured since the uplink to the energy the model gives for the same
-//!   history (time driving and standing), once [`CALIBRATION_MIN_S`] have passed; the ratio is
-//!   limited to [`CALIBRATION_RANGE`] (a counted clamp).
+//! - **Calibration**: before each replan and energy check the model's drive and idle powers
+//!   are fitted to the telemetry, once [`CALIBRATION_MIN_S`] have passed since the uplink.
+//!   Each interval between two power readings gives one equation `dE = P_drive t_drive +
+//!   P_idle t_stand` (the times booked in RG2); the least-squares solution of the normal
+//!   equations is used when both kinds of time are well represented (the two columns less
+//!   than [`CALIBRATION_MAX_CORRELATION`] correlated) and both powers come out within
+//!   [`CALIBRATION_RANGE`] of the model's; otherwise both powers are scaled by the ratio of
+//!   the measured to the modelled energy since the uplink, limited to [`CALIBRATION_RANGE`]
+//!   (a counted clamp).
 //! - **At a target** the rover stands for the target's dwell (science), then it is visited.
 //! - **Without power readings** the energy used is the model's own integral (counted).
 //!
@@ -51,8 +56,13 @@ pub const REPLAN_INTERVAL_M: f64 = 2.0;
 /// History (s since the uplink) before the powers are calibrated from the energy telemetry.
 pub const CALIBRATION_MIN_S: f64 = 60.0;
 
-/// Range of the calibration ratio (measured over modelled energy).
+/// Range of the calibration ratio (measured over modelled energy, or a fitted power over the
+/// model's).
 pub const CALIBRATION_RANGE: [f64; 2] = [0.25, 8.0];
+
+/// Largest correlation of the driving and standing times over the readings' intervals for
+/// the two-power fit (above it the fit is ill-conditioned and the single ratio is used).
+pub const CALIBRATION_MAX_CORRELATION: f64 = 0.99;
 
 /// The ground's budget for the day's targets.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -125,8 +135,14 @@ pub struct MissionCounters {
     pub power_missing: u32,
     /// Calibrations whose ratio was clamped to [`CALIBRATION_RANGE`].
     pub calibration_clamps: u32,
-    /// The last calibration ratio (measured over modelled energy; 1 before the first).
+    /// The last calibration's drive power over the model's (1 before the first).
     pub calibration_ratio: f64,
+    /// Drive and idle powers of the last calibration, W (the model's before the first).
+    pub drive_power_w: f64,
+    /// Idle power of the last calibration, W.
+    pub idle_power_w: f64,
+    /// Calibrations by the two-power fit (the others used the single ratio).
+    pub power_fits: u32,
     /// Energy used since the uplink at the last replan, J.
     pub energy_used_j: f64,
 }
@@ -164,6 +180,13 @@ pub(super) struct Mission {
     /// Time spent driving and standing since the uplink (RG2), s.
     drive_s: f64,
     stand_s: f64,
+    /// Times driving and standing since the last power reading, s.
+    interval_drive_s: f64,
+    interval_stand_s: f64,
+    /// Normal equations of the two-power fit: `[sum td^2, sum td ts, sum ts^2]` and
+    /// `[sum td dE, sum ts dE]`.
+    fit_ata: [f64; 3],
+    fit_atb: [f64; 2],
     last_cycle_t_us: Option<u64>,
     phase: MissionPhase,
     /// End of the dwell in progress, us.
@@ -197,6 +220,10 @@ impl Mission {
         uplink_t_us: 0,
         drive_s: 0.0,
         stand_s: 0.0,
+        interval_drive_s: 0.0,
+        interval_stand_s: 0.0,
+        fit_ata: [0.0; 3],
+        fit_atb: [0.0; 2],
         last_cycle_t_us: None,
         phase: MissionPhase::None,
         dwell_until_us: 0,
@@ -218,6 +245,9 @@ impl Mission {
             power_missing: 0,
             calibration_clamps: 0,
             calibration_ratio: 1.0,
+            drive_power_w: 0.0,
+            idle_power_w: 0.0,
+            power_fits: 0,
             energy_used_j: 0.0,
         },
     };
@@ -243,6 +273,20 @@ impl Navigator {
     /// against the energy left and a replan is asked for when it no longer fits.
     pub fn power(&mut self, reading: &PowerReading) {
         let m = &mut self.mission;
+        // One equation of the two-power fit per interval between readings.
+        if let (Some(prev), true) = (m.power, m.sequencer.is_some()) {
+            let de = reading.energy_used_j - prev.energy_used_j;
+            let (td, ts) = (m.interval_drive_s, m.interval_stand_s);
+            if de.is_finite() && de >= 0.0 && td + ts > 0.0 {
+                m.fit_ata[0] += td * td;
+                m.fit_ata[1] += td * ts;
+                m.fit_ata[2] += ts * ts;
+                m.fit_atb[0] += td * de;
+                m.fit_atb[1] += ts * de;
+            }
+        }
+        m.interval_drive_s = 0.0;
+        m.interval_stand_s = 0.0;
         m.power = Some(*reading);
         if m.sequencer.is_some() && m.energy_base_j.is_none() {
             // The first reading after the uplink: the energy the plan has used so far is the
@@ -295,6 +339,8 @@ impl Navigator {
         m.power = power;
         m.sequencer = Some(seq);
         m.model = model;
+        m.counters.drive_power_w = model.drive_power_w;
+        m.counters.idle_power_w = model.idle_power_w;
         m.budget = budget;
         m.energy_base_j = power.map(|p| p.energy_used_j);
         m.uplink_t_us = self.ekf.state().t_us;
@@ -376,8 +422,10 @@ impl Navigator {
             let dt = t.saturating_sub(last) as f64 * 1e-6;
             if moving {
                 m.drive_s += dt;
+                m.interval_drive_s += dt;
             } else {
                 m.stand_s += dt;
+                m.interval_stand_s += dt;
             }
         }
         m.last_cycle_t_us = Some(t);
@@ -545,7 +593,7 @@ impl Navigator {
         quantum.max(1)
     }
 
-    /// Scale the model's powers by the energy telemetry (module doc).
+    /// Fit the model's powers to the energy telemetry (module doc).
     fn mission_calibrate(&mut self) {
         let m = &mut self.mission;
         let (used, measured) = m.energy_used();
@@ -554,20 +602,45 @@ impl Navigator {
         if !measured || history < CALIBRATION_MIN_S || modelled <= 0.0 {
             return;
         }
-        let raw = used / modelled;
-        if !raw.is_finite() {
-            return;
-        }
-        let k = raw.clamp(CALIBRATION_RANGE[0], CALIBRATION_RANGE[1]);
-        if k != raw {
-            m.counters.calibration_clamps = m.counters.calibration_clamps.saturating_add(1);
-        }
+        let [a11, a12, a22] = m.fit_ata;
+        let [b1, b2] = m.fit_atb;
+        let det = a11 * a22 - a12 * a12;
+        let r = CALIBRATION_MAX_CORRELATION;
+        let within = |p: f64, model: f64| {
+            p.is_finite() && p >= model * CALIBRATION_RANGE[0] && p <= model * CALIBRATION_RANGE[1]
+        };
         let mut model = m.model;
-        model.drive_power_w *= k;
-        model.idle_power_w *= k;
+        let mut fitted = false;
+        if det > (1.0 - r * r) * a11 * a22 && det > 0.0 {
+            let drive = (a22 * b1 - a12 * b2) / det;
+            let idle = (a11 * b2 - a12 * b1) / det;
+            if within(drive, m.model.drive_power_w) && within(idle, m.model.idle_power_w) {
+                model.drive_power_w = drive;
+                model.idle_power_w = idle;
+                fitted = true;
+            }
+        }
+        if !fitted {
+            let raw = used / modelled;
+            if !raw.is_finite() {
+                return;
+            }
+            let k = raw.clamp(CALIBRATION_RANGE[0], CALIBRATION_RANGE[1]);
+            if k != raw {
+                m.counters.calibration_clamps = m.counters.calibration_clamps.saturating_add(1);
+            }
+            model.drive_power_w *= k;
+            model.idle_power_w *= k;
+        }
         if let Some(seq) = m.sequencer.as_mut() {
             if seq.set_model(model).is_ok() {
-                m.counters.calibration_ratio = k;
+                let c = &mut m.counters;
+                c.calibration_ratio = model.drive_power_w / m.model.drive_power_w.max(1e-9);
+                c.drive_power_w = model.drive_power_w;
+                c.idle_power_w = model.idle_power_w;
+                if fitted {
+                    c.power_fits = c.power_fits.saturating_add(1);
+                }
             }
         }
     }
@@ -812,5 +885,37 @@ mod tests {
         ekf_at(&mut blind, 1_000_000, [0.0, 0.0]);
         blind.mission_background(100);
         assert_eq!(blind.mission_counters().power_missing, 1);
+    }
+
+    /// MISSION-4: the two-power fit. Intervals of driving, standing and both, with the truth
+    /// drawing 100 W driving and 90 W standing (the model says 60 and 25 W): the fit recovers
+    /// both powers; with driving only it falls back to the single ratio.
+    #[test]
+    fn mission_4_two_power_fit() {
+        let targets = [target(50.0, 0.0, 1)];
+        let m = ResourceModel::rocky8();
+        let mut nav = navigator(true);
+        assert_eq!(nav.uplink_targets(&targets, m, budget(1e9)), Ok(()));
+        ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
+        nav.mission_background(100);
+        let (mut t, mut e) = (1_000_000u64, 5_000.0);
+        nav.power(&reading(t, e));
+        // 24 intervals of 5 s: driving for 0, 1, 2, 3, 4 or 5 s of each (RG2 at 20 Hz).
+        for k in 0..24u64 {
+            let drive_cycles = (k % 6) * 20;
+            for c in 0..100u64 {
+                t += 50_000;
+                ekf_at(&mut nav, t, [0.0, 0.0]);
+                nav.mission_book(c < drive_cycles);
+            }
+            let td = drive_cycles as f64 * 0.05;
+            e += 100.0 * td + 90.0 * (5.0 - td);
+            nav.power(&reading(t, e));
+        }
+        nav.mission_background(100);
+        let c = nav.mission_counters();
+        assert!(c.power_fits >= 1);
+        assert!((c.drive_power_w - 100.0).abs() < 1.0, "{}", c.drive_power_w);
+        assert!((c.idle_power_w - 90.0).abs() < 1.0, "{}", c.idle_power_w);
     }
 }
