@@ -508,16 +508,21 @@ fn groups(m: &Measured) -> Vec<Group> {
             name: "LOC",
             period_s: 5.0,
             insns: m.task("localize").max,
-            content: "terrain-map localization (issue 17; budgeted, not yet scheduled by the \
-                      flight software): at most one per hazard map, the HAZ bound"
+            content: "terrain-map localization (issue 17, `fsw::flight::nav::loc_nav`): a search \
+                      in background work items after the hazard map that completes a local \
+                      map (four maps, one every 0.5 m of travel) or a stop's view: at most one \
+                      per hazard map, the HAZ bound"
                 .into(),
         },
         Group {
             name: "SEQ",
-            period_s: 10.0,
+            period_s: 5.0,
             insns: m.task("sequencer_replan").max,
-            content: "on-board sequencer (issue 17; budgeted, not yet scheduled by the flight \
-                      software): at most one replan per 10 s (arrivals and triggers)"
+            content: "on-board sequencer (issue 17, `fsw::flight::nav::mission`): one replan in \
+                      a background slice per trigger (a dwell done, every 2 m of travel, a leg \
+                      grown at a RoverBug step, the energy check at a 0.2 Hz power reading): \
+                      at most one per power reading, 5 s, taken as the bound (SIL-SEQ-1 made \
+                      18 in 563 s)"
                 .into(),
         },
     ]
@@ -811,15 +816,15 @@ const TASK_DOC: [(&str, &str, &str); 16] = [
     (
         "localize",
         "`Localizer::localize`",
-        "background, after a hazard map (issue 17, not yet scheduled by the flight software): \
-         one branch-and-bound localization of a hazard grid against that map, prior 0.3 m / \
+        "background, after a hazard map (issue 17): one branch-and-bound localization of a hazard grid against that map, prior 0.3 m / \
          0.03 rad, 8 synthetic trials",
     ),
     (
         "sequencer_replan",
-        "`Sequencer::replan`",
-        "on arrival or a trigger (issue 17, not yet scheduled by the flight software): one \
-         replan of 8 targets with windows, energy and a leg penalty, 8 random problems",
+        "`Sequencer::replan_committed`",
+        "background, on a trigger of the navigator's mission (issue 17): one replan of 8 \
+         targets with windows, energy, a leg penalty and the commitment to one target, 8 random \
+         problems",
     ),
 ];
 

@@ -593,7 +593,16 @@ impl Sequencer {
                 let Some((k, _)) = victim else {
                     break;
                 };
-                let _ = removed.push(trial.remove(k));
+                // Out of `trial` without a panicking `remove` (no panic path, issue 18).
+                let mut rest: Vec<u8, MAX_TARGETS> = Vec::new();
+                for (j, &o) in trial.iter().enumerate() {
+                    if j == k {
+                        let _ = removed.push(o);
+                    } else {
+                        let _ = rest.push(o);
+                    }
+                }
+                trial = rest;
             }
         }
         // Or-opt: move one target to another position while the plan gets shorter.
