@@ -314,6 +314,8 @@ pub struct TargetsSummary {
     pub fsw_power_w: [f64; 2],
     /// Calibrations by the two-power fit (the others scaled by one ratio).
     pub power_fits: u32,
+    /// Localization stops the sequencer planned for (position uncertainty too large).
+    pub localizations: u32,
     /// Final phase of the mission.
     pub phase: String,
 }
@@ -536,6 +538,7 @@ pub fn summarise(run: &RunResult) -> Summary {
             calibration_ratio: m.counters.calibration_ratio,
             fsw_power_w: [m.counters.drive_power_w, m.counters.idle_power_w],
             power_fits: m.counters.power_fits,
+            localizations: m.counters.localizations,
             phase: format!("{:?}", m.phase),
         }),
         localization: run.localization.as_ref().map(|l| {

@@ -643,7 +643,11 @@ impl Navigator {
     /// its views are the headings whose hazcam wedge holds the most mapped rocks
     /// ([`crate::localization::select_target`], V99 sec. 5's target selection).
     pub(super) fn loc_command(&mut self) -> Option<Option<VehicleCommand>> {
-        if self.config.hazard_avoidance || !self.ekf_running {
+        // Goal-directed drives stop only with the day's targets, on the sigma trigger (the
+        // sequencer's "localize now", V99 sec. 3).
+        // Not while dwelling at a target or waiting for a plan.
+        let mission = matches!(self.mission_phase(), super::MissionPhase::Driving { .. });
+        if (self.config.hazard_avoidance && !mission) || !self.ekf_running {
             return None;
         }
         let s = self.config.localization;
@@ -665,7 +669,8 @@ impl Navigator {
                 // Routine stops only while VO is off or lost (with VO the maps of the drive
                 // localize when the terrain allows; turning in place for views cost VO 5
                 // failures on `marsyard-25m`); the sigma trigger always.
-                let due = (vo_lost && s.stop_interval_m > 0.0 && d >= s.stop_interval_m)
+                let routine = !mission && vo_lost && s.stop_interval_m > 0.0;
+                let due = (routine && d >= s.stop_interval_m)
                     || (sigma > s.stop_sigma_fraction * max_sigma && d >= s.stop_min_spacing_m);
                 if !due {
                     return None;
@@ -673,6 +678,8 @@ impl Navigator {
                 l.counters.stops = l.counters.stops.saturating_add(1);
                 l.plan_views(pos, yaw, usize::from(s.stop_views), sweep);
                 l.stop = Stop::Turning { view: 0 };
+                // The sequencer accounts the stop's time and energy (and may drop targets).
+                self.mission_localization_started();
                 Some(None)
             }
             Stop::Turning { view } => {
@@ -710,6 +717,12 @@ impl Navigator {
             }
             Stop::Searching => Some(None),
         }
+    }
+
+    /// True while a localization stop holds the rover (turning, waiting for a view's map,
+    /// searching).
+    pub(super) fn loc_stop_active(&self) -> bool {
+        self.loc.as_ref().is_some_and(|l| l.stop != Stop::Idle)
     }
 
     /// Starts the search of the local map around the newest map's EKF pose.

@@ -143,6 +143,9 @@ pub struct MissionCounters {
     pub idle_power_w: f64,
     /// Calibrations by the two-power fit (the others used the single ratio).
     pub power_fits: u32,
+    /// Localization stops the sequencer put at the head of the plan (V99 sec. 3: the
+    /// position uncertainty grew too large).
+    pub localizations: u32,
     /// Energy used since the uplink at the last replan, J.
     pub energy_used_j: f64,
 }
@@ -248,6 +251,7 @@ impl Mission {
             drive_power_w: 0.0,
             idle_power_w: 0.0,
             power_fits: 0,
+            localizations: 0,
             energy_used_j: 0.0,
         },
     };
@@ -414,7 +418,14 @@ impl Navigator {
     /// driving (`moving`: wheel rates were commanded) or standing, for the calibration.
     pub(super) fn mission_book(&mut self, moving: bool) {
         let t = self.ekf.state().t_us;
+        let stop = self.loc_stop_active();
         let m = &mut self.mission;
+        // A localization stop over: the sequencer's localization is done.
+        if let Some(seq) = m.sequencer.as_mut() {
+            if seq.localization_due() && !stop {
+                seq.localized();
+            }
+        }
         if m.phase == MissionPhase::None {
             return;
         }
@@ -478,6 +489,18 @@ impl Navigator {
         m.dwell_until_us = t.saturating_add(dwell_us);
         m.phase = MissionPhase::Dwelling { target };
         true
+    }
+
+    /// A localization stop began (terrain-map localization's sigma trigger, V99 sec. 3's
+    /// "localize now"): the sequencer puts the localization at the head of the plan and a
+    /// replan accounts its time and energy.
+    pub(super) fn mission_localization_started(&mut self) {
+        let m = &mut self.mission;
+        if let Some(seq) = m.sequencer.as_mut() {
+            seq.request_localization();
+            m.counters.localizations = seq.counters().localizations;
+            m.replan_due = true;
+        }
     }
 
     /// The path planner gave up on the current target (unreachable, or blocked without a
@@ -917,5 +940,40 @@ mod tests {
         assert!(c.power_fits >= 1);
         assert!((c.drive_power_w - 100.0).abs() < 1.0, "{}", c.drive_power_w);
         assert!((c.idle_power_w - 90.0).abs() < 1.0, "{}", c.idle_power_w);
+    }
+
+    /// MISSION-5: a localization stop (the position sigma's "localize now") goes to the head
+    /// of the plan with its time, and is done once the stop is over.
+    #[test]
+    fn mission_5_localization_stop_is_planned_and_done() {
+        let targets = [target(5.0, 0.0, 1)];
+        let m = ResourceModel::rocky8();
+        let mut nav = navigator(true);
+        assert_eq!(nav.uplink_targets(&targets, m, budget(1e9)), Ok(()));
+        ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
+        nav.mission_background(100);
+        let before = nav
+            .mission
+            .sequencer
+            .as_ref()
+            .and_then(|s| s.timeline().first().copied())
+            .map_or(0.0, |s| s.start_s);
+        nav.mission_localization_started();
+        assert!(nav.mission_replan_due());
+        nav.mission_background(100);
+        let seq = nav.mission.sequencer.as_ref();
+        assert_eq!(seq.map(|s| s.localization_due()), Some(true));
+        let after = seq
+            .and_then(|s| s.timeline().first().copied())
+            .map_or(0.0, |s| s.start_s);
+        assert!(
+            (after - before - m.localization_s).abs() < 1e-6,
+            "{before} {after}"
+        );
+        assert_eq!(nav.mission_counters().localizations, 1);
+        // No stop in progress (localization off here): the next RG2 cycle marks it done.
+        nav.mission_book(false);
+        let seq = nav.mission.sequencer.as_ref();
+        assert_eq!(seq.map(|s| s.localization_due()), Some(false));
     }
 }
