@@ -1,4 +1,4 @@
-//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7, SIL-HAZ-1..3, SIL-LOC-1..2: closed-loop scenario runs of the flight software on the
+//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7, SIL-HAZ-1..3, SIL-LOC-1..2, SIL-SEQ-1..2: closed-loop scenario runs of the flight software on the
 //! simulator with rendered stereo, against the thresholds of `sim_host::sil::CASES` (the same
 //! table `sim-host sil` writes to `docs/sil-results.md`).
 
@@ -61,6 +61,16 @@ fn sil_loc_1_marsyard_localization_without_vo() {
 #[test]
 fn sil_loc_2_wrong_map_is_not_fused() {
     check("SIL-LOC-2");
+}
+
+#[test]
+fn sil_seq_1_multi_target_reorder() {
+    check("SIL-SEQ-1");
+}
+
+#[test]
+fn sil_seq_2_energy_shortfall_drops_the_least_important() {
+    check("SIL-SEQ-2");
 }
 
 #[test]
