@@ -857,14 +857,14 @@ pub const CASES: [Case; 30] = [
             ),
             req(
                 "targets visited",
-                |s| s.targets.as_ref().map(|t| f64::from(t.visited)),
+                |s| s.targets.as_ref().map(|t| f64::from(t.counters.visited)),
                 Compare::AtLeast,
                 3.0,
                 "",
             ),
             req(
                 "replans that changed the order (Fig. 3)",
-                |s| s.targets.as_ref().map(|t| f64::from(t.reorders)),
+                |s| s.targets.as_ref().map(|t| f64::from(t.counters.reorders)),
                 Compare::AtLeast,
                 1.0,
                 "",
@@ -897,14 +897,14 @@ pub const CASES: [Case; 30] = [
             WITHIN_ENERGY_BUDGET,
             req(
                 "replans triggered by the energy telemetry",
-                |s| s.targets.as_ref().map(|t| f64::from(t.energy_triggers)),
+                |s| s.targets.as_ref().map(|t| f64::from(t.counters.energy_triggers)),
                 Compare::AtLeast,
                 1.0,
                 "",
             ),
             goal(
                 "fitted power / truth mean power (drive)",
-                |s| s.targets.as_ref().map(|t| t.fsw_power_w[0] / s.energy.mean_power_w),
+                |s| s.targets.as_ref().map(|t| t.counters.drive_power_w / s.energy.mean_power_w),
                 Compare::AtMost,
                 1.05,
                 "",

@@ -272,29 +272,15 @@ pub struct LocalizationSummary {
     pub last_error: Option<String>,
 }
 
-/// The day's targets and the on-board sequencer of a run (issue 17, V99 sec. 3).
+/// The day's targets and the on-board sequencer of a run (issue 17, V99 sec. 3): the flight
+/// software's counters (`total`, `visited`, `dropped`, `unreachable`, `replans`, `reorders`,
+/// the triggers, `goal_switches`, the power calibration, `energy_used_j` since the uplink at
+/// its last replan; `fsw::flight::nav::MissionCounters`) and the outcome per target.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct TargetsSummary {
-    /// Targets uplinked.
-    pub total: u32,
-    /// Targets visited (reached and dwelt at).
-    pub visited: u32,
-    /// Targets dropped (energy, window, horizon, unreachable).
-    pub dropped: u32,
-    /// Of them, found unreachable by the path planner.
-    pub unreachable: u32,
-    /// Replans.
-    pub replans: u32,
-    /// Replans that changed the order of the targets.
-    pub reorders: u32,
-    /// Replans triggered by a leg growing (an unexpected obstacle).
-    pub leg_triggers: u32,
-    /// Replans triggered by the energy telemetry.
-    pub energy_triggers: u32,
-    /// Replans after 2 m of travel (the opportunity check).
-    pub travel_triggers: u32,
-    /// Switches to another target while driving.
-    pub goal_switches: u32,
+    /// The flight software's counters, flattened into this object.
+    #[serde(flatten)]
+    pub counters: fsw::flight::nav::MissionCounters,
     /// Order of the visits (target indices).
     pub order: Vec<usize>,
     /// Outcome per target (scenario order).
@@ -304,18 +290,6 @@ pub struct TargetsSummary {
     pub miss_m: Vec<Option<f64>>,
     /// The ground's energy budget, J.
     pub energy_budget_j: f64,
-    /// Energy used since the uplink as the flight software counted it at its last replan, J.
-    pub fsw_energy_used_j: f64,
-    /// The flight software's power calibration: its fitted drive power over its a-priori
-    /// model's.
-    pub calibration_ratio: f64,
-    /// The flight software's drive and idle powers at its last calibration, W (the simulator's
-    /// truth: `energy.mean_power_w`).
-    pub fsw_power_w: [f64; 2],
-    /// Calibrations by the two-power fit (the others scaled by one ratio).
-    pub power_fits: u32,
-    /// Localization stops the sequencer planned for (position uncertainty too large).
-    pub localizations: u32,
     /// Final phase of the mission.
     pub phase: String,
 }
@@ -518,27 +492,13 @@ pub fn summarise(run: &RunResult) -> Summary {
                 .collect(),
         },
         targets: run.mission.as_ref().map(|m| TargetsSummary {
-            total: m.counters.total,
-            visited: m.counters.visited,
-            dropped: m.counters.dropped,
-            unreachable: m.counters.unreachable,
-            replans: m.counters.replans,
-            reorders: m.counters.reorders,
-            leg_triggers: m.counters.leg_triggers,
-            energy_triggers: m.counters.energy_triggers,
-            travel_triggers: m.counters.travel_triggers,
-            goal_switches: m.counters.goal_switches,
+            counters: m.counters,
             order: m.order.clone(),
             outcomes: m.outcomes.iter().map(|o| format!("{o:?}")).collect(),
             miss_m: (0..m.outcomes.len())
                 .map(|i| m.visits.iter().find(|v| v.target == i).map(|v| v.miss_m))
                 .collect(),
             energy_budget_j: m.energy_budget_j,
-            fsw_energy_used_j: m.counters.energy_used_j,
-            calibration_ratio: m.counters.calibration_ratio,
-            fsw_power_w: [m.counters.drive_power_w, m.counters.idle_power_w],
-            power_fits: m.counters.power_fits,
-            localizations: m.counters.localizations,
             phase: format!("{:?}", m.phase),
         }),
         localization: run.localization.as_ref().map(|l| {
