@@ -25,7 +25,12 @@
 //!   than [`CALIBRATION_MAX_CORRELATION`] correlated) and both powers come out within
 //!   [`CALIBRATION_RANGE`] of the model's; otherwise both powers are scaled by the ratio of
 //!   the measured to the modelled energy since the uplink, limited to [`CALIBRATION_RANGE`]
-//!   (a counted clamp).
+//!   (a counted clamp). The planned speed is the EKF path length over the time spent driving
+//!   to targets (holds for maps and gazes included, as the model's speed counts them) once
+//!   [`CALIBRATION_MIN_S`] of it have passed, and the detour factor the path length over the
+//!   straight line of the legs that reached their target, once [`CALIBRATION_MIN_LEG_M`] of
+//!   straight line were driven; both limited to [`CALIBRATION_RANGE`] of the model's (the
+//!   detour factor also to at least 1).
 //! - **At a target** the rover stands for the target's dwell (science), then it is visited.
 //! - **Without power readings** the energy used is the model's own integral (counted).
 //!
@@ -59,6 +64,9 @@ pub const CALIBRATION_MIN_S: f64 = 60.0;
 /// Range of the calibration ratio (measured over modelled energy, or a fitted power over the
 /// model's).
 pub const CALIBRATION_RANGE: [f64; 2] = [0.25, 8.0];
+
+/// Straight-line length (m) of completed legs before the detour factor is calibrated.
+pub const CALIBRATION_MIN_LEG_M: f64 = 3.0;
 
 /// Largest correlation of the driving and standing times over the readings' intervals for
 /// the two-power fit (above it the fit is ill-conditioned and the single ratio is used).
@@ -143,6 +151,10 @@ pub struct MissionCounters {
     pub idle_power_w: f64,
     /// Calibrations by the two-power fit (the others used the single ratio).
     pub power_fits: u32,
+    /// Planned speed of the last calibration, m/s (the model's before the first).
+    pub speed_m_s: f64,
+    /// Detour factor of the last calibration (the model's before the first).
+    pub detour_factor: f64,
     /// Localization stops the sequencer put at the head of the plan (V99 sec. 3: the
     /// position uncertainty grew too large).
     pub localizations: u32,
@@ -191,6 +203,17 @@ pub(super) struct Mission {
     fit_ata: [f64; 3],
     fit_atb: [f64; 2],
     last_cycle_t_us: Option<u64>,
+    /// EKF position at the last RG2 cycle, m.
+    last_xy: Option<[f64; 2]>,
+    /// Time driving to targets (phase `Driving`) and the EKF path length meanwhile, s and m.
+    leg_time_s: f64,
+    travel_m: f64,
+    /// Start of the current leg and its path length so far, m.
+    leg_start_xy: Option<[f64; 2]>,
+    leg_travel_m: f64,
+    /// Path length and straight line of the legs that reached their target, m.
+    legs_travel_m: f64,
+    legs_straight_m: f64,
     phase: MissionPhase,
     /// End of the dwell in progress, us.
     dwell_until_us: u64,
@@ -228,6 +251,13 @@ impl Mission {
         fit_ata: [0.0; 3],
         fit_atb: [0.0; 2],
         last_cycle_t_us: None,
+        last_xy: None,
+        leg_time_s: 0.0,
+        travel_m: 0.0,
+        leg_start_xy: None,
+        leg_travel_m: 0.0,
+        legs_travel_m: 0.0,
+        legs_straight_m: 0.0,
         phase: MissionPhase::None,
         dwell_until_us: 0,
         replan_due: false,
@@ -251,6 +281,8 @@ impl Mission {
             drive_power_w: 0.0,
             idle_power_w: 0.0,
             power_fits: 0,
+            speed_m_s: 0.0,
+            detour_factor: 0.0,
             localizations: 0,
             energy_used_j: 0.0,
         },
@@ -345,6 +377,8 @@ impl Navigator {
         m.model = model;
         m.counters.drive_power_w = model.drive_power_w;
         m.counters.idle_power_w = model.idle_power_w;
+        m.counters.speed_m_s = model.speed_m_s;
+        m.counters.detour_factor = model.detour_factor;
         m.budget = budget;
         m.energy_base_j = power.map(|p| p.energy_used_j);
         m.uplink_t_us = self.ekf.state().t_us;
@@ -418,6 +452,10 @@ impl Navigator {
     /// driving (`moving`: wheel rates were commanded) or standing, for the calibration.
     pub(super) fn mission_book(&mut self, moving: bool) {
         let t = self.ekf.state().t_us;
+        let xy = {
+            let p = self.ekf.state().p_n;
+            [p.x, p.y]
+        };
         let stop = self.loc_stop_active();
         let m = &mut self.mission;
         // A localization stop over: the sequencer's localization is done.
@@ -438,8 +476,20 @@ impl Navigator {
                 m.stand_s += dt;
                 m.interval_stand_s += dt;
             }
+            if matches!(m.phase, MissionPhase::Driving { .. }) {
+                let step = m
+                    .last_xy
+                    .map_or(0.0, |q| libm::hypot(xy[0] - q[0], xy[1] - q[1]));
+                // A non-finite estimate adds nothing (fault protection handles it).
+                if step.is_finite() {
+                    m.leg_time_s += dt;
+                    m.travel_m += step;
+                    m.leg_travel_m += step;
+                }
+            }
         }
         m.last_cycle_t_us = Some(t);
+        m.last_xy = Some(xy);
     }
 
     /// RG2, from [`Self::guidance_cycle`]: the mission's say in the motor command. `Some(())`
@@ -484,6 +534,20 @@ impl Navigator {
             .and_then(|s| s.targets().get(usize::from(target)))
             .map(|t| t.dwell_s)
             .unwrap_or(0.0);
+        // The leg reached its target: its path length over its straight line (detour).
+        let goal = m
+            .sequencer
+            .as_ref()
+            .and_then(|s| s.targets().get(usize::from(target)))
+            .map(|t| t.position_m);
+        if let (Some(a), Some(b)) = (m.leg_start_xy, goal) {
+            let straight = libm::hypot(b[0] - a[0], b[1] - a[1]);
+            if straight.is_finite() && m.leg_travel_m.is_finite() {
+                m.legs_straight_m += straight;
+                m.legs_travel_m += m.leg_travel_m;
+            }
+        }
+        m.leg_start_xy = None;
         // Dwells are finite and non-negative (the sequencer checked them); whole us.
         let dwell_us = (dwell_s * 1e6) as u64;
         m.dwell_until_us = t.saturating_add(dwell_us);
@@ -622,9 +686,8 @@ impl Navigator {
         let (used, measured) = m.energy_used();
         let history = m.drive_s + m.stand_s;
         let modelled = m.modelled_energy(&m.model);
-        if !measured || history < CALIBRATION_MIN_S || modelled <= 0.0 {
-            return;
-        }
+        // The powers need the telemetry and some history; speed and detour only the drive.
+        let powers = measured && history >= CALIBRATION_MIN_S && modelled > 0.0;
         let [a11, a12, a22] = m.fit_ata;
         let [b1, b2] = m.fit_atb;
         let det = a11 * a22 - a12 * a12;
@@ -633,8 +696,23 @@ impl Navigator {
             p.is_finite() && p >= model * CALIBRATION_RANGE[0] && p <= model * CALIBRATION_RANGE[1]
         };
         let mut model = m.model;
+        // Speed and detour factor from the drive (module doc).
+        let ratio_ok =
+            |x: f64| x.is_finite() && (CALIBRATION_RANGE[0]..=CALIBRATION_RANGE[1]).contains(&x);
+        if m.leg_time_s >= CALIBRATION_MIN_S {
+            let speed = m.travel_m / m.leg_time_s;
+            if ratio_ok(speed / m.model.speed_m_s) {
+                model.speed_m_s = speed;
+            }
+        }
+        if m.legs_straight_m >= CALIBRATION_MIN_LEG_M {
+            let detour = (m.legs_travel_m / m.legs_straight_m).max(1.0);
+            if ratio_ok(detour / m.model.detour_factor) {
+                model.detour_factor = detour;
+            }
+        }
         let mut fitted = false;
-        if det > (1.0 - r * r) * a11 * a22 && det > 0.0 {
+        if powers && det > (1.0 - r * r) * a11 * a22 && det > 0.0 {
             let drive = (a22 * b1 - a12 * b2) / det;
             let idle = (a11 * b2 - a12 * b1) / det;
             if within(drive, m.model.drive_power_w) && within(idle, m.model.idle_power_w) {
@@ -643,11 +721,8 @@ impl Navigator {
                 fitted = true;
             }
         }
-        if !fitted {
-            let raw = used / modelled;
-            if !raw.is_finite() {
-                return;
-            }
+        let raw = used / modelled;
+        if powers && !fitted && raw.is_finite() {
             let k = raw.clamp(CALIBRATION_RANGE[0], CALIBRATION_RANGE[1]);
             if k != raw {
                 m.counters.calibration_clamps = m.counters.calibration_clamps.saturating_add(1);
@@ -661,6 +736,8 @@ impl Navigator {
                 c.calibration_ratio = model.drive_power_w / m.model.drive_power_w.max(1e-9);
                 c.drive_power_w = model.drive_power_w;
                 c.idle_power_w = model.idle_power_w;
+                c.speed_m_s = model.speed_m_s;
+                c.detour_factor = model.detour_factor;
                 if fitted {
                     c.power_fits = c.power_fits.saturating_add(1);
                 }
@@ -694,6 +771,8 @@ impl Navigator {
             .and_then(|p| Guidance::new(p, self.config.guidance).ok())
             .or(self.guidance.take());
         self.mission.phase = MissionPhase::Driving { target: i as u8 };
+        self.mission.leg_start_xy = Some(position);
+        self.mission.leg_travel_m = 0.0;
         if self.mode == NavMode::Arrived {
             self.mode = NavMode::Driving;
         }
@@ -975,5 +1054,58 @@ mod tests {
         nav.mission_book(false);
         let seq = nav.mission.sequencer.as_ref();
         assert_eq!(seq.map(|s| s.localization_due()), Some(false));
+    }
+
+    /// MISSION-6: speed and detour factor from the drive. A 6 m leg driven as 9 m of EKF path
+    /// in 100 s: speed 0.09 m/s, detour 1.5 after the arrival; before 60 s of driving and 3 m
+    /// of completed legs the model's figures stay.
+    #[test]
+    fn mission_6_speed_and_detour_from_the_drive() {
+        let targets = [target(6.0, 0.0, 1), target(6.0, 20.0, 1)];
+        let m = ResourceModel::rocky8();
+        let mut nav = navigator(true);
+        assert_eq!(nav.uplink_targets(&targets, m, budget(1e9)), Ok(()));
+        ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
+        nav.mission_book(false);
+        nav.mission_background(100);
+        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 0 });
+        // A dog-leg: 4.5 m east-north-east then back, 9 m of path in 100 s (RG2 at 20 Hz).
+        let path = |k: u64| -> [f64; 2] {
+            let s = k as f64 * 0.0045;
+            if s <= 4.5 {
+                [s * 0.6, s * 0.8]
+            } else {
+                [2.7 + (s - 4.5) * (3.3 / 4.5), 3.6 - (s - 4.5) * 0.8]
+            }
+        };
+        for k in 1..=2000u64 {
+            ekf_at(&mut nav, 1_000_000 + k * 50_000, path(k));
+            nav.mission_book(true);
+        }
+        let c = nav.mission_counters();
+        assert_eq!(
+            (c.speed_m_s, c.detour_factor),
+            (m.speed_m_s, m.detour_factor)
+        );
+        assert!(nav.mission_arrived());
+        nav.mission_calibrate();
+        let c = nav.mission_counters();
+        let travel: f64 = (1..=2000u64)
+            .map(|k| {
+                let (a, b) = (path(k - 1), path(k));
+                (b[0] - a[0]).hypot(b[1] - a[1])
+            })
+            .sum();
+        assert!(
+            (c.speed_m_s - travel / 100.0).abs() < 1e-9,
+            "{}",
+            c.speed_m_s
+        );
+        assert!(
+            (c.detour_factor - travel / 6.0).abs() < 1e-9,
+            "{}",
+            c.detour_factor
+        );
+        assert!(c.detour_factor > 1.4 && c.detour_factor < 1.6);
     }
 }
