@@ -190,8 +190,6 @@ pub(super) struct Mission {
     budget: MissionBudget,
     /// Energy used at the first power reading after the uplink, J.
     energy_base_j: Option<f64>,
-    /// Time of the uplink, us.
-    uplink_t_us: u64,
     /// Time spent driving and standing since the uplink (RG2), s.
     drive_s: f64,
     stand_s: f64,
@@ -243,7 +241,6 @@ impl Mission {
             end_s: 0.0,
         },
         energy_base_j: None,
-        uplink_t_us: 0,
         drive_s: 0.0,
         stand_s: 0.0,
         interval_drive_s: 0.0,
@@ -381,7 +378,6 @@ impl Navigator {
         m.counters.detour_factor = model.detour_factor;
         m.budget = budget;
         m.energy_base_j = power.map(|p| p.energy_used_j);
-        m.uplink_t_us = self.ekf.state().t_us;
         m.phase = MissionPhase::Planning;
         m.replan_due = true;
         m.counters.total = u32::try_from(targets.len()).unwrap_or(u32::MAX);
@@ -451,6 +447,10 @@ impl Navigator {
     /// RG2, first in [`Self::guidance_cycle`]: the time since the last cycle is booked as
     /// driving (`moving`: wheel rates were commanded) or standing, for the calibration.
     pub(super) fn mission_book(&mut self, moving: bool) {
+        // Path drives (no targets) pay nothing here, every RG2 cycle.
+        if self.mission.phase == MissionPhase::None {
+            return;
+        }
         let t = self.ekf.state().t_us;
         let xy = {
             let p = self.ekf.state().p_n;
@@ -463,9 +463,6 @@ impl Navigator {
             if seq.localization_due() && !stop {
                 seq.localized();
             }
-        }
-        if m.phase == MissionPhase::None {
-            return;
         }
         if let Some(last) = m.last_cycle_t_us {
             let dt = t.saturating_sub(last) as f64 * 1e-6;
