@@ -1,6 +1,6 @@
 //! Absolute pose update: the rover's world position `x, y` and heading from terrain-map
 //! localization (V99 sec. 5, `crate::localization`), gated by the Mahalanobis test (H04
-//! eq. 46) and fused in Joseph form (H04 eq. 52-56, `fusion`).
+//! eq. 46) and fused by the shared update (H04 eq. 52-56, `fusion`).
 //!
 //! The measurement `z = [x_N, y_N, psi]` (m, m, rad) of the rover reference point and the
 //! heading `psi = atan2(a_y, a_x)` of its forward axis `a = C e_x` (from north towards east)

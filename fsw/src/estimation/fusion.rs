@@ -4,11 +4,14 @@
 //! `O(DIM^3)`.
 //!
 //! - `U = P H'` (gathered from the `C` columns), `S = H P H' + R` (eq. 52);
-//! - `K = U S^-1` (eq. 53), through the Cholesky factor of `S`;
-//! - Joseph form `P <- (I - K H) P (I - K H)' + K R K'`, which with `H P = U'` expands exactly to
-//!   `P - K U' - U K' + K S K' = P - U K' - K W'`, `W = U - K S` (eq. 54; the Joseph form holds for
-//!   any gain, so the rounding error of `K` enters at second order only), evaluated on the upper triangle only and
-//!   mirrored, so `P` stays exactly symmetric;
+//! - `K = U S^-1` (eq. 53), through the Cholesky factor `S = L L'`: with `V = U L'^-1`,
+//!   `K = V L^-1`;
+//! - `P <- P - K S K' = P - V V'` (eq. 54 with the optimal gain: the Joseph form
+//!   `(I - K H) P (I - K H)' + K R K'` equals it exactly for `K = U S^-1`), a rank-`M` downdate
+//!   evaluated on the upper triangle of the live rows only and mirrored, so `P` stays exactly
+//!   symmetric. Until issue 18 the Joseph form was evaluated expanded, `P - U K' - K W'` with
+//!   `W = U - K S`: twice the products for the same result up to rounding (the gain here is
+//!   always the optimal one, computed from the same factor);
 //! - `dx = K r` (eq. 55-56), injected into the nominal state ([`Ekf::inject`]).
 
 use super::state::{Cov, ErrorVec, CLONE_DIM, CORE_DIM, DIM};
@@ -43,7 +46,34 @@ impl<const M: usize, const C: usize> Innovation<M, C> {
                 }
             }
         }
-        let s = h * pcc * h.transpose() + meas_cov;
+        // `H Pcc H'` over the non-zero entries of `H` only (the relative-pose `H` is half
+        // zeros): `A = H Pcc` row by row, then `S = A H'`.
+        let mut a = SMatrix::<f64, M, C>::zeros();
+        for m in 0..M {
+            for c in 0..C {
+                let hmc = h.get((m, c)).copied().unwrap_or(f64::NAN);
+                if hmc != 0.0 {
+                    for k in 0..C {
+                        if let (Some(dst), Some(&pv)) = (a.get_mut((m, k)), pcc.get((c, k))) {
+                            *dst += hmc * pv;
+                        }
+                    }
+                }
+            }
+        }
+        let mut s = *meas_cov;
+        for n in 0..M {
+            for c in 0..C {
+                let hnc = h.get((n, c)).copied().unwrap_or(f64::NAN);
+                if hnc != 0.0 {
+                    for m in 0..M {
+                        if let (Some(dst), Some(&av)) = (s.get_mut((m, n)), a.get((m, c))) {
+                            *dst += av * hnc;
+                        }
+                    }
+                }
+            }
+        }
         let s = (s + s.transpose()) * 0.5;
         Self { cols, h, r, s }
     }
@@ -100,7 +130,11 @@ impl Ekf {
         (out, n)
     }
 
-    /// Apply an innovation (eq. 53-56, Joseph form), then run the covariance health check.
+    /// Apply an innovation (eq. 53-56), then run the covariance health check. With the
+    /// Cholesky factor `S = L L'` and `V = U L'^-1` (`DIM x M`): `K = V L^-1`, so
+    /// `K S K' = V V'` and the update `P - K S K'` (eq. 54 with the optimal gain) is the
+    /// rank-`M` downdate `P - V V'`, evaluated on the upper triangle of the live rows and
+    /// mirrored (exactly symmetric); `dx = K r = V (L^-1 r)` (eq. 55-56).
     pub(crate) fn fuse<const M: usize, const C: usize>(
         &mut self,
         inn: &Innovation<M, C>,
@@ -109,32 +143,36 @@ impl Ekf {
             .s
             .cholesky()
             .ok_or(EstError::ResidualCovarianceNotPositive)?;
-        let u = inn.u(&self.p);
-        // K' = S^-1 U'  (M x DIM), solved in place; K = U S^-1 is read from it as K(i, m) =
-        // K'(m, i), so the gain is never stored twice (the stack frame stays small).
-        let mut kt = u.transpose();
-        chol.solve_mut(&mut kt);
-        if kt.iter().any(|v| !v.is_finite()) {
+        let l = chol.l_dirty();
+        // V' = L^-1 U' (M x DIM), solved in place: column i of V' is row i of V, contiguous.
+        let mut vt = inn.u(&self.p).transpose();
+        let mut y = inn.r;
+        if !(l.solve_lower_triangular_mut(&mut vt) && l.solve_lower_triangular_mut(&mut y)) {
             return Err(EstError::ResidualCovarianceNotPositive);
         }
-        let dx: ErrorVec = kt.tr_mul(&inn.r);
-        // Joseph form P - K U' - U K' + K S K' = P - U K' - K W' with W = U - K S (zero up to
-        // rounding), evaluated on the upper triangle and mirrored: exactly symmetric. Rows and
-        // columns of released clones are zero in P, hence in U, K and W: they are skipped.
-        let mut w: SMatrix<f64, DIM, M> = u;
-        w.gemm_tr(-1.0, &kt, &inn.s, 1.0);
+        if vt.iter().chain(y.iter()).any(|v| !v.is_finite()) {
+            return Err(EstError::ResidualCovarianceNotPositive);
+        }
+        let dx: ErrorVec = vt.tr_mul(&y);
+        // Rows and columns of released clones are zero in P, hence in V: they are skipped.
         let (live, count) = self.live_indices();
         let live = live.get(..count).unwrap_or(&[]);
         for (b, &j) in live.iter().enumerate() {
+            let Some(vj) = vt.as_slice().get(j * M..j * M + M) else {
+                continue;
+            };
             for &i in live.get(..=b).unwrap_or(&[]) {
                 // Live indices are below DIM by construction; the test lets the optimiser drop
-                // the matrices' own index checks (no panic path, issue 18).
+                // the matrix's own index checks (no panic path, issue 18).
                 if i >= DIM || j >= DIM {
                     continue;
                 }
+                let Some(vi) = vt.as_slice().get(i * M..i * M + M) else {
+                    continue;
+                };
                 let mut acc = 0.0;
-                for m in 0..M {
-                    acc += u[(i, m)] * kt[(m, j)] + kt[(m, i)] * w[(j, m)];
+                for (a, c) in vi.iter().zip(vj.iter()) {
+                    acc += a * c;
                 }
                 let v = self.p[(i, j)] - acc;
                 self.p[(i, j)] = v;

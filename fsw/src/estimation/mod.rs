@@ -10,7 +10,7 @@
 //! | [`state`] | nominal state, error-state layout, covariance type, error injection, health | H04 sec. 4 |
 //! | `propagate` | IMU integration and covariance propagation, [`Ekf::propagate`] | H04 eq. 26-27, 50-51 |
 //! | `clone` | the fixed clone window, [`Ekf::clone_at`], [`Ekf::release`] | H04 eq. 41 (stochastic cloning) |
-//! | `fusion` | the shared measurement update in Joseph form | H04 eq. 52-56 |
+//! | `fusion` | the shared measurement update (Cholesky downdate) | H04 eq. 52-56 |
 //! | `relative_pose` | [`Ekf::gate_relative_pose`], [`Ekf::update_relative_pose`] | H04 eq. 28-45 |
 //! | [`gate`] | chi-square table and [`gate::GateDecision`] | H04 eq. 46 |
 //! | `sun_sensor` | [`Ekf::update_sun`], sequential scalar updates | RB eq. 16-21 |

@@ -183,8 +183,92 @@ fn skew(v: &Vec3) -> Mat3 {
     Mat3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
+/// One Gauss-Newton iteration's inputs with the body rotation known (the gyro's).
+struct TranslationProblem<'a> {
+    frames: &'a [WheelFrames; WHEEL_COUNT],
+    wheels: &'a [WheelStep; WHEEL_COUNT],
+    increments: &'a SuspensionRates,
+    valid: &'a [bool; WHEEL_COUNT],
+    estimated: &'a [bool; WHEEL_COUNT],
+    drive: &'a [f64; WHEEL_COUNT],
+    prior: &'a [f64; WHEEL_COUNT],
+    radius: f64,
+    w_prev: f64,
+    w_level: f64,
+}
+
+/// One Gauss-Newton iteration of the contact-angle step when the gyro gives `dphi`: the
+/// unknowns are `dp` and the angles. With `J_b = [I, -[c_i]x]` restricted to its `dp` columns
+/// (the identity) the block-arrow normal matrix of the module doc reduces to 3-vectors: per
+/// wheel `h_bd = j_d`, and the Schur complement is `S = n I - sum j_d j_d' / h_dd`,
+/// `g = sum e_i - sum j_d g_d / h_dd` (the same operations, in the same order, as the 6x6 form's
+/// translation block, without the products by the zero and identity entries). Returns the
+/// `dp` increment and updates `delta` by the angle increments (unclamped).
+fn translation_step(
+    pr: &TranslationProblem,
+    dp: Vec3,
+    dphi: Vec3,
+    delta: &mut [f64; WHEEL_COUNT],
+) -> Result<Vec3, KinematicsError> {
+    let mut n = 0.0;
+    let mut g = Vec3::zeros();
+    let mut j_d = [Vec3::zeros(); WHEEL_COUNT];
+    let mut h_dd = [1.0; WHEEL_COUNT];
+    let mut g_d = [0.0; WHEEL_COUNT];
+    for i in 0..WHEEL_COUNT {
+        if !pr.valid[i] {
+            continue;
+        }
+        n += 1.0;
+        // The wheel's Jacobian at `delta_i` (`contact_jacobians`) and its contact velocity
+        // (`contact_velocities`), with one sine and cosine for the point and the tangents.
+        let f = &pr.frames[i];
+        let (point, tangent, d_tangent) = contact_geometry(&pr.wheels[i], pr.radius, delta[i]);
+        let lever = point - f.contact_point_m;
+        let jac = WheelJacobian {
+            contact_point_m: point,
+            rocker: -(f.d_contact_d_rocker + f.rocker_axis.cross(&lever)),
+            bogie: -(f.d_contact_d_bogie + f.bogie_axis.cross(&lever)),
+            drive: tangent * pr.radius,
+            bogie_index: f.bogie,
+        };
+        let bogie_rate = match jac.bogie_index {
+            Some(1) => pr.increments.bogie_rad_s[1],
+            Some(_) => pr.increments.bogie_rad_s[0],
+            None => 0.0,
+        };
+        let b = jac.measured_velocity(pr.increments.rocker_rad_s, bogie_rate, pr.drive[i]);
+        let e = dp + dphi.cross(&point) - b;
+        g += e;
+        if pr.estimated[i] {
+            let rim = pr.radius * pr.drive[i];
+            let jd = (dphi + pr.wheels[i].suspension_rotation).cross(&(tangent * pr.radius))
+                - d_tangent * rim;
+            h_dd[i] = jd.dot(&jd) + pr.w_prev + pr.w_level;
+            g_d[i] = jd.dot(&e) + pr.w_prev * (delta[i] - pr.prior[i]) + pr.w_level * delta[i];
+            j_d[i] = jd;
+        }
+    }
+    let mut s = Mat3::identity() * n;
+    for i in 0..WHEEL_COUNT {
+        if pr.estimated[i] {
+            s -= j_d[i] * j_d[i].transpose() / h_dd[i];
+            g -= j_d[i] * (g_d[i] / h_dd[i]);
+        }
+    }
+    let chol = s.cholesky().ok_or(KinematicsError::Singular)?;
+    let d = chol.solve(&(-g));
+    for i in 0..WHEEL_COUNT {
+        if pr.estimated[i] {
+            delta[i] += -(g_d[i] + j_d[i].dot(&d)) / h_dd[i];
+        }
+    }
+    Ok(d)
+}
+
 /// The contact-angle step for frames already evaluated at the mid-point configuration (the
 /// odometry's entry point; see [`contact_kinematics`] for the equations and the checks).
+/// `ContactStep::residual_rms_m` is computed only `with_residual` (0 otherwise).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn contact_step_frames(
     geometry: &RoverGeometry,
@@ -195,6 +279,7 @@ pub(crate) fn contact_step_frames(
     gyro_rad: Option<Vec3>,
     previous_rad: &[f64; WHEEL_COUNT],
     config: &ContactConfig,
+    with_residual: bool,
 ) -> Result<ContactStep, KinematicsError> {
     let radius = geometry.wheel_radius_m;
     let cfg_values = [
@@ -290,6 +375,33 @@ pub(crate) fn contact_step_frames(
         }
     });
     for _ in 0..iterations {
+        if let Some(gyro) = gyro_rad {
+            // The rotation is the gyro's: only `dp` and the angles are unknown, and every
+            // block of the normal matrix that meets `dphi` drops out (`translation_step`).
+            let d = translation_step(
+                &TranslationProblem {
+                    frames,
+                    wheels: &wheels,
+                    increments,
+                    valid: wheel_valid,
+                    estimated: &estimated,
+                    drive: &drive,
+                    prior: &prior,
+                    radius,
+                    w_prev,
+                    w_level,
+                },
+                dp,
+                gyro,
+                &mut delta,
+            )?;
+            dp += d;
+            delta = delta.map(clamp);
+            if dp.iter().any(|x| !x.is_finite()) || delta.iter().any(|x| !x.is_finite()) {
+                return Err(KinematicsError::NonFinite);
+            }
+            continue;
+        }
         let jac = contact_jacobians(frames, radius, &delta);
         let b = contact_velocities(&jac, increments, &drive);
         let mut h_bb = Mat6::zeros();
@@ -356,18 +468,21 @@ pub(crate) fn contact_step_frames(
             return Err(KinematicsError::NonFinite);
         }
     }
-    // Misfit at the solution.
-    let jac = contact_jacobians(frames, radius, &delta);
-    let b = contact_velocities(&jac, increments, &drive);
-    let mut sum = 0.0;
-    for i in 0..WHEEL_COUNT {
-        if wheel_valid[i] {
-            sum += (dp + dphi.cross(&jac[i].contact_point_m) - b[i]).norm_squared();
+    // Misfit at the solution (only when asked: the odometry does not use it).
+    let mut residual_rms_m = 0.0;
+    if with_residual {
+        let jac = contact_jacobians(frames, radius, &delta);
+        let b = contact_velocities(&jac, increments, &drive);
+        let mut sum = 0.0;
+        for i in 0..WHEEL_COUNT {
+            if wheel_valid[i] {
+                sum += (dp + dphi.cross(&jac[i].contact_point_m) - b[i]).norm_squared();
+            }
         }
-    }
-    let residual_rms_m = libm::sqrt(sum / (3.0 * f64::from(count)));
-    if !residual_rms_m.is_finite() {
-        return Err(KinematicsError::NonFinite);
+        residual_rms_m = libm::sqrt(sum / (3.0 * f64::from(count)));
+        if !residual_rms_m.is_finite() {
+            return Err(KinematicsError::NonFinite);
+        }
     }
     Ok(ContactStep {
         body_step: Vec6::new(dp.x, dp.y, dp.z, dphi.x, dphi.y, dphi.z),
@@ -420,5 +535,6 @@ pub fn contact_kinematics(
         gyro_rad,
         previous_rad,
         config,
+        true,
     )
 }

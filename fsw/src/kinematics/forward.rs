@@ -18,6 +18,7 @@ use super::geometry::{check_suspension, wheel_frames_trusted, RoverGeometry};
 use super::jacobian::WheelJacobian;
 use super::{BodyRates, KinematicsError, SuspensionRates, SuspensionState};
 use crate::types::Vec3;
+use nalgebra::SMatrix;
 use rover_hal::{JointState, WHEEL_COUNT};
 
 /// Result of forward kinematics.
@@ -128,17 +129,45 @@ impl ContactLeastSquares {
             }
         }
         let v_c = sum_b / f64::from(self.count);
+        let w = self.inertia_solve(&moment);
+        let v = v_c - w.cross(&self.centroid);
+        BodyRates::new(v.x, v.y, v.z, w.x, w.y, w.z)
+    }
+
+    /// `I_c^-1 m` by forward then back substitution with the factor.
+    fn inertia_solve(&self, moment: &Vec3) -> Vec3 {
         let [l11, l21, l22, l31, l32, l33] = self.chol;
-        // Forward then back substitution with the factor.
         let y1 = moment.x / l11;
         let y2 = (moment.y - l21 * y1) / l22;
         let y3 = (moment.z - l31 * y1 - l32 * y2) / l33;
         let w3 = y3 / l33;
         let w2 = (y2 - l32 * w3) / l22;
         let w1 = (y1 - l21 * w2 - l31 * w3) / l11;
-        let w = Vec3::new(w1, w2, w3);
-        let v = v_c - w.cross(&self.centroid);
-        BodyRates::new(v.x, v.y, v.z, w.x, w.y, w.z)
+        Vec3::new(w1, w2, w3)
+    }
+
+    /// The linear map of one wheel's contact velocity to the body rates: `solve(b) = M b_i`
+    /// for a `b` that is zero except at wheel `i`, with the rows ordered `[omega; v]`
+    /// (rotation first, the odometry covariance's order; rad/s and m/s per m/s of `b_i`).
+    /// Zero for a wheel the least squares does not use. With `q_i` the wheel's offset from the
+    /// contact centroid `c`: `omega = I_c^-1 [q_i]x b_i`, `v = b_i / n - omega x c` (eq. 15).
+    pub(crate) fn wheel_map(&self, i: usize) -> SMatrix<f64, 6, 3> {
+        let mut m = SMatrix::<f64, 6, 3>::zeros();
+        let (Some(true), Some(q)) = (self.valid.get(i).copied(), self.offsets.get(i)) else {
+            return m;
+        };
+        let n = f64::from(self.count);
+        for k in 0..3 {
+            let mut e = Vec3::zeros();
+            if let Some(v) = e.get_mut(k) {
+                *v = 1.0;
+            }
+            let w = self.inertia_solve(&q.cross(&e));
+            let v = e / n - w.cross(&self.centroid);
+            m.fixed_view_mut::<3, 1>(0, k).copy_from(&w);
+            m.fixed_view_mut::<3, 1>(3, k).copy_from(&v);
+        }
+        m
     }
 
     /// Root-mean-square misfit of `b` against the rates `t`, m/s.

@@ -396,6 +396,7 @@ impl KinematicOdometry {
             gyro_rad,
             &self.contact_rad,
             &self.config.contact,
+            false,
         )?;
         // The common mode of the angles (all tangents tilted alike) is the direction of the
         // body's motion in its own x-z plane, which the wheels barely observe (the same rim
@@ -452,66 +453,53 @@ impl KinematicOdometry {
     ) -> Mat6 {
         let c = &self.config;
         let mut q = Mat6::zeros();
-        // Sensitivity column of the step for one contact-velocity perturbation pattern.
+        // The patterns that perturb one wheel only: the step is `M_i b_i` (`wheel_map`), so
+        // their sum `sum sigma^2 (M_i b)(M_i b)'` is `M_i S_i M_i'` with the wheel's 3x3
+        // `S_i = sum sigma^2 b b'` (one 6x3 map per wheel instead of one solve and one 6x6
+        // outer product per pattern).
+        let articulation = contact_velocities(jacobians, articulation_rate, &[0.0; WHEEL_COUNT]);
+        let mut travels = [Vec3::zeros(); WHEEL_COUNT];
+        for i in 0..WHEEL_COUNT {
+            if !valid[i] {
+                continue;
+            }
+            let drive_dir = jacobians[i].drive;
+            let travel = drive_dir * drive[i];
+            travels[i] = travel;
+            // Drive encoder increment.
+            let sigma = c.drive_increment_noise_rad + c.drive_fraction * libm::fabs(drive[i]);
+            let mut s_i = drive_dir * drive_dir.transpose() * (sigma * sigma);
+            // Steering error turns the rolling direction about the steering axis.
+            let turned = frames[i].steer_axis.cross(&drive_dir) * drive[i];
+            s_i += turned * turned.transpose() * (c.steer_noise_rad * c.steer_noise_rad);
+            // The wheel's own radius.
+            s_i += travel * travel.transpose() * (c.wheel_radius_sigma * c.wheel_radius_sigma);
+            // Articulation: the wheel's mean displacement per step relative to the body from
+            // the suspension, over the articulation window, along, across and normal to its
+            // rolling direction.
+            let moved = articulation[i].norm();
+            let n = drive_dir.norm();
+            if moved > 0.0 && n > 0.0 {
+                let along = drive_dir / n;
+                let lateral = frames[i].steer_axis.cross(&along);
+                let normal = along.cross(&lateral);
+                let sigma = c.articulation_fraction * moved;
+                s_i += (along * along.transpose()
+                    + lateral * lateral.transpose()
+                    + normal * normal.transpose())
+                    * (sigma * sigma);
+            }
+            let m = lsq.wheel_map(i);
+            q += m * s_i * m.transpose();
+        }
+        // Sensitivity column of the step for one contact-velocity pattern that perturbs several wheels.
         let mut add = |b: &[Vec3; WHEEL_COUNT], sigma: f64| {
             let t = lsq.solve(b);
             let col = Vec6::new(t[3], t[4], t[5], t[0], t[1], t[2]);
             q += col * col.transpose() * (sigma * sigma);
         };
-        for i in 0..WHEEL_COUNT {
-            if !valid[i] {
-                continue;
-            }
-            let mut b = [Vec3::zeros(); WHEEL_COUNT];
-            b[i] = jacobians[i].drive;
-            let sigma = c.drive_increment_noise_rad + c.drive_fraction * libm::fabs(drive[i]);
-            add(&b, sigma);
-            // Steering error turns the rolling direction about the steering axis.
-            b[i] = frames[i].steer_axis.cross(&jacobians[i].drive) * drive[i];
-            add(&b, c.steer_noise_rad);
-        }
         // Common radius scale: all wheels' rolling travel together.
-        let scaled: [Vec3; WHEEL_COUNT] = core::array::from_fn(|i| {
-            if valid[i] {
-                jacobians[i].drive * drive[i]
-            } else {
-                Vec3::zeros()
-            }
-        });
-        add(&scaled, c.radius_scale_sigma);
-        // Each wheel's own radius.
-        for (i, travel) in scaled.iter().enumerate() {
-            let mut b = [Vec3::zeros(); WHEEL_COUNT];
-            if let Some(slot) = b.get_mut(i) {
-                *slot = *travel;
-            }
-            add(&b, c.wheel_radius_sigma);
-        }
-        // Articulation: each wheel's mean displacement per step relative to the body from the
-        // suspension, over the articulation window.
-        let articulation = contact_velocities(jacobians, articulation_rate, &[0.0; WHEEL_COUNT]);
-        for i in 0..WHEEL_COUNT {
-            let moved = articulation[i].norm();
-            let moving = moved > 0.0;
-            if !valid[i] || !moving {
-                continue;
-            }
-            let rolling = jacobians[i].drive;
-            let n = rolling.norm();
-            let rolls = n > 0.0;
-            if !rolls {
-                continue;
-            }
-            let along = rolling / n;
-            let lateral = frames[i].steer_axis.cross(&along);
-            let mut b = [Vec3::zeros(); WHEEL_COUNT];
-            b[i] = along;
-            add(&b, c.articulation_fraction * moved);
-            b[i] = lateral;
-            add(&b, c.articulation_fraction * moved);
-            b[i] = along.cross(&lateral);
-            add(&b, c.articulation_fraction * moved);
-        }
+        add(&travels, c.radius_scale_sigma);
         for k in 0..3 {
             let unit = SuspensionRates {
                 rocker_rad_s: if k == 0 { 1.0 } else { 0.0 },
@@ -535,12 +523,28 @@ impl KinematicOdometry {
         // Mid-step rotation for the translation (second order in the step).
         let half = Quat::from_scaled_axis(dphi * 0.5);
         let dp_0 = rot * (half * dp);
-        let mut f = Mat6::identity();
-        f.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-skew(&dp_0)));
-        let mut g = Mat6::zeros();
-        g.fixed_view_mut::<3, 3>(0, 0).copy_from(&rot);
-        g.fixed_view_mut::<3, 3>(3, 3).copy_from(&rot);
-        self.covariance = f * self.covariance * f.transpose() + g * q * g.transpose();
+        // `P <- F P F' + G Q G'` with `F = [[I, 0], [S, I]]`, `S = -[dp_0]x`, and
+        // `G = diag(C, C)`, by 3x3 blocks (`P = [[A, B], [B', D]]`): `F P F'` is
+        // `[[A, A S' + B], [S A + B', S A S' + S B + B' S' + D]]`.
+        let s = -skew(&dp_0);
+        let p = &self.covariance;
+        let (a, b, d) = (block3(p, 0, 0), block3(p, 0, 3), block3(p, 3, 3));
+        let sa = s * a;
+        let sb = s * b;
+        let top_right = sa.transpose() + b;
+        let bottom = sa * s.transpose() + sb + sb.transpose() + d;
+        let block = |r: usize, c: usize| block3(q, r, c);
+        let rt = rot.transpose();
+        let mut out = Mat6::zeros();
+        out.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&(a + rot * block(0, 0) * rt));
+        out.fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&(top_right + rot * block(0, 3) * rt));
+        out.fixed_view_mut::<3, 3>(3, 0)
+            .copy_from(&(top_right.transpose() + rot * block(3, 0) * rt));
+        out.fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&(bottom + rot * block(3, 3) * rt));
+        self.covariance = out;
         self.trans_0_k_m += dp_0;
         self.rot_0_k *= Quat::from_scaled_axis(dphi);
     }
@@ -566,5 +570,107 @@ impl KinematicOdometry {
         let last = self.last.ok_or(KinematicsError::NotStarted)?;
         self.start(&last)?;
         Ok(pose)
+    }
+}
+
+/// The 3x3 block of `m` at row `r0`, column `c0` (NaN outside `m`; built element-wise, without
+/// the view's `into_owned`, whose length assertion the optimiser keeps: no panic path).
+fn block3(m: &Mat6, r0: usize, c0: usize) -> Mat3 {
+    Mat3::from_fn(|r, c| m.get((r0 + r, c0 + c)).copied().unwrap_or(f64::NAN))
+}
+
+#[cfg(test)]
+mod covariance_tests {
+    use super::super::contact::contact_jacobians;
+    use super::super::geometry::{wheel_frames_trusted, ROCKY8};
+    use super::*;
+
+    /// The per-pattern sum the per-wheel maps replace: one least-squares solve and one outer
+    /// product per perturbation pattern (the definition of the step covariance).
+    fn reference(
+        c: &OdometryConfig,
+        lsq: &ContactLeastSquares,
+        jac: &[WheelJacobian; WHEEL_COUNT],
+        frames: &[super::super::geometry::WheelFrames; WHEEL_COUNT],
+        drive: &[f64; WHEEL_COUNT],
+        rates: &SuspensionRates,
+        valid: &[bool; WHEEL_COUNT],
+    ) -> Mat6 {
+        let mut q = Mat6::zeros();
+        let mut add = |b: &[Vec3; WHEEL_COUNT], sigma: f64| {
+            let t = lsq.solve(b);
+            let col = Vec6::new(t[3], t[4], t[5], t[0], t[1], t[2]);
+            q += col * col.transpose() * (sigma * sigma);
+        };
+        let articulation = contact_velocities(jac, rates, &[0.0; WHEEL_COUNT]);
+        let mut travels = [Vec3::zeros(); WHEEL_COUNT];
+        for i in 0..WHEEL_COUNT {
+            if !valid[i] {
+                continue;
+            }
+            let one = |v: Vec3| {
+                let mut b = [Vec3::zeros(); WHEEL_COUNT];
+                b[i] = v;
+                b
+            };
+            travels[i] = jac[i].drive * drive[i];
+            add(
+                &one(jac[i].drive),
+                c.drive_increment_noise_rad + c.drive_fraction * drive[i].abs(),
+            );
+            add(
+                &one(frames[i].steer_axis.cross(&jac[i].drive) * drive[i]),
+                c.steer_noise_rad,
+            );
+            add(&one(travels[i]), c.wheel_radius_sigma);
+            let moved = articulation[i].norm();
+            let along = jac[i].drive.normalize();
+            let lateral = frames[i].steer_axis.cross(&along);
+            for v in [along, lateral, along.cross(&lateral)] {
+                add(&one(v), c.articulation_fraction * moved);
+            }
+        }
+        add(&travels, c.radius_scale_sigma);
+        for k in 0..3 {
+            let unit = SuspensionRates {
+                rocker_rad_s: f64::from(u8::from(k == 0)),
+                bogie_rad_s: [f64::from(u8::from(k == 1)), f64::from(u8::from(k == 2))],
+            };
+            let b = contact_velocities(jac, &unit, &[0.0; WHEEL_COUNT]);
+            let masked: [Vec3; WHEEL_COUNT] =
+                core::array::from_fn(|i| if valid[i] { b[i] } else { Vec3::zeros() });
+            add(&masked, c.suspension_increment_noise_rad);
+        }
+        q
+    }
+
+    /// KIN-11: the step covariance built from the per-wheel maps (`wheel_map`, issue 18) equals
+    /// the per-pattern definition to 1e-12 relative, with steering, articulation, contact angles
+    /// and a missing wheel.
+    #[test]
+    fn kin_11_step_covariance_per_wheel_maps_equal_the_pattern_sum() {
+        let odo = KinematicOdometry::new(ROCKY8, OdometryConfig::default());
+        let state = SuspensionState {
+            rocker_rad: 0.12,
+            bogie_rad: [-0.2, 0.15],
+            steer_rad: [0.3, -0.1, 0.0, 0.05, -0.25, 0.4],
+        };
+        let frames = wheel_frames_trusted(&ROCKY8, &state);
+        let angles = [0.2, -0.1, 0.35, 0.0, -0.3, 0.05];
+        let jac = contact_jacobians(&frames, ROCKY8.wheel_radius_m, &angles);
+        let drive = [0.05, 0.048, 0.06, -0.01, 0.052, 0.0];
+        let rates = SuspensionRates {
+            rocker_rad_s: 0.004,
+            bogie_rad_s: [-0.006, 0.002],
+        };
+        for valid in [[true; 6], [true, true, false, true, true, true]] {
+            let lsq = ContactLeastSquares::new(&jac.map(|j| j.contact_point_m), &valid).unwrap();
+            let got = odo.step_covariance(&lsq, &jac, &frames, &drive, &rates, &valid);
+            let want = reference(&odo.config, &lsq, &jac, &frames, &drive, &rates, &valid);
+            let scale = want.abs().max();
+            assert!(scale > 0.0);
+            let err = (got - want).abs().max();
+            assert!(err <= 1e-12 * scale, "error {err:e} of {scale:e}");
+        }
     }
 }

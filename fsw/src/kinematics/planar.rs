@@ -9,6 +9,7 @@
 
 use super::geometry::{wheel_contact_points, RoverGeometry};
 use super::{BodyRates, KinematicsError, SuspensionState};
+use crate::types::Vec3;
 use rover_hal::{JointState, WHEEL_COUNT};
 
 /// Planar-model body rates `[x_dot, y_dot, 0, 0, 0, yaw]` (rover frame `R`, m/s, rad/s) from
@@ -21,6 +22,19 @@ pub fn planar_body_rates(
     wheel_valid: &[bool; WHEEL_COUNT],
 ) -> Result<BodyRates, KinematicsError> {
     let points = wheel_contact_points(geometry, &SuspensionState::default())?;
+    planar_body_rates_at(geometry, &points, drive_rad_s, steer_rad, wheel_valid)
+}
+
+/// [`planar_body_rates`] with the nominal contact points `points` (m, `R`: the contact points at
+/// the zero suspension state, [`wheel_contact_points`]) already evaluated: the caller that runs
+/// it every joint reading computes them once (issue 18).
+pub(crate) fn planar_body_rates_at(
+    geometry: &RoverGeometry,
+    points: &[Vec3; WHEEL_COUNT],
+    drive_rad_s: &[f64; WHEEL_COUNT],
+    steer_rad: &[f64; WHEEL_COUNT],
+    wheel_valid: &[bool; WHEEL_COUNT],
+) -> Result<BodyRates, KinematicsError> {
     let mut count: u8 = 0;
     let (mut cx, mut cy, mut vx, mut vy) = (0.0, 0.0, 0.0, 0.0);
     let mut velocities = [(0.0, 0.0); WHEEL_COUNT];
@@ -85,13 +99,25 @@ pub fn planar_pose_increment(
     prev: &JointState,
     cur: &JointState,
 ) -> Result<[f64; 3], KinematicsError> {
+    let points = wheel_contact_points(geometry, &SuspensionState::default())?;
+    planar_pose_increment_at(geometry, &points, prev, cur)
+}
+
+/// [`planar_pose_increment`] with the nominal contact points already evaluated (see
+/// [`planar_body_rates_at`]).
+pub(crate) fn planar_pose_increment_at(
+    geometry: &RoverGeometry,
+    points: &[Vec3; WHEEL_COUNT],
+    prev: &JointState,
+    cur: &JointState,
+) -> Result<[f64; 3], KinematicsError> {
     let valid: [bool; WHEEL_COUNT] =
         core::array::from_fn(|i| prev.wheel_valid[i] && cur.wheel_valid[i]);
     let drive: [f64; WHEEL_COUNT] =
         core::array::from_fn(|i| cur.drive_angle_rad[i] - prev.drive_angle_rad[i]);
     let steer: [f64; WHEEL_COUNT] =
         core::array::from_fn(|i| 0.5 * (cur.steer_angle_rad[i] + prev.steer_angle_rad[i]));
-    let t = planar_body_rates(geometry, &drive, &steer, &valid)?;
+    let t = planar_body_rates_at(geometry, points, &drive, &steer, &valid)?;
     let (dx, dy, dyaw) = (t[0], t[1], t[5]);
     // Exact integration of constant body rates over the unit "time" of the increments.
     let (s, c) = (libm::sin(dyaw), libm::cos(dyaw));

@@ -10,8 +10,9 @@
 //! | `vo` | VO relative poses chained | VO relative poses chained |
 
 use super::PoseEstimate;
+use crate::kinematics::{wheel_contact_points, RoverGeometry, SuspensionState};
 use crate::types::{Quat, RelativePose, Vec3};
-use rover_hal::ImuSample;
+use rover_hal::{ImuSample, WHEEL_COUNT};
 
 /// Longest IMU sample gap the gyro dead reckoning integrates across, us; a longer gap (or time
 /// going backwards) skips that sample's rotation and counts it in [`Trajectories::dr_gaps`].
@@ -34,6 +35,9 @@ pub(super) struct Trajectories {
     pub dr_gaps: u32,
     /// VO-only: VO relative poses chained from the EKF pose of the first keyframe.
     pub vo: Option<PoseEstimate>,
+    /// The planar model's wheel contact points (m, `R`, zero suspension state), evaluated once
+    /// at initialisation for [`Self::wheel_step`]'s increments; `None` if the geometry has none.
+    pub nominal_points: Option<[Vec3; WHEEL_COUNT]>,
 }
 
 impl Trajectories {
@@ -47,10 +51,12 @@ impl Trajectories {
         dr_t_us: None,
         dr_gaps: 0,
         vo: None,
+        nominal_points: None,
     };
 
-    /// All trajectories at `p0` (m, `N`) with heading `yaw0` (rad).
-    pub fn new(p0: Vec3, yaw0: f64) -> Self {
+    /// All trajectories at `p0` (m, `N`) with heading `yaw0` (rad), the planar model on the
+    /// contact points of `geometry`.
+    pub fn new(p0: Vec3, yaw0: f64, geometry: &RoverGeometry) -> Self {
         let q0 = Quat::from_euler_angles(0.0, 0.0, yaw0);
         let pose = PoseEstimate { p_n: p0, q_nr: q0 };
         Self {
@@ -61,6 +67,7 @@ impl Trajectories {
             dr_t_us: None,
             dr_gaps: 0,
             vo: None,
+            nominal_points: wheel_contact_points(geometry, &SuspensionState::default()).ok(),
         }
     }
 

@@ -2,6 +2,7 @@
 //! the gate policy (fuse, hold, VO-loss fallback), the slip vector, zero-velocity updates.
 
 use super::*;
+use crate::kinematics::planar::planar_pose_increment_at;
 
 /// Default [`NavConfig::kin_crab_allowance`]: the crab (lateral slip) a kinematic interval's
 /// gate cannot see, 1-sigma, as `tan(crab)` per unit of the cross-slope gravity component
@@ -73,7 +74,11 @@ impl Navigator {
         self.cycles_without_joints = 0;
         let previous = self.last_joints.replace(*j);
         if let Some(prev) = previous {
-            if let Ok(step) = planar_pose_increment(&self.config.geometry, &prev, j) {
+            let step = match &self.traj.nominal_points {
+                Some(points) => planar_pose_increment_at(&self.config.geometry, points, &prev, j),
+                None => planar_pose_increment(&self.config.geometry, &prev, j),
+            };
+            if let Ok(step) = step {
                 self.traj.wheel_step(step);
             }
         }

@@ -804,7 +804,7 @@ impl Navigator {
         self.gate = GateStatus::default();
         self.command = VehicleCommand::default();
         self.last_guidance = None;
-        self.traj = Trajectories::new(p0, config.initial_yaw_rad);
+        self.traj = Trajectories::new(p0, config.initial_yaw_rad, &config.geometry);
         self.vo_quality = None;
         self.last_vo_error = None;
         self.vo_gate = VoGateStatus::default();
