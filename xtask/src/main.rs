@@ -19,11 +19,14 @@
 //! - `cargo xtask timing`: timing analysis on the rover CPU model (instruction counts per task,
 //!   utilisation, response times, stack, memory, panic sites) and the bit-identical host/target
 //!   replay check; writes `docs/timing.md`. Also the last step of `test`.
+//! - `cargo xtask cpi`: build the rover-CPU image and print the CPI of its kernel loops on
+//!   LLVM's Cortex-M7 pipeline model ([`cpi`]; also a section of `docs/timing.md`).
 //! - `cargo xtask stack`: build the rover-CPU image and print its static worst-case stack paths
 //!   ([`stack`]; `STACK_CALLEES=<name part>` lists a function's callees, `STACK_INDIRECT=1` the
 //!   functions with indirect calls).
 
 mod campaign;
+mod cpi;
 mod elf;
 mod report;
 mod stack;
@@ -58,6 +61,7 @@ fn main() -> Result<()> {
         Some("report") => report::report_checks(),
         Some("campaign") => campaign::slurm_smoke(),
         Some("stack") => stack_command(),
+        Some("cpi") => cpi_command(),
         Some("timing") => {
             setup()?;
             timing::timing()
@@ -87,6 +91,36 @@ fn main() -> Result<()> {
 
 /// `cargo xtask stack`: build the rover-CPU image and print the static stack analysis
 /// ([`stack`]) of its entry and of the flight software's frame.
+/// `cargo xtask cpi`: the Cortex-M7 pipeline model's CPI of the image's kernel loops
+/// ([`cpi`]), printed per group (the same figures as `docs/timing.md`).
+fn cpi_command() -> Result<()> {
+    run(cargo().args([
+        "build",
+        "--profile",
+        FLIGHT_PROFILE,
+        "--target",
+        TARGET,
+        "-p",
+        "fsw-image",
+    ]))?;
+    println!("{}", cpi::tool_version()?);
+    for (g, c) in cpi::GROUPS.iter().zip(cpi::analyse(&image_path())?) {
+        let (lo, hi) = c.range().unwrap_or((0.0, 0.0));
+        println!(
+            "{:.2} CPI ({:.2}-{:.2}) over {} loops, {} instructions, {} functions, {} skipped: {}",
+            c.cpi().unwrap_or(f64::NAN),
+            lo,
+            hi,
+            c.loops.len(),
+            c.insns(),
+            c.functions,
+            c.skipped,
+            g.label
+        );
+    }
+    Ok(())
+}
+
 fn stack_command() -> Result<()> {
     run(cargo().args([
         "build",
