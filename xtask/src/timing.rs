@@ -772,7 +772,7 @@ const TASK_DOC: [(&str, &str, &str); 16] = [
     ),
     (
         "kinematic_odometry",
-        "`KinematicOdometry::update`",
+        "`KinematicOdometry::update_with_gyro` (the flight configuration: eq. 15 step with its covariance, and the contact-angle estimator on the tape's gyro rotation since the last reading)",
         "RG2: odometry integration of a joint reading",
     ),
     (

@@ -144,19 +144,34 @@ impl Ekf {
             .cholesky()
             .ok_or(EstError::ResidualCovarianceNotPositive)?;
         let l = chol.l_dirty();
-        // V' = L^-1 U' (M x DIM), solved in place: column i of V' is row i of V, contiguous.
+        // Reciprocals of the factor's diagonal (positive: the factorisation succeeded).
+        let mut inv_diag = [0.0; M];
+        for (k, v) in inv_diag.iter_mut().enumerate() {
+            *v = 1.0 / l.get((k, k)).copied().unwrap_or(f64::NAN);
+        }
+        // Rows and columns of released clones are zero in P, hence in U and V: they are skipped.
+        let (live, count) = self.live_indices();
+        let live = live.get(..count).unwrap_or(&[]);
+        // V' = L^-1 U' (M x DIM), solved in place column by column (the live ones; the others
+        // stay zero): column i of V' is row i of V, contiguous.
         let mut vt = inn.u(&self.p).transpose();
+        for &i in live {
+            if let Some(col) = vt
+                .as_mut_slice()
+                .get_mut(i * M..i * M + M)
+                .and_then(|c| <&mut [f64; M]>::try_from(c).ok())
+            {
+                forward_substitute(l, &inv_diag, col);
+            }
+        }
         let mut y = inn.r;
-        if !(l.solve_lower_triangular_mut(&mut vt) && l.solve_lower_triangular_mut(&mut y)) {
-            return Err(EstError::ResidualCovarianceNotPositive);
+        if let Ok(col) = <&mut [f64; M]>::try_from(y.as_mut_slice()) {
+            forward_substitute(l, &inv_diag, col);
         }
         if vt.iter().chain(y.iter()).any(|v| !v.is_finite()) {
             return Err(EstError::ResidualCovarianceNotPositive);
         }
         let dx: ErrorVec = vt.tr_mul(&y);
-        // Rows and columns of released clones are zero in P, hence in V: they are skipped.
-        let (live, count) = self.live_indices();
-        let live = live.get(..count).unwrap_or(&[]);
         for (b, &j) in live.iter().enumerate() {
             let Some(vj) = vt.as_slice().get(j * M..j * M + M) else {
                 continue;
@@ -181,5 +196,21 @@ impl Ekf {
         }
         self.inject(&dx);
         self.check_health()
+    }
+}
+
+/// `x <- L^-1 x` for the lower-triangular `L` (entries above the diagonal ignored) with the
+/// reciprocals `inv_diag` of its diagonal: forward substitution, `M (M - 1) / 2` products.
+fn forward_substitute<const M: usize>(
+    l: &SMatrix<f64, M, M>,
+    inv_diag: &[f64; M],
+    x: &mut [f64; M],
+) {
+    for i in 0..M {
+        let mut s = x[i];
+        for k in 0..i {
+            s -= l[(i, k)] * x[k];
+        }
+        x[i] = s * inv_diag[i];
     }
 }

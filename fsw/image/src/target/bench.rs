@@ -163,6 +163,10 @@ pub struct Bench {
     rectify: Option<BenchRectify>,
     loaded: Option<u32>,
     kin: KinematicOdometry,
+    /// Gyro rotation since the last joint reading (rad, `R`, the samples' rates times their
+    /// intervals), passed to the odometry as the navigator passes its integrated rotation.
+    gyro_since_joints: [f64; 3],
+    last_imu_us: Option<u64>,
     vo_prior: KinematicOdometry,
     last_vo_capture_us: Option<u64>,
     start: NominalState,
@@ -259,6 +263,8 @@ impl Bench {
             ),
             vo_prior: KinematicOdometry::new(ROCKY8, OdometryConfig::default()),
             last_vo_capture_us: None,
+            gyro_since_joints: [0.0; 3],
+            last_imu_us: None,
             start,
             started: false,
             prev_joints: None,
@@ -358,6 +364,13 @@ impl Bench {
         let ekf = &mut *self.ekf;
         let (r, n) = meter.measure(|| ekf.propagate(s));
         self.add(PROPAGATE, n, r.is_ok());
+        if let Some(t0) = self.last_imu_us.filter(|t0| s.t_us > *t0) {
+            let dt = (s.t_us - t0) as f64 * 1e-6;
+            for (g, w) in self.gyro_since_joints.iter_mut().zip(s.gyro_rad_s) {
+                *g += w * dt;
+            }
+        }
+        self.last_imu_us = Some(s.t_us);
     }
 
     fn joints(&mut self, meter: &mut Meter, j: &JointState) {
@@ -383,7 +396,11 @@ impl Bench {
 
         // Kinematic odometry over the RG2 interval, then gate and update between two clones.
         let kin = &mut self.kin;
-        let (r, n) = meter.measure(|| kin.update(j));
+        // As flown: with the gyro's rotation over the step (the contact-angle step's 3-vector
+        // path, `NavConfig::rocky8`).
+        let [gx, gy, gz] = core::mem::take(&mut self.gyro_since_joints);
+        let gyro = Some(fsw::types::Vec3::new(gx, gy, gz));
+        let (r, n) = meter.measure(|| kin.update_with_gyro(j, gyro));
         if r.is_err() {
             let _ = self.kin.start(j);
         } else {

@@ -132,9 +132,22 @@ pub const GAZE_TURN_MARGIN_M: f64 = 0.2;
 /// point: the farthest wheel contact plus the wheel radius fore and aft, the half-width (with
 /// its margin, [`crate::perception::ROVER_HALF_WIDTH_M`]) across.
 pub fn turn_sweep_radius(geometry: &RoverGeometry) -> f64 {
-    let reach = match wheel_contact_points(geometry, &SuspensionState::default()) {
-        Ok(p) => p.iter().fold(0.0_f64, |m, c| m.max(libm::fabs(c.x))),
-        Err(_) => 0.5,
+    sweep_radius_of(
+        wheel_contact_points(geometry, &SuspensionState::default()).ok(),
+        geometry,
+    )
+}
+
+/// [`turn_sweep_radius`] from the nominal contact points `points` (m, `R`, zero suspension
+/// state) already evaluated (the navigator keeps them: `Trajectories::nominal_points`), so the
+/// RG2 guidance cycle does not run the D-H chain again (issue 18); 0.5 m of reach without them.
+pub(super) fn sweep_radius_of(
+    points: Option<[crate::types::Vec3; rover_hal::WHEEL_COUNT]>,
+    geometry: &RoverGeometry,
+) -> f64 {
+    let reach = match points {
+        Some(p) => p.iter().fold(0.0_f64, |m, c| m.max(libm::fabs(c.x))),
+        None => 0.5,
     } + geometry.wheel_radius_m;
     let w = crate::perception::ROVER_HALF_WIDTH_M;
     libm::sqrt(reach * reach + w * w)
@@ -505,7 +518,7 @@ impl Navigator {
     pub(super) fn hazard_command(&mut self) -> Option<Option<VehicleCommand>> {
         let heading = self.ekf_running.then(|| yaw_of(&self.ekf.state().q_nr));
         let position = [self.ekf.state().p_n.x, self.ekf.state().p_n.y];
-        let sweep = turn_sweep_radius(&self.config.geometry);
+        let sweep = sweep_radius_of(self.traj.nominal_points, &self.config.geometry);
         let grown = crate::perception::ROVER_HALF_WIDTH_M + self.config.perception.grow_margin_m;
         let h = self.hazard.as_mut()?;
         if !h.planning || h.verdict != PlannerVerdict::Driving {

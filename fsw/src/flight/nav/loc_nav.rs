@@ -31,7 +31,6 @@ use crate::localization::{
     SearchProgress, MAX_POINTS,
 };
 use crate::perception::GridFrame;
-use hazard_nav::turn_sweep_radius;
 
 /// Cost units (10,000 rover-CPU instructions) of one node expansion of the search: up to 8
 /// children of up to [`MAX_POINTS`] point terms (about 60 instructions each, `docs/timing.md`).
@@ -657,7 +656,8 @@ impl Navigator {
         let sigma = self.horizontal_sigma_m();
         let max_sigma = self.config.protection.max_position_sigma_m;
         let vo_lost = self.vo_lost();
-        let sweep = turn_sweep_radius(&self.config.geometry) + hazard_nav::GAZE_TURN_MARGIN_M;
+        let sweep = hazard_nav::sweep_radius_of(self.traj.nominal_points, &self.config.geometry)
+            + hazard_nav::GAZE_TURN_MARGIN_M;
         let l = self.loc.as_mut()?;
         match l.stop {
             Stop::Idle => {
