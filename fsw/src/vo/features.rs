@@ -72,129 +72,225 @@ impl ForstnerDetector {
     };
 }
 
-/// The rows a central-difference gradient row `y` needs, cut to the interior columns
-/// `1..width-1`: left and right neighbours in row `y`, the pixels above and below. `None` at the
-/// first and last rows.
-fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[&'a [u8]; 4]> {
-    let up = image.row(y.checked_sub(1)?)?;
-    let mid = image.row(y)?;
-    let down = image.row(y + 1)?;
-    let n = IMAGE_WIDTH_PX - 2;
-    Some([
-        mid.get(..n)?,
-        mid.get(2..n + 2)?,
-        up.get(1..n + 1)?,
-        down.get(1..n + 1)?,
-    ])
-}
+/// One image row as an array.
+type Row<'a> = &'a [u8; IMAGE_WIDTH_PX];
 
-/// Central-difference gradients `(gx, gy)` of the interior pixels of image row `y` (columns
-/// 1..width-1), `None` at the first and last rows.
-fn row_gradients<'a>(image: &Image<'a>, y: usize) -> Option<impl Iterator<Item = (i32, i32)> + 'a> {
-    let [l, r, u, d] = gradient_rows(image, y)?;
-    Some(
-        l.iter()
-            .zip(r)
-            .zip(u.iter().zip(d))
-            .map(|((&l, &r), (&u, &d))| (i32::from(r) - i32::from(l), i32::from(d) - i32::from(u))),
-    )
+/// The rows a central-difference gradient row `y` needs: the row above, the row itself, the
+/// row below. `None` at the first and last rows.
+fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[Row<'a>; 3]> {
+    let up = image.row(y.checked_sub(1)?)?.try_into().ok()?;
+    let mid = image.row(y)?.try_into().ok()?;
+    let down = image.row(y + 1)?.try_into().ok()?;
+    Some([up, mid, down])
 }
 
 /// The column sums of the gradient products, `[xx, yy, xy]` per column.
 type ColumnSums = [[i32; 3]; IMAGE_WIDTH_PX];
 
-/// Adds the gradient products of image row `y` to the column sums.
+/// Central-difference gradients `(gx, gy)` at column `c` of the row whose neighbours are
+/// `[up, mid, down]` (`gx = I(c + 1) - I(c - 1)`, `gy = I(y + 1) - I(y - 1)`), with the row's
+/// pixels `m0 = I(c - 1)` and `m2 = I(c + 1)` given.
+#[inline(always)]
+fn gradient(up: u8, down: u8, m0: i32, m2: i32) -> (i32, i32) {
+    (m2 - m0, i32::from(down) - i32::from(up))
+}
+
+/// Adds the gradient products of image row `y` to the column sums (interior columns
+/// `1..width-1`; nothing at the first and last rows).
 fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
-    let Some(g) = row_gradients(image, y) else {
+    let Some([up, mid, down]) = gradient_rows(image, y) else {
         return;
     };
-    for (s, (gx, gy)) in sums.iter_mut().skip(1).zip(g) {
-        s[0] += gx * gx;
-        s[1] += gy * gy;
-        s[2] += gx * gy;
+    for c in 1..IMAGE_WIDTH_PX - 1 {
+        let (Some(s), Some(&u), Some(&d), Some(&m0), Some(&m2)) = (
+            sums.get_mut(c),
+            up.get(c),
+            down.get(c),
+            mid.get(c - 1),
+            mid.get(c + 1),
+        ) else {
+            break;
+        };
+        let (gx, gy) = gradient(u, d, i32::from(m0), i32::from(m2));
+        s[0] = s[0].wrapping_add(gx * gx);
+        s[1] = s[1].wrapping_add(gy * gy);
+        s[2] = s[2].wrapping_add(gx * gy);
     }
 }
 
 /// Moves the window down one row: adds the products of row `add`, removes those of row
 /// `remove` (one pass over the sums).
 fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
-    let (Some([al, ar, au, ad]), Some([rl, rr, ru, rd])) =
+    let (Some([au, am, ad]), Some([ru, rm, rd])) =
         (gradient_rows(image, add), gradient_rows(image, remove))
     else {
         return;
     };
-    let added = al.iter().zip(ar).zip(au.iter().zip(ad));
-    let removed = rl.iter().zip(rr).zip(ru.iter().zip(rd));
-    for (s, (((&al, &ar), (&au, &ad)), ((&rl, &rr), (&ru, &rd)))) in
-        sums.iter_mut().skip(1).zip(added.zip(removed))
-    {
-        let (ax, ay) = (i32::from(ar) - i32::from(al), i32::from(ad) - i32::from(au));
-        let (rx, ry) = (i32::from(rr) - i32::from(rl), i32::from(rd) - i32::from(ru));
-        s[0] += ax * ax - rx * rx;
-        s[1] += ay * ay - ry * ry;
-        s[2] += ax * ay - rx * ry;
+    for c in 1..IMAGE_WIDTH_PX - 1 {
+        let (Some(s), Some(&au), Some(&ad), Some(&al), Some(&ar)) = (
+            sums.get_mut(c),
+            au.get(c),
+            ad.get(c),
+            am.get(c - 1),
+            am.get(c + 1),
+        ) else {
+            break;
+        };
+        let (Some(&ru), Some(&rd), Some(&rl), Some(&rr)) =
+            (ru.get(c), rd.get(c), rm.get(c - 1), rm.get(c + 1))
+        else {
+            break;
+        };
+        let (ax, ay) = gradient(au, ad, i32::from(al), i32::from(ar));
+        let (rx, ry) = gradient(ru, rd, i32::from(rl), i32::from(rr));
+        s[0] = s[0].wrapping_add(ax * ax).wrapping_sub(rx * rx);
+        s[1] = s[1].wrapping_add(ay * ay).wrapping_sub(ry * ry);
+        s[2] = s[2].wrapping_add(ax * ay).wrapping_sub(rx * ry);
     }
 }
 
-/// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
-/// columns `first - WINDOW_HALF .. first + n + WINDOW_HALF` for the `n` centres
-/// `first..first + n`; keeps the best pixel passing the thresholds in `cell`.
+/// Columns of a full cell's span: its [`GRID_PX`] centres and [`WINDOW_HALF`] on each side.
+const SPAN: usize = GRID_PX + 2 * WINDOW_HALF;
+
+/// Integer lower bounds a pixel must exceed to pass the thresholds and beat a cell's best
+/// interest `best` (all conservative: a pixel failing one of them fails the exact tests).
+#[derive(Clone, Copy)]
+struct Floors {
+    /// `floor(4 best)`, or `floor(4 min_interest) - 1` if larger: a pixel needs
+    /// `trace > min_trace`, since `w = det / trace <= trace / 4` (det <= (trace / 2)^2 for a
+    /// 2x2 normal matrix) and `w > best`, `w >= min_interest`. At least 0.
+    min_trace: i32,
+    /// `floor(best)`, or `floor(min_interest) - 1` if larger: a pixel needs
+    /// `det > w_floor trace` and `min(nxx, nyy) > w_floor` (`w <= nxx nyy / (nxx + nyy) <=
+    /// min(nxx, nyy)`).
+    w_floor: i32,
+}
+
+/// The thresholds of one call: `min_interest` and `min_roundness` (f64 of the config's f32)
+/// and their integer parts for [`Floors`].
+#[derive(Clone, Copy)]
+struct Thresholds {
+    min_interest: f64,
+    min_roundness: f64,
+    /// `floor(4 min_interest) - 1` (saturating; `as` maps NaN to 0).
+    trace_floor: i32,
+    /// `floor(min_interest) - 1` (saturating).
+    w_floor: i32,
+}
+
+impl Thresholds {
+    fn new(config: &VoConfig) -> Self {
+        let min_interest = f64::from(config.min_interest);
+        Self {
+            min_interest,
+            min_roundness: f64::from(config.min_roundness),
+            trace_floor: ((4.0 * min_interest) as i32).saturating_sub(1),
+            w_floor: (min_interest as i32).saturating_sub(1),
+        }
+    }
+
+    /// The floors of a cell whose best interest is `best` (non-negative).
+    #[inline(always)]
+    fn floors(&self, best: f32) -> Floors {
+        let w = f64::from(best);
+        Floors {
+            min_trace: ((4.0 * w) as i32).max(self.trace_floor),
+            w_floor: (w as i32).max(self.w_floor),
+        }
+    }
+}
+
+/// The exact tests of one pixel that passed the trace and diagonal bounds: `(nxx, nyy, nxy)`
+/// are its window sums, `trace = nxx + nyy > 0`. Returns the pixel's interest when it passes
+/// the interest and roundness thresholds and beats `best`.
 #[inline(always)]
-fn score_cell(
+fn score_pixel(
+    (nxx, nyy, nxy): (i32, i32, i32),
+    trace: i32,
+    best: f32,
+    w_floor: i32,
+    t: &Thresholds,
+) -> Option<f32> {
+    // det exactly in i64 (|products| < 2^42). Integer pre-test of the interest: w_floor <= best
+    // and w_floor < min_interest, so det <= w_floor trace fails an f64 test below as well.
+    let det = i64::from(nxx) * i64::from(nyy) - i64::from(nxy) * i64::from(nxy);
+    if det <= i64::from(w_floor) * i64::from(trace) {
+        return None;
+    }
+    // The definition's tests, in f64 (exact: det and trace below 2^53).
+    let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
+    let det_f = fxx * fyy - fxy * fxy;
+    let trace_f = f64::from(trace);
+    if det_f > 0.0
+        && det_f > f64::from(best) * trace_f
+        && !(det_f < t.min_interest * trace_f)
+        && !(4.0 * det_f < t.min_roundness * trace_f * trace_f)
+    {
+        let interest = (det_f / trace_f) as f32;
+        if interest > best {
+            return Some(interest);
+        }
+    }
+    None
+}
+
+/// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
+/// columns `first - WINDOW_HALF .. first + N + WINDOW_HALF` for the `N` centres
+/// `first..first + N` (fewer when `span` is shorter); keeps the best pixel passing the
+/// thresholds in `cell`.
+///
+/// Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
+/// window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
+/// and trace are exact in f64 (and in i64).
+#[inline(always)]
+fn score_span<const N: usize>(
     span: &[[i32; 3]],
     first: usize,
     y: usize,
     cell: &mut Candidate,
-    min_interest: f64,
-    min_roundness: f64,
+    t: &Thresholds,
 ) {
     const W: usize = 2 * WINDOW_HALF;
-    // Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
-    // window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
-    // and trace are exact in f64.
     let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
     for &[a, b, c] in span.iter().take(W) {
-        nxx += a;
-        nyy += b;
-        nxy += c;
+        nxx = nxx.wrapping_add(a);
+        nyy = nyy.wrapping_add(b);
+        nxy = nxy.wrapping_add(c);
     }
-    // w = det / trace <= trace / 4 (det <= (trace / 2)^2 for a 2x2 normal matrix): a pixel
-    // whose trace is at most four times the cell's best cannot beat it. In integers (traces are
-    // integers, interests non-negative): trace > 4 w  <=>  trace > floor(4 w).
-    let bound = |interest: f32| (4.0 * f64::from(interest)) as i32;
-    let mut min_trace = bound(cell.interest);
-    for (k, (&[a, b, c], &[oa, ob, oc])) in span.iter().skip(W).zip(span.iter()).enumerate() {
+    let mut floors = t.floors(cell.interest);
+    for k in 0..N {
+        let (Some(&[a, b, c]), Some(&[oa, ob, oc])) = (span.get(k + W), span.get(k)) else {
+            break;
+        };
         // Window over the columns centre-2..=centre+2.
-        nxx += a;
-        nyy += b;
-        nxy += c;
-        let trace = nxx + nyy;
-        if trace > min_trace && trace > 0 {
-            let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
-            let det_f = fxx * fyy - fxy * fxy;
-            let trace_f = f64::from(trace);
-            // Thresholds without divisions; the test against the cell's best comes first (most
-            // pixels fail it), the division runs only for a new best.
-            if det_f > 0.0
-                && det_f > f64::from(cell.interest) * trace_f
-                && !(det_f < min_interest * trace_f)
-                && !(4.0 * det_f < min_roundness * trace_f * trace_f)
+        nxx = nxx.wrapping_add(a);
+        nyy = nyy.wrapping_add(b);
+        nxy = nxy.wrapping_add(c);
+        let trace = nxx.wrapping_add(nyy);
+        // min_trace >= 0, so this also gives trace > 0.
+        if trace > floors.min_trace && nxx > floors.w_floor && nyy > floors.w_floor {
+            if let Some(interest) =
+                score_pixel((nxx, nyy, nxy), trace, cell.interest, floors.w_floor, t)
             {
-                let interest = (det_f / trace_f) as f32;
-                if interest > cell.interest {
-                    *cell = Candidate {
-                        interest,
-                        x: (first + k) as u16,
-                        y: y as u16,
-                    };
-                    min_trace = bound(interest);
-                }
+                *cell = Candidate {
+                    interest,
+                    x: (first + k) as u16,
+                    y: y as u16,
+                };
+                floors = t.floors(interest);
             }
         }
-        nxx -= oa;
-        nyy -= ob;
-        nxy -= oc;
+        nxx = nxx.wrapping_sub(oa);
+        nyy = nyy.wrapping_sub(ob);
+        nxy = nxy.wrapping_sub(oc);
     }
+}
+
+/// [`score_span`] of a partial cell (fewer than [`GRID_PX`] centres: the loop stops at the
+/// end of `span`).
+#[inline(never)]
+fn score_partial(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t: &Thresholds) {
+    score_span::<GRID_PX>(span, first, y, cell, t);
 }
 
 impl ForstnerDetector {
@@ -238,10 +334,7 @@ impl ForstnerDetector {
             );
         }
         let cell_row = y / GRID_PX;
-        let (min_interest, min_roundness) = (
-            f64::from(config.min_interest),
-            f64::from(config.min_roundness),
-        );
+        let thresholds = Thresholds::new(config);
         let cells = self
             .cells
             .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
@@ -261,7 +354,13 @@ impl ForstnerDetector {
             let Some(span) = self.columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) else {
                 continue;
             };
-            score_cell(span, first, y, cell, min_interest, min_roundness);
+            // A full cell (span of known length: no checks in the loop); the two partial
+            // cells at the borders stop at the end of their shorter span.
+            if span.len() == SPAN {
+                score_span::<GRID_PX>(span, first, y, cell, &thresholds);
+            } else {
+                score_partial(span, first, y, cell, &thresholds);
+            }
         }
     }
 
@@ -409,6 +508,187 @@ pub fn select_with_min_distance(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The operator as it was before session 12 (commit de4e5b8), verbatim but for the state
+    /// passed in: the reference of `vo_1_optimised_operator_equals_the_reference`.
+    mod reference {
+        use super::super::*;
+
+        /// The rows a central-difference gradient row `y` needs, cut to the interior columns
+        /// `1..width-1`: left and right neighbours in row `y`, the pixels above and below. `None` at the
+        /// first and last rows.
+        fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[&'a [u8]; 4]> {
+            let up = image.row(y.checked_sub(1)?)?;
+            let mid = image.row(y)?;
+            let down = image.row(y + 1)?;
+            let n = IMAGE_WIDTH_PX - 2;
+            Some([
+                mid.get(..n)?,
+                mid.get(2..n + 2)?,
+                up.get(1..n + 1)?,
+                down.get(1..n + 1)?,
+            ])
+        }
+
+        /// Central-difference gradients `(gx, gy)` of the interior pixels of image row `y` (columns
+        /// 1..width-1), `None` at the first and last rows.
+        fn row_gradients<'a>(
+            image: &Image<'a>,
+            y: usize,
+        ) -> Option<impl Iterator<Item = (i32, i32)> + 'a> {
+            let [l, r, u, d] = gradient_rows(image, y)?;
+            Some(
+                l.iter()
+                    .zip(r)
+                    .zip(u.iter().zip(d))
+                    .map(|((&l, &r), (&u, &d))| {
+                        (i32::from(r) - i32::from(l), i32::from(d) - i32::from(u))
+                    }),
+            )
+        }
+
+        /// The column sums of the gradient products, `[xx, yy, xy]` per column.
+        type ColumnSums = [[i32; 3]; IMAGE_WIDTH_PX];
+
+        /// Adds the gradient products of image row `y` to the column sums.
+        fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
+            let Some(g) = row_gradients(image, y) else {
+                return;
+            };
+            for (s, (gx, gy)) in sums.iter_mut().skip(1).zip(g) {
+                s[0] += gx * gx;
+                s[1] += gy * gy;
+                s[2] += gx * gy;
+            }
+        }
+
+        /// Moves the window down one row: adds the products of row `add`, removes those of row
+        /// `remove` (one pass over the sums).
+        fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
+            let (Some([al, ar, au, ad]), Some([rl, rr, ru, rd])) =
+                (gradient_rows(image, add), gradient_rows(image, remove))
+            else {
+                return;
+            };
+            let added = al.iter().zip(ar).zip(au.iter().zip(ad));
+            let removed = rl.iter().zip(rr).zip(ru.iter().zip(rd));
+            for (s, (((&al, &ar), (&au, &ad)), ((&rl, &rr), (&ru, &rd)))) in
+                sums.iter_mut().skip(1).zip(added.zip(removed))
+            {
+                let (ax, ay) = (i32::from(ar) - i32::from(al), i32::from(ad) - i32::from(au));
+                let (rx, ry) = (i32::from(rr) - i32::from(rl), i32::from(rd) - i32::from(ru));
+                s[0] += ax * ax - rx * rx;
+                s[1] += ay * ay - ry * ry;
+                s[2] += ax * ay - rx * ry;
+            }
+        }
+
+        /// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
+        /// columns `first - WINDOW_HALF .. first + n + WINDOW_HALF` for the `n` centres
+        /// `first..first + n`; keeps the best pixel passing the thresholds in `cell`.
+        #[inline(always)]
+        fn score_cell(
+            span: &[[i32; 3]],
+            first: usize,
+            y: usize,
+            cell: &mut Candidate,
+            min_interest: f64,
+            min_roundness: f64,
+        ) {
+            const W: usize = 2 * WINDOW_HALF;
+            // Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
+            // window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
+            // and trace are exact in f64.
+            let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
+            for &[a, b, c] in span.iter().take(W) {
+                nxx += a;
+                nyy += b;
+                nxy += c;
+            }
+            // w = det / trace <= trace / 4 (det <= (trace / 2)^2 for a 2x2 normal matrix): a pixel
+            // whose trace is at most four times the cell's best cannot beat it. In integers (traces are
+            // integers, interests non-negative): trace > 4 w  <=>  trace > floor(4 w).
+            let bound = |interest: f32| (4.0 * f64::from(interest)) as i32;
+            let mut min_trace = bound(cell.interest);
+            for (k, (&[a, b, c], &[oa, ob, oc])) in span.iter().skip(W).zip(span.iter()).enumerate()
+            {
+                // Window over the columns centre-2..=centre+2.
+                nxx += a;
+                nyy += b;
+                nxy += c;
+                let trace = nxx + nyy;
+                if trace > min_trace && trace > 0 {
+                    let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
+                    let det_f = fxx * fyy - fxy * fxy;
+                    let trace_f = f64::from(trace);
+                    // Thresholds without divisions; the test against the cell's best comes first (most
+                    // pixels fail it), the division runs only for a new best.
+                    if det_f > 0.0
+                        && det_f > f64::from(cell.interest) * trace_f
+                        && !(det_f < min_interest * trace_f)
+                        && !(4.0 * det_f < min_roundness * trace_f * trace_f)
+                    {
+                        let interest = (det_f / trace_f) as f32;
+                        if interest > cell.interest {
+                            *cell = Candidate {
+                                interest,
+                                x: (first + k) as u16,
+                                y: y as u16,
+                            };
+                            min_trace = bound(interest);
+                        }
+                    }
+                }
+                nxx -= oa;
+                nyy -= ob;
+                nxy -= oc;
+            }
+        }
+
+        pub fn process_row_masked(
+            columns: &mut ColumnSums,
+            cells_all: &mut [Candidate; CELL_COUNT],
+            image: &Image,
+            y: usize,
+            config: &VoConfig,
+            skip_cells: u64,
+        ) {
+            if y == FIRST_ROW {
+                columns.fill([0; 3]);
+                cells_all.fill(NO_CANDIDATE);
+                for r in (FIRST_ROW - WINDOW_HALF)..=(FIRST_ROW + WINDOW_HALF) {
+                    add_row(image, r, columns);
+                }
+            } else {
+                slide_rows(image, y + WINDOW_HALF, y - WINDOW_HALF - 1, columns);
+            }
+            let cell_row = y / GRID_PX;
+            let (min_interest, min_roundness) = (
+                f64::from(config.min_interest),
+                f64::from(config.min_roundness),
+            );
+            let cells = cells_all
+                .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
+                .unwrap_or(&mut []);
+            // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
+            // last one ends inside the border), cell by cell.
+            let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
+            for (c, cell) in cells.iter_mut().enumerate() {
+                if c < u64::BITS as usize && skip_cells & (1u64 << c) != 0 {
+                    continue;
+                }
+                let first = (c * GRID_PX).max(BORDER_PX);
+                let stop = (c * GRID_PX + GRID_PX).min(end);
+                if first >= stop {
+                    continue;
+                }
+                let Some(span) = columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) else {
+                    continue;
+                };
+                score_cell(span, first, y, cell, min_interest, min_roundness);
+            }
+        }
+    }
     use rover_hal::IMAGE_PIXELS;
     use std::{boxed::Box, vec::Vec};
 
@@ -503,6 +783,110 @@ mod tests {
         let found = cells.iter().filter(|c| c.interest > 0.0).count();
         assert!(found > 1000, "{found} cells");
         assert_eq!(det.cells[..], cells[..]);
+    }
+
+    /// Runs the optimised operator and the reference on `img` with `config` and the skip mask
+    /// `mask(grid_row)`; asserts equal cells after every grid row. Returns the non-empty cells.
+    fn compare_with_reference(img: &[u8], config: &VoConfig, mask: impl Fn(usize) -> u64) -> usize {
+        let image = Image::new(img).unwrap();
+        let mut det = Box::new(ForstnerDetector::default());
+        let mut columns: Box<ColumnSums> = Box::new([[0; 3]; IMAGE_WIDTH_PX]);
+        let mut cells: Box<[Candidate; CELL_COUNT]> = Box::new([NO_CANDIDATE; CELL_COUNT]);
+        for y in FIRST_ROW..END_ROW {
+            let skip = mask(y / GRID_PX);
+            det.process_row_masked(&image, y, config, skip);
+            reference::process_row_masked(&mut columns, &mut cells, &image, y, config, skip);
+            if y % GRID_PX == GRID_PX - 1 || y + 1 == END_ROW {
+                let column = (0..IMAGE_WIDTH_PX).find(|&c| det.columns[c] != columns[c]);
+                assert_eq!(column, None, "column sums differ, row {y}");
+                let cell = (0..CELL_COUNT).find(|&c| det.cells[c] != cells[c]);
+                if let Some(c) = cell {
+                    panic!("row {y} cell {c}: {:?} != {:?}", det.cells[c], cells[c]);
+                }
+            }
+        }
+        cells.iter().filter(|c| c.interest > 0.0).count()
+    }
+
+    /// xorshift64 noise image; `smooth` box-filters it horizontally over that many pixels
+    /// (lower contrast, more ties near the thresholds).
+    fn noise_image(seed: u64, smooth: usize) -> Vec<u8> {
+        let mut state = seed;
+        let raw: Vec<u8> = (0..IMAGE_PIXELS)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 56) as u8
+            })
+            .collect();
+        (0..IMAGE_PIXELS)
+            .map(|i| {
+                let n = smooth.max(1).min(IMAGE_PIXELS - i);
+                (raw[i..i + n].iter().map(|&v| u32::from(v)).sum::<u32>() / n as u32) as u8
+            })
+            .collect()
+    }
+
+    #[test]
+    fn vo_1_optimised_operator_equals_the_reference() {
+        // The session-12 operator (integer pre-tests, fixed-length cell loops, per-column slide)
+        // against the former code, verbatim in `reference`: the same column sums and the same
+        // cells (interest bits, positions) on random and rendered images, with and without skip
+        // masks, for the flight thresholds and for extreme ones.
+        use crate::types::Vec3;
+        use crate::vo::render::{hazcam, render_pair, RoverPose};
+        let configs = [
+            VoConfig::default(),
+            VoConfig {
+                min_interest: 2000.0,
+                ..VoConfig::default()
+            },
+            VoConfig {
+                min_interest: 0.5,
+                min_roundness: 0.0,
+                ..VoConfig::default()
+            },
+            VoConfig {
+                min_interest: 1.0e12,
+                ..VoConfig::default()
+            },
+            VoConfig {
+                min_interest: f32::NAN,
+                min_roundness: f32::NAN,
+                ..VoConfig::default()
+            },
+            VoConfig {
+                min_interest: -5.0,
+                min_roundness: 1.0,
+                ..VoConfig::default()
+            },
+        ];
+        let no_mask = |_: usize| 0u64;
+        let some_mask = |row: usize| 0x5555_0f0f_00ff_1234u64.rotate_left(row as u32);
+        let mut images = vec![
+            noise_image(0x1234_5678_9abc_def0, 1),
+            noise_image(0x0bad_cafe_dead_beef, 3),
+            noise_image(42, 9),
+        ];
+        let cal = hazcam();
+        for (yaw, x) in [(0.0, 0.0), (0.3, 0.5), (-0.2, 1.5)] {
+            images
+                .push(render_pair(&cal, &RoverPose::new(yaw, 0.0, 0.0, Vec3::new(x, 0.2, 0.0))).0);
+        }
+        let mut flight_cells = 0;
+        for (i, img) in images.iter().enumerate() {
+            for (k, config) in configs.iter().enumerate() {
+                let n = compare_with_reference(img, config, no_mask);
+                if k == 0 {
+                    flight_cells += n;
+                }
+            }
+            compare_with_reference(img, &VoConfig::default(), some_mask);
+            assert!(i < images.len());
+        }
+        // The comparison is not vacuous: the flight thresholds find many cells.
+        assert!(flight_cells > 6 * 1000, "{flight_cells} cells");
     }
 
     #[test]
