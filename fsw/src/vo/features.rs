@@ -259,7 +259,7 @@ fn score_span<const N: usize>(
     }
     let mut floors = t.floors(cell.interest);
     for k in 0..N {
-        let (Some(&[a, b, c]), Some(&[oa, ob, oc])) = (span.get(k + W), span.get(k)) else {
+        let Some(&[a, b, c]) = span.get(k + W) else {
             break;
         };
         // Window over the columns centre-2..=centre+2.
@@ -280,6 +280,12 @@ fn score_span<const N: usize>(
                 floors = t.floors(interest);
             }
         }
+        // Keeps the leaving column's loads after the tests (a compiler-only barrier, no
+        // instruction): loaded before them, they stay live across the rare path and spill.
+        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+        let Some(&[oa, ob, oc]) = span.get(k) else {
+            break;
+        };
         nxx = nxx.wrapping_sub(oa);
         nyy = nyy.wrapping_sub(ob);
         nxy = nxy.wrapping_sub(oc);
