@@ -84,8 +84,16 @@ fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[Row<'a>; 3]> {
     Some([up, mid, down])
 }
 
-/// The column sums of the gradient products, `[xx, yy, xy]` per column.
+/// The column sums of the gradient products, `[xx, yy, xy]` per column (kept for the columns
+/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`], the only ones a scored window reaches; the others
+/// stay 0).
 type ColumnSums = [[i32; 3]; IMAGE_WIDTH_PX];
+
+/// First column a scored window reaches (the first centre [`BORDER_PX`] minus the half window).
+const SUM_FIRST_COL: usize = BORDER_PX - WINDOW_HALF;
+/// One past the last column a scored window reaches (the last centre is
+/// `IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF - 1`).
+const SUM_END_COL: usize = IMAGE_WIDTH_PX - BORDER_PX;
 
 /// Central-difference gradients `(gx, gy)` at column `c` of the row whose neighbours are
 /// `[up, mid, down]` (`gx = I(c + 1) - I(c - 1)`, `gy = I(y + 1) - I(y - 1)`), with the row's
@@ -95,13 +103,13 @@ fn gradient(up: u8, down: u8, m0: i32, m2: i32) -> (i32, i32) {
     (m2 - m0, i32::from(down) - i32::from(up))
 }
 
-/// Adds the gradient products of image row `y` to the column sums (interior columns
-/// `1..width-1`; nothing at the first and last rows).
+/// Adds the gradient products of image row `y` to the column sums (columns
+/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`]; nothing at the first and last rows).
 fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
     let Some([up, mid, down]) = gradient_rows(image, y) else {
         return;
     };
-    for c in 1..IMAGE_WIDTH_PX - 1 {
+    for c in SUM_FIRST_COL..SUM_END_COL {
         let (Some(s), Some(&u), Some(&d), Some(&m0), Some(&m2)) = (
             sums.get_mut(c),
             up.get(c),
@@ -126,7 +134,7 @@ fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
     else {
         return;
     };
-    for c in 1..IMAGE_WIDTH_PX - 1 {
+    for c in SUM_FIRST_COL..SUM_END_COL {
         let (Some(s), Some(&au), Some(&ad), Some(&al), Some(&ar)) = (
             sums.get_mut(c),
             au.get(c),
@@ -235,21 +243,16 @@ fn score_pixel(
 }
 
 /// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
-/// columns `first - WINDOW_HALF .. first + N + WINDOW_HALF` for the `N` centres
-/// `first..first + N` (fewer when `span` is shorter); keeps the best pixel passing the
-/// thresholds in `cell`.
+/// columns `first - WINDOW_HALF .. first + n + WINDOW_HALF` for the `n` centres
+/// `first..first + n` (`n = span.len() - 2 WINDOW_HALF`, at most [`GRID_PX`]); keeps the
+/// best pixel passing the thresholds in `cell` (the first one in scan order on equal
+/// interests, as a sequential scan with a strict `>`).
 ///
 /// Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
 /// window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
 /// and trace are exact in f64 (and in i64).
 #[inline(always)]
-fn score_span<const N: usize>(
-    span: &[[i32; 3]],
-    first: usize,
-    y: usize,
-    cell: &mut Candidate,
-    t: &Thresholds,
-) {
+fn score_span(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t: &Thresholds) {
     const W: usize = 2 * WINDOW_HALF;
     let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
     for &[a, b, c] in span.iter().take(W) {
@@ -257,8 +260,10 @@ fn score_span<const N: usize>(
         nyy = nyy.wrapping_add(b);
         nxy = nxy.wrapping_add(c);
     }
-    let mut floors = t.floors(cell.interest);
-    for k in 0..N {
+    let mut best = cell.interest;
+    let mut best_k = None;
+    let mut floors = t.floors(best);
+    for k in 0..GRID_PX {
         let Some(&[a, b, c]) = span.get(k + W) else {
             break;
         };
@@ -269,14 +274,9 @@ fn score_span<const N: usize>(
         let trace = nxx.wrapping_add(nyy);
         // min_trace >= 0, so this also gives trace > 0.
         if trace > floors.min_trace && nxx > floors.w_floor && nyy > floors.w_floor {
-            if let Some(interest) =
-                score_pixel((nxx, nyy, nxy), trace, cell.interest, floors.w_floor, t)
-            {
-                *cell = Candidate {
-                    interest,
-                    x: (first + k) as u16,
-                    y: y as u16,
-                };
+            if let Some(interest) = score_pixel((nxx, nyy, nxy), trace, best, floors.w_floor, t) {
+                best = interest;
+                best_k = Some(k);
                 floors = t.floors(interest);
             }
         }
@@ -290,13 +290,20 @@ fn score_span<const N: usize>(
         nyy = nyy.wrapping_sub(ob);
         nxy = nxy.wrapping_sub(oc);
     }
+    if let Some(k) = best_k {
+        *cell = Candidate {
+            interest: best,
+            x: (first + k) as u16,
+            y: y as u16,
+        };
+    }
 }
 
 /// [`score_span`] of a partial cell (fewer than [`GRID_PX`] centres: the loop stops at the
 /// end of `span`).
 #[inline(never)]
 fn score_partial(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t: &Thresholds) {
-    score_span::<GRID_PX>(span, first, y, cell, t);
+    score_span(span, first, y, cell, t);
 }
 
 impl ForstnerDetector {
@@ -326,8 +333,20 @@ impl ForstnerDetector {
         config: &VoConfig,
         skip_cells: u64,
     ) {
+        let cell_row = y / GRID_PX;
+        let cells = self
+            .cells
+            .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
+            .unwrap_or(&mut []);
+        if y == FIRST_ROW || y % GRID_PX == 0 {
+            // A grid row's cells are cleared at its first row (the pass reaches every grid
+            // row, so all cells are cleared by its end, as by `reset` at its start, without a
+            // 37 KB clear in the first item).
+            cells.fill(NO_CANDIDATE);
+        }
         if y == FIRST_ROW {
-            self.reset();
+            self.columns.fill([0; 3]);
+            self.candidate_count = 0;
             for r in (FIRST_ROW - WINDOW_HALF)..=(FIRST_ROW + WINDOW_HALF) {
                 add_row(image, r, &mut self.columns);
             }
@@ -339,12 +358,7 @@ impl ForstnerDetector {
                 &mut self.columns,
             );
         }
-        let cell_row = y / GRID_PX;
         let thresholds = Thresholds::new(config);
-        let cells = self
-            .cells
-            .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
-            .unwrap_or(&mut []);
         // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
         // last one ends inside the border), cell by cell.
         let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
@@ -363,7 +377,7 @@ impl ForstnerDetector {
             // A full cell (span of known length: no checks in the loop); the two partial
             // cells at the borders stop at the end of their shorter span.
             if span.len() == SPAN {
-                score_span::<GRID_PX>(span, first, y, cell, &thresholds);
+                score_span(span, first, y, cell, &thresholds);
             } else {
                 score_partial(span, first, y, cell, &thresholds);
             }
@@ -803,7 +817,9 @@ mod tests {
             det.process_row_masked(&image, y, config, skip);
             reference::process_row_masked(&mut columns, &mut cells, &image, y, config, skip);
             if y % GRID_PX == GRID_PX - 1 || y + 1 == END_ROW {
-                let column = (0..IMAGE_WIDTH_PX).find(|&c| det.columns[c] != columns[c]);
+                // The reference keeps every interior column; the operator those a scored
+                // window reaches.
+                let column = (SUM_FIRST_COL..SUM_END_COL).find(|&c| det.columns[c] != columns[c]);
                 assert_eq!(column, None, "column sums differ, row {y}");
                 let cell = (0..CELL_COUNT).find(|&c| det.cells[c] != cells[c]);
                 if let Some(c) = cell {
