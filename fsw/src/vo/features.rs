@@ -299,6 +299,76 @@ fn score_span(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t
     }
 }
 
+/// [`score_span`] of a full cell ([`GRID_PX`] centres, the span of [`SPAN`] columns),
+/// unrolled: no loop counter, every column at a fixed offset.
+#[inline(always)]
+fn score_full(
+    span: &[[i32; 3]; SPAN],
+    first: usize,
+    y: usize,
+    cell: &mut Candidate,
+    t: &Thresholds,
+) {
+    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12, s13] = span;
+    // The leaving columns read through an opaque copy of the reference: the optimiser would
+    // otherwise keep each column in registers from its entering to its leaving (4 columns,
+    // 12 values) and spill them; loading it again is one instruction.
+    let [_, _, _, _, o4, o5, o6, o7, o8, o9, ..] = core::hint::black_box(span);
+    let mut n = [0i32; 3];
+    for col in [s0, s1, s2, s3] {
+        for (n, &v) in n.iter_mut().zip(col) {
+            *n = n.wrapping_add(v);
+        }
+    }
+    let [mut nxx, mut nyy, mut nxy] = n;
+    let mut best = cell.interest;
+    let mut best_k = None;
+    let mut floors = t.floors(best);
+    // Centre k: the window over the columns k..=k+4 of the span (entering column `new`,
+    // leaving column `old`), tests as in `score_span`.
+    macro_rules! centre {
+        ($k:expr, $new:ident, $old:ident) => {
+            let [a, b, c] = *$new;
+            nxx = nxx.wrapping_add(a);
+            nyy = nyy.wrapping_add(b);
+            nxy = nxy.wrapping_add(c);
+            let trace = nxx.wrapping_add(nyy);
+            if trace > floors.min_trace && nxx > floors.w_floor && nyy > floors.w_floor {
+                if let Some(interest) = score_pixel((nxx, nyy, nxy), trace, best, floors.w_floor, t)
+                {
+                    best = interest;
+                    best_k = Some($k);
+                    floors = t.floors(interest);
+                }
+            }
+            core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+            let [oa, ob, oc] = *$old;
+            nxx = nxx.wrapping_sub(oa);
+            nyy = nyy.wrapping_sub(ob);
+            nxy = nxy.wrapping_sub(oc);
+        };
+    }
+    centre!(0usize, s4, s0);
+    centre!(1, s5, s1);
+    centre!(2, s6, s2);
+    centre!(3, s7, s3);
+    centre!(4, s8, o4);
+    centre!(5, s9, o5);
+    centre!(6, s10, o6);
+    centre!(7, s11, o7);
+    centre!(8, s12, o8);
+    centre!(9, s13, o9);
+    // The last update of the sums is not read.
+    let _ = (nxx, nyy, nxy, floors);
+    if let Some(k) = best_k {
+        *cell = Candidate {
+            interest: best,
+            x: (first + k) as u16,
+            y: y as u16,
+        };
+    }
+}
+
 /// [`score_span`] of a partial cell (fewer than [`GRID_PX`] centres: the loop stops at the
 /// end of `span`).
 #[inline(never)]
@@ -360,26 +430,35 @@ impl ForstnerDetector {
         }
         let thresholds = Thresholds::new(config);
         // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
-        // last one ends inside the border), cell by cell.
+        // last one ends inside the border), cell by cell. The skip mask is shifted one cell
+        // per step (bit 0 is the current cell).
         let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
+        let mut skip = skip_cells;
         for (c, cell) in cells.iter_mut().enumerate() {
-            if c < u64::BITS as usize && skip_cells & (1u64 << c) != 0 {
+            let skipped = skip & 1 != 0;
+            skip >>= 1;
+            if skipped {
                 continue;
             }
-            let first = (c * GRID_PX).max(BORDER_PX);
-            let stop = (c * GRID_PX + GRID_PX).min(end);
-            if first >= stop {
-                continue;
-            }
-            let Some(span) = self.columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) else {
-                continue;
-            };
-            // A full cell (span of known length: no checks in the loop); the two partial
-            // cells at the borders stop at the end of their shorter span.
-            if span.len() == SPAN {
-                score_span(span, first, y, cell, &thresholds);
+            let first = c * GRID_PX;
+            if let Some(span) = self
+                .columns
+                .get(first.wrapping_sub(WINDOW_HALF)..first + GRID_PX + WINDOW_HALF)
+                .and_then(|s| <&[[i32; 3]; SPAN]>::try_from(s).ok())
+                .filter(|_| first >= BORDER_PX && first + GRID_PX <= end)
+            {
+                // A full cell: fixed offsets, no checks.
+                score_full(span, first, y, cell, &thresholds);
             } else {
-                score_partial(span, first, y, cell, &thresholds);
+                // The partial cells at the borders stop at the end of their shorter span.
+                let first = first.max(BORDER_PX);
+                let stop = (c * GRID_PX + GRID_PX).min(end);
+                if first >= stop {
+                    continue;
+                }
+                if let Some(span) = self.columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) {
+                    score_partial(span, first, y, cell, &thresholds);
+                }
             }
         }
     }
