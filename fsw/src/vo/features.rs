@@ -129,31 +129,44 @@ fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
 /// Moves the window down one row: adds the products of row `add`, removes those of row
 /// `remove` (one pass over the sums).
 fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
+    use core::sync::atomic::{compiler_fence, Ordering::SeqCst};
     let (Some([au, am, ad]), Some([ru, rm, rd])) =
         (gradient_rows(image, add), gradient_rows(image, remove))
     else {
         return;
     };
     for c in SUM_FIRST_COL..SUM_END_COL {
-        let (Some(s), Some(&au), Some(&ad), Some(&al), Some(&ar)) = (
+        let (Some(s), Some(&ru), Some(&rd), Some(&rl), Some(&rr)) = (
             sums.get_mut(c),
-            au.get(c),
-            ad.get(c),
-            am.get(c - 1),
-            am.get(c + 1),
+            ru.get(c),
+            rd.get(c),
+            rm.get(c - 1),
+            rm.get(c + 1),
         ) else {
             break;
         };
-        let (Some(&ru), Some(&rd), Some(&rl), Some(&rr)) =
-            (ru.get(c), rd.get(c), rm.get(c - 1), rm.get(c + 1))
+        // The leaving row, then (compiler fences: no instruction) the entering row, and the
+        // next column only after this one's stores: few values live at a time, no spills.
+        let (rx, ry) = gradient(ru, rd, i32::from(rl), i32::from(rr));
+        let [s0, s1, s2] = *s;
+        let (s0, s1, s2) = (
+            s0.wrapping_sub(rx * rx),
+            s1.wrapping_sub(ry * ry),
+            s2.wrapping_sub(rx * ry),
+        );
+        compiler_fence(SeqCst);
+        let (Some(&au), Some(&ad), Some(&al), Some(&ar)) =
+            (au.get(c), ad.get(c), am.get(c - 1), am.get(c + 1))
         else {
             break;
         };
         let (ax, ay) = gradient(au, ad, i32::from(al), i32::from(ar));
-        let (rx, ry) = gradient(ru, rd, i32::from(rl), i32::from(rr));
-        s[0] = s[0].wrapping_add(ax * ax).wrapping_sub(rx * rx);
-        s[1] = s[1].wrapping_add(ay * ay).wrapping_sub(ry * ry);
-        s[2] = s[2].wrapping_add(ax * ay).wrapping_sub(rx * ry);
+        *s = [
+            s0.wrapping_add(ax * ax),
+            s1.wrapping_add(ay * ay),
+            s2.wrapping_add(ax * ay),
+        ];
+        compiler_fence(SeqCst);
     }
 }
 
