@@ -123,11 +123,60 @@ fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
         s[0] = s[0].wrapping_add(gx * gx);
         s[1] = s[1].wrapping_add(gy * gy);
         s[2] = s[2].wrapping_add(gx * gy);
+        // One column at a time (a compiler-only barrier, as in `slide_rows`).
+        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+/// Adds the gradient products of the window rows `y - WINDOW_HALF..=y + WINDOW_HALF` to the
+/// column sums (the first row of a pass): one pass over the columns with the five rows' sums in
+/// registers; row by row ([`add_row`]) when a row has no neighbour in the image. Out of line:
+/// it runs once per pass and would otherwise change the register use of the per-row code.
+#[inline(never)]
+fn add_window(image: &Image, y: usize, sums: &mut ColumnSums) {
+    let row = |k: Option<usize>| {
+        k.and_then(|k| image.row(k))
+            .and_then(|r| <&[u8; IMAGE_WIDTH_PX]>::try_from(r).ok())
+    };
+    let first = y.checked_sub(WINDOW_HALF + 1);
+    let at = |d: usize| row(first.map(|f| f + d));
+    let (Some(r0), Some(r1), Some(r2), Some(r3), Some(r4), Some(r5), Some(r6)) =
+        (at(0), at(1), at(2), at(3), at(4), at(5), at(6))
+    else {
+        for r in y.saturating_sub(WINDOW_HALF)..=y + WINDOW_HALF {
+            add_row(image, r, sums);
+        }
+        return;
+    };
+    let rows = [r0, r1, r2, r3, r4, r5, r6];
+    for c in SUM_FIRST_COL..SUM_END_COL {
+        let Some(s) = sums.get_mut(c) else {
+            break;
+        };
+        let mut acc = *s;
+        for j in 0..2 * WINDOW_HALF + 1 {
+            let (Some(up), Some(mid), Some(down)) = (rows.get(j), rows.get(j + 1), rows.get(j + 2))
+            else {
+                break;
+            };
+            let (Some(&u), Some(&d), Some(&m0), Some(&m2)) =
+                (up.get(c), down.get(c), mid.get(c - 1), mid.get(c + 1))
+            else {
+                break;
+            };
+            let (gx, gy) = gradient(u, d, i32::from(m0), i32::from(m2));
+            acc[0] = acc[0].wrapping_add(gx * gx);
+            acc[1] = acc[1].wrapping_add(gy * gy);
+            acc[2] = acc[2].wrapping_add(gx * gy);
+        }
+        *s = acc;
+        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
     }
 }
 
 /// Moves the window down one row: adds the products of row `add`, removes those of row
 /// `remove` (one pass over the sums).
+#[inline(never)]
 fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
     use core::sync::atomic::{compiler_fence, Ordering::SeqCst};
     let (Some([au, am, ad]), Some([ru, rm, rd])) =
@@ -430,9 +479,7 @@ impl ForstnerDetector {
         if y == FIRST_ROW {
             self.columns.fill([0; 3]);
             self.candidate_count = 0;
-            for r in (FIRST_ROW - WINDOW_HALF)..=(FIRST_ROW + WINDOW_HALF) {
-                add_row(image, r, &mut self.columns);
-            }
+            add_window(image, FIRST_ROW, &mut self.columns);
         } else {
             slide_rows(
                 image,
