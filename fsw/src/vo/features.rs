@@ -456,8 +456,10 @@ impl ForstnerDetector {
 
     /// [`Self::process_row`] that skips the grid cells of this row's grid row whose bit is set
     /// in `skip_cells` (bit `c` for grid column `c`): they are not scored and stay as they are
-    /// (empty after the first row of the pass). The running column sums are kept for every
-    /// column, so the other cells get exactly the scores of the unmasked operator.
+    /// (empty: a grid row's cells are cleared at its first row of the pass, so until then they
+    /// hold the previous pass's values; the candidates are read only after the whole pass).
+    /// The running column sums are kept for every column a window reaches, so the other cells
+    /// get exactly the scores of the unmasked operator.
     pub fn process_row_masked(
         &mut self,
         image: &Image,
