@@ -72,129 +72,370 @@ impl ForstnerDetector {
     };
 }
 
-/// The rows a central-difference gradient row `y` needs, cut to the interior columns
-/// `1..width-1`: left and right neighbours in row `y`, the pixels above and below. `None` at the
-/// first and last rows.
-fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[&'a [u8]; 4]> {
-    let up = image.row(y.checked_sub(1)?)?;
-    let mid = image.row(y)?;
-    let down = image.row(y + 1)?;
-    let n = IMAGE_WIDTH_PX - 2;
-    Some([
-        mid.get(..n)?,
-        mid.get(2..n + 2)?,
-        up.get(1..n + 1)?,
-        down.get(1..n + 1)?,
-    ])
+/// One image row as an array.
+type Row<'a> = &'a [u8; IMAGE_WIDTH_PX];
+
+/// The rows a central-difference gradient row `y` needs: the row above, the row itself, the
+/// row below. `None` at the first and last rows.
+fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[Row<'a>; 3]> {
+    let up = image.row(y.checked_sub(1)?)?.try_into().ok()?;
+    let mid = image.row(y)?.try_into().ok()?;
+    let down = image.row(y + 1)?.try_into().ok()?;
+    Some([up, mid, down])
 }
 
-/// Central-difference gradients `(gx, gy)` of the interior pixels of image row `y` (columns
-/// 1..width-1), `None` at the first and last rows.
-fn row_gradients<'a>(image: &Image<'a>, y: usize) -> Option<impl Iterator<Item = (i32, i32)> + 'a> {
-    let [l, r, u, d] = gradient_rows(image, y)?;
-    Some(
-        l.iter()
-            .zip(r)
-            .zip(u.iter().zip(d))
-            .map(|((&l, &r), (&u, &d))| (i32::from(r) - i32::from(l), i32::from(d) - i32::from(u))),
-    )
-}
-
-/// The column sums of the gradient products, `[xx, yy, xy]` per column.
+/// The column sums of the gradient products, `[xx, yy, xy]` per column (kept for the columns
+/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`], the only ones a scored window reaches; the others
+/// stay 0).
 type ColumnSums = [[i32; 3]; IMAGE_WIDTH_PX];
 
-/// Adds the gradient products of image row `y` to the column sums.
+/// First column a scored window reaches (the first centre [`BORDER_PX`] minus the half window).
+const SUM_FIRST_COL: usize = BORDER_PX - WINDOW_HALF;
+/// One past the last column a scored window reaches (the last centre is
+/// `IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF - 1`).
+const SUM_END_COL: usize = IMAGE_WIDTH_PX - BORDER_PX;
+
+/// Central-difference gradients `(gx, gy)` at column `c` of the row whose neighbours are
+/// `[up, mid, down]` (`gx = I(c + 1) - I(c - 1)`, `gy = I(y + 1) - I(y - 1)`), with the row's
+/// pixels `m0 = I(c - 1)` and `m2 = I(c + 1)` given.
+#[inline(always)]
+fn gradient(up: u8, down: u8, m0: i32, m2: i32) -> (i32, i32) {
+    (m2 - m0, i32::from(down) - i32::from(up))
+}
+
+/// Adds the gradient products of image row `y` to the column sums (columns
+/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`]; nothing at the first and last rows).
 fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
-    let Some(g) = row_gradients(image, y) else {
+    let Some([up, mid, down]) = gradient_rows(image, y) else {
         return;
     };
-    for (s, (gx, gy)) in sums.iter_mut().skip(1).zip(g) {
-        s[0] += gx * gx;
-        s[1] += gy * gy;
-        s[2] += gx * gy;
+    for c in SUM_FIRST_COL..SUM_END_COL {
+        let (Some(s), Some(&u), Some(&d), Some(&m0), Some(&m2)) = (
+            sums.get_mut(c),
+            up.get(c),
+            down.get(c),
+            mid.get(c - 1),
+            mid.get(c + 1),
+        ) else {
+            break;
+        };
+        let (gx, gy) = gradient(u, d, i32::from(m0), i32::from(m2));
+        s[0] = s[0].wrapping_add(gx * gx);
+        s[1] = s[1].wrapping_add(gy * gy);
+        s[2] = s[2].wrapping_add(gx * gy);
+        // One column at a time (a compiler-only barrier, as in `slide_rows`).
+        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+/// Adds the gradient products of the window rows `y - WINDOW_HALF..=y + WINDOW_HALF` to the
+/// column sums (the first row of a pass): one pass over the columns with the five rows' sums in
+/// registers; row by row ([`add_row`]) when a row has no neighbour in the image. Out of line:
+/// it runs once per pass and would otherwise change the register use of the per-row code.
+#[inline(never)]
+fn add_window(image: &Image, y: usize, sums: &mut ColumnSums) {
+    let row = |k: Option<usize>| {
+        k.and_then(|k| image.row(k))
+            .and_then(|r| <&[u8; IMAGE_WIDTH_PX]>::try_from(r).ok())
+    };
+    let first = y.checked_sub(WINDOW_HALF + 1);
+    let at = |d: usize| row(first.map(|f| f + d));
+    let (Some(r0), Some(r1), Some(r2), Some(r3), Some(r4), Some(r5), Some(r6)) =
+        (at(0), at(1), at(2), at(3), at(4), at(5), at(6))
+    else {
+        for r in y.saturating_sub(WINDOW_HALF)..=y + WINDOW_HALF {
+            add_row(image, r, sums);
+        }
+        return;
+    };
+    let rows = [r0, r1, r2, r3, r4, r5, r6];
+    for c in SUM_FIRST_COL..SUM_END_COL {
+        let Some(s) = sums.get_mut(c) else {
+            break;
+        };
+        let mut acc = *s;
+        for j in 0..2 * WINDOW_HALF + 1 {
+            let (Some(up), Some(mid), Some(down)) = (rows.get(j), rows.get(j + 1), rows.get(j + 2))
+            else {
+                break;
+            };
+            let (Some(&u), Some(&d), Some(&m0), Some(&m2)) =
+                (up.get(c), down.get(c), mid.get(c - 1), mid.get(c + 1))
+            else {
+                break;
+            };
+            let (gx, gy) = gradient(u, d, i32::from(m0), i32::from(m2));
+            acc[0] = acc[0].wrapping_add(gx * gx);
+            acc[1] = acc[1].wrapping_add(gy * gy);
+            acc[2] = acc[2].wrapping_add(gx * gy);
+        }
+        *s = acc;
+        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
     }
 }
 
 /// Moves the window down one row: adds the products of row `add`, removes those of row
 /// `remove` (one pass over the sums).
+#[inline(never)]
 fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
-    let (Some([al, ar, au, ad]), Some([rl, rr, ru, rd])) =
+    use core::sync::atomic::{compiler_fence, Ordering::SeqCst};
+    let (Some([au, am, ad]), Some([ru, rm, rd])) =
         (gradient_rows(image, add), gradient_rows(image, remove))
     else {
         return;
     };
-    let added = al.iter().zip(ar).zip(au.iter().zip(ad));
-    let removed = rl.iter().zip(rr).zip(ru.iter().zip(rd));
-    for (s, (((&al, &ar), (&au, &ad)), ((&rl, &rr), (&ru, &rd)))) in
-        sums.iter_mut().skip(1).zip(added.zip(removed))
-    {
-        let (ax, ay) = (i32::from(ar) - i32::from(al), i32::from(ad) - i32::from(au));
-        let (rx, ry) = (i32::from(rr) - i32::from(rl), i32::from(rd) - i32::from(ru));
-        s[0] += ax * ax - rx * rx;
-        s[1] += ay * ay - ry * ry;
-        s[2] += ax * ay - rx * ry;
+    for c in SUM_FIRST_COL..SUM_END_COL {
+        let (Some(s), Some(&ru), Some(&rd), Some(&rl), Some(&rr)) = (
+            sums.get_mut(c),
+            ru.get(c),
+            rd.get(c),
+            rm.get(c - 1),
+            rm.get(c + 1),
+        ) else {
+            break;
+        };
+        // The leaving row, then (compiler fences: no instruction) the entering row, and the
+        // next column only after this one's stores: few values live at a time, no spills.
+        let (rx, ry) = gradient(ru, rd, i32::from(rl), i32::from(rr));
+        let [s0, s1, s2] = *s;
+        let (s0, s1, s2) = (
+            s0.wrapping_sub(rx * rx),
+            s1.wrapping_sub(ry * ry),
+            s2.wrapping_sub(rx * ry),
+        );
+        compiler_fence(SeqCst);
+        let (Some(&au), Some(&ad), Some(&al), Some(&ar)) =
+            (au.get(c), ad.get(c), am.get(c - 1), am.get(c + 1))
+        else {
+            break;
+        };
+        let (ax, ay) = gradient(au, ad, i32::from(al), i32::from(ar));
+        *s = [
+            s0.wrapping_add(ax * ax),
+            s1.wrapping_add(ay * ay),
+            s2.wrapping_add(ax * ay),
+        ];
+        compiler_fence(SeqCst);
     }
+}
+
+/// Columns of a full cell's span: its [`GRID_PX`] centres and [`WINDOW_HALF`] on each side.
+const SPAN: usize = GRID_PX + 2 * WINDOW_HALF;
+
+/// Integer lower bounds a pixel must exceed to pass the thresholds and beat a cell's best
+/// interest `best` (all conservative: a pixel failing one of them fails the exact tests).
+#[derive(Clone, Copy)]
+struct Floors {
+    /// `floor(4 best)`, or `floor(4 min_interest) - 1` if larger: a pixel needs
+    /// `trace > min_trace`, since `w = det / trace <= trace / 4` (det <= (trace / 2)^2 for a
+    /// 2x2 normal matrix) and `w > best`, `w >= min_interest`. At least 0.
+    min_trace: i32,
+    /// `floor(best)`, or `floor(min_interest) - 1` if larger: a pixel needs
+    /// `det > w_floor trace` and `min(nxx, nyy) > w_floor` (`w <= nxx nyy / (nxx + nyy) <=
+    /// min(nxx, nyy)`).
+    w_floor: i32,
+}
+
+/// The thresholds of one call: `min_interest` and `min_roundness` (f64 of the config's f32)
+/// and their integer parts for [`Floors`].
+#[derive(Clone, Copy)]
+struct Thresholds {
+    min_interest: f64,
+    min_roundness: f64,
+    /// `floor(4 min_interest) - 1` (saturating; `as` maps NaN to 0).
+    trace_floor: i32,
+    /// `floor(min_interest) - 1` (saturating).
+    w_floor: i32,
+}
+
+impl Thresholds {
+    fn new(config: &VoConfig) -> Self {
+        let min_interest = f64::from(config.min_interest);
+        Self {
+            min_interest,
+            min_roundness: f64::from(config.min_roundness),
+            trace_floor: ((4.0 * min_interest) as i32).saturating_sub(1),
+            w_floor: (min_interest as i32).saturating_sub(1),
+        }
+    }
+
+    /// The floors of a cell whose best interest is `best` (non-negative).
+    #[inline(always)]
+    fn floors(&self, best: f32) -> Floors {
+        let w = f64::from(best);
+        Floors {
+            min_trace: ((4.0 * w) as i32).max(self.trace_floor),
+            w_floor: (w as i32).max(self.w_floor),
+        }
+    }
+}
+
+/// The exact tests of one pixel that passed the trace and diagonal bounds: `(nxx, nyy, nxy)`
+/// are its window sums, `trace = nxx + nyy > 0`. Returns the pixel's interest when it passes
+/// the interest and roundness thresholds and beats `best`.
+#[inline(always)]
+fn score_pixel(
+    (nxx, nyy, nxy): (i32, i32, i32),
+    trace: i32,
+    best: f32,
+    w_floor: i32,
+    t: &Thresholds,
+) -> Option<f32> {
+    // det exactly in i64 (|products| < 2^42). Integer pre-test of the interest: w_floor <= best
+    // and w_floor < min_interest, so det <= w_floor trace fails an f64 test below as well.
+    let det = i64::from(nxx) * i64::from(nyy) - i64::from(nxy) * i64::from(nxy);
+    if det <= i64::from(w_floor) * i64::from(trace) {
+        return None;
+    }
+    // The definition's tests, in f64 (exact: det and trace below 2^53).
+    let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
+    let det_f = fxx * fyy - fxy * fxy;
+    let trace_f = f64::from(trace);
+    if det_f > 0.0
+        && det_f > f64::from(best) * trace_f
+        && !(det_f < t.min_interest * trace_f)
+        && !(4.0 * det_f < t.min_roundness * trace_f * trace_f)
+    {
+        let interest = (det_f / trace_f) as f32;
+        if interest > best {
+            return Some(interest);
+        }
+    }
+    None
 }
 
 /// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
 /// columns `first - WINDOW_HALF .. first + n + WINDOW_HALF` for the `n` centres
-/// `first..first + n`; keeps the best pixel passing the thresholds in `cell`.
+/// `first..first + n` (`n = span.len() - 2 WINDOW_HALF`, at most [`GRID_PX`]); keeps the
+/// best pixel passing the thresholds in `cell` (the first one in scan order on equal
+/// interests, as a sequential scan with a strict `>`).
+///
+/// Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
+/// window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
+/// and trace are exact in f64 (and in i64).
 #[inline(always)]
-fn score_cell(
-    span: &[[i32; 3]],
+fn score_span(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t: &Thresholds) {
+    const W: usize = 2 * WINDOW_HALF;
+    let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
+    for &[a, b, c] in span.iter().take(W) {
+        nxx = nxx.wrapping_add(a);
+        nyy = nyy.wrapping_add(b);
+        nxy = nxy.wrapping_add(c);
+    }
+    let mut best = cell.interest;
+    let mut best_k = None;
+    let mut floors = t.floors(best);
+    for k in 0..GRID_PX {
+        let Some(&[a, b, c]) = span.get(k + W) else {
+            break;
+        };
+        // Window over the columns centre-2..=centre+2.
+        nxx = nxx.wrapping_add(a);
+        nyy = nyy.wrapping_add(b);
+        nxy = nxy.wrapping_add(c);
+        let trace = nxx.wrapping_add(nyy);
+        // min_trace >= 0, so this also gives trace > 0.
+        if trace > floors.min_trace && nxx > floors.w_floor && nyy > floors.w_floor {
+            if let Some(interest) = score_pixel((nxx, nyy, nxy), trace, best, floors.w_floor, t) {
+                best = interest;
+                best_k = Some(k);
+                floors = t.floors(interest);
+            }
+        }
+        // Keeps the leaving column's loads after the tests (a compiler-only barrier, no
+        // instruction): loaded before them, they stay live across the rare path and spill.
+        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+        let Some(&[oa, ob, oc]) = span.get(k) else {
+            break;
+        };
+        nxx = nxx.wrapping_sub(oa);
+        nyy = nyy.wrapping_sub(ob);
+        nxy = nxy.wrapping_sub(oc);
+    }
+    if let Some(k) = best_k {
+        *cell = Candidate {
+            interest: best,
+            x: (first + k) as u16,
+            y: y as u16,
+        };
+    }
+}
+
+/// [`score_span`] of a full cell ([`GRID_PX`] centres, the span of [`SPAN`] columns),
+/// unrolled: no loop counter, every column at a fixed offset.
+#[inline(always)]
+fn score_full(
+    span: &[[i32; 3]; SPAN],
     first: usize,
     y: usize,
     cell: &mut Candidate,
-    min_interest: f64,
-    min_roundness: f64,
+    t: &Thresholds,
 ) {
-    const W: usize = 2 * WINDOW_HALF;
-    // Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
-    // window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
-    // and trace are exact in f64.
-    let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
-    for &[a, b, c] in span.iter().take(W) {
-        nxx += a;
-        nyy += b;
-        nxy += c;
+    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12, s13] = span;
+    // The leaving columns read through an opaque copy of the reference: the optimiser would
+    // otherwise keep each column in registers from its entering to its leaving (4 columns,
+    // 12 values) and spill them; loading it again is one instruction.
+    let [_, _, _, _, o4, o5, o6, o7, o8, o9, ..] = core::hint::black_box(span);
+    let mut n = [0i32; 3];
+    for col in [s0, s1, s2, s3] {
+        for (n, &v) in n.iter_mut().zip(col) {
+            *n = n.wrapping_add(v);
+        }
     }
-    // w = det / trace <= trace / 4 (det <= (trace / 2)^2 for a 2x2 normal matrix): a pixel
-    // whose trace is at most four times the cell's best cannot beat it. In integers (traces are
-    // integers, interests non-negative): trace > 4 w  <=>  trace > floor(4 w).
-    let bound = |interest: f32| (4.0 * f64::from(interest)) as i32;
-    let mut min_trace = bound(cell.interest);
-    for (k, (&[a, b, c], &[oa, ob, oc])) in span.iter().skip(W).zip(span.iter()).enumerate() {
-        // Window over the columns centre-2..=centre+2.
-        nxx += a;
-        nyy += b;
-        nxy += c;
-        let trace = nxx + nyy;
-        if trace > min_trace && trace > 0 {
-            let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
-            let det_f = fxx * fyy - fxy * fxy;
-            let trace_f = f64::from(trace);
-            // Thresholds without divisions; the test against the cell's best comes first (most
-            // pixels fail it), the division runs only for a new best.
-            if det_f > 0.0
-                && det_f > f64::from(cell.interest) * trace_f
-                && !(det_f < min_interest * trace_f)
-                && !(4.0 * det_f < min_roundness * trace_f * trace_f)
-            {
-                let interest = (det_f / trace_f) as f32;
-                if interest > cell.interest {
-                    *cell = Candidate {
-                        interest,
-                        x: (first + k) as u16,
-                        y: y as u16,
-                    };
-                    min_trace = bound(interest);
+    let [mut nxx, mut nyy, mut nxy] = n;
+    let mut best = cell.interest;
+    let mut best_k = None;
+    let mut floors = t.floors(best);
+    // Centre k: the window over the columns k..=k+4 of the span (entering column `new`,
+    // leaving column `old`), tests as in `score_span`.
+    macro_rules! centre {
+        ($k:expr, $new:ident, $old:ident) => {
+            let [a, b, c] = *$new;
+            nxx = nxx.wrapping_add(a);
+            nyy = nyy.wrapping_add(b);
+            nxy = nxy.wrapping_add(c);
+            let trace = nxx.wrapping_add(nyy);
+            if trace > floors.min_trace && nxx > floors.w_floor && nyy > floors.w_floor {
+                if let Some(interest) = score_pixel((nxx, nyy, nxy), trace, best, floors.w_floor, t)
+                {
+                    best = interest;
+                    best_k = Some($k);
+                    floors = t.floors(interest);
                 }
             }
-        }
-        nxx -= oa;
-        nyy -= ob;
-        nxy -= oc;
+            core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+            let [oa, ob, oc] = *$old;
+            nxx = nxx.wrapping_sub(oa);
+            nyy = nyy.wrapping_sub(ob);
+            nxy = nxy.wrapping_sub(oc);
+        };
     }
+    centre!(0usize, s4, s0);
+    centre!(1, s5, s1);
+    centre!(2, s6, s2);
+    centre!(3, s7, s3);
+    centre!(4, s8, o4);
+    centre!(5, s9, o5);
+    centre!(6, s10, o6);
+    centre!(7, s11, o7);
+    centre!(8, s12, o8);
+    centre!(9, s13, o9);
+    // The last update of the sums is not read.
+    let _ = (nxx, nyy, nxy, floors);
+    if let Some(k) = best_k {
+        *cell = Candidate {
+            interest: best,
+            x: (first + k) as u16,
+            y: y as u16,
+        };
+    }
+}
+
+/// [`score_span`] of a partial cell (fewer than [`GRID_PX`] centres: the loop stops at the
+/// end of `span`).
+#[inline(never)]
+fn score_partial(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t: &Thresholds) {
+    score_span(span, first, y, cell, t);
 }
 
 impl ForstnerDetector {
@@ -215,8 +456,10 @@ impl ForstnerDetector {
 
     /// [`Self::process_row`] that skips the grid cells of this row's grid row whose bit is set
     /// in `skip_cells` (bit `c` for grid column `c`): they are not scored and stay as they are
-    /// (empty after the first row of the pass). The running column sums are kept for every
-    /// column, so the other cells get exactly the scores of the unmasked operator.
+    /// (empty: a grid row's cells are cleared at its first row of the pass, so until then they
+    /// hold the previous pass's values; the candidates are read only after the whole pass).
+    /// The running column sums are kept for every column a window reaches, so the other cells
+    /// get exactly the scores of the unmasked operator.
     pub fn process_row_masked(
         &mut self,
         image: &Image,
@@ -224,11 +467,21 @@ impl ForstnerDetector {
         config: &VoConfig,
         skip_cells: u64,
     ) {
+        let cell_row = y / GRID_PX;
+        let cells = self
+            .cells
+            .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
+            .unwrap_or(&mut []);
+        if y == FIRST_ROW || y % GRID_PX == 0 {
+            // A grid row's cells are cleared at its first row (the pass reaches every grid
+            // row, so all cells are cleared by its end, as by `reset` at its start, without a
+            // 37 KB clear in the first item).
+            cells.fill(NO_CANDIDATE);
+        }
         if y == FIRST_ROW {
-            self.reset();
-            for r in (FIRST_ROW - WINDOW_HALF)..=(FIRST_ROW + WINDOW_HALF) {
-                add_row(image, r, &mut self.columns);
-            }
+            self.columns.fill([0; 3]);
+            self.candidate_count = 0;
+            add_window(image, FIRST_ROW, &mut self.columns);
         } else {
             slide_rows(
                 image,
@@ -237,31 +490,38 @@ impl ForstnerDetector {
                 &mut self.columns,
             );
         }
-        let cell_row = y / GRID_PX;
-        let (min_interest, min_roundness) = (
-            f64::from(config.min_interest),
-            f64::from(config.min_roundness),
-        );
-        let cells = self
-            .cells
-            .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
-            .unwrap_or(&mut []);
+        let thresholds = Thresholds::new(config);
         // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
-        // last one ends inside the border), cell by cell.
+        // last one ends inside the border), cell by cell. The skip mask is shifted one cell
+        // per step (bit 0 is the current cell).
         let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
+        let mut skip = skip_cells;
         for (c, cell) in cells.iter_mut().enumerate() {
-            if c < u64::BITS as usize && skip_cells & (1u64 << c) != 0 {
+            let skipped = skip & 1 != 0;
+            skip >>= 1;
+            if skipped {
                 continue;
             }
-            let first = (c * GRID_PX).max(BORDER_PX);
-            let stop = (c * GRID_PX + GRID_PX).min(end);
-            if first >= stop {
-                continue;
+            let first = c * GRID_PX;
+            if let Some(span) = self
+                .columns
+                .get(first.wrapping_sub(WINDOW_HALF)..first + GRID_PX + WINDOW_HALF)
+                .and_then(|s| <&[[i32; 3]; SPAN]>::try_from(s).ok())
+                .filter(|_| first >= BORDER_PX && first + GRID_PX <= end)
+            {
+                // A full cell: fixed offsets, no checks.
+                score_full(span, first, y, cell, &thresholds);
+            } else {
+                // The partial cells at the borders stop at the end of their shorter span.
+                let first = first.max(BORDER_PX);
+                let stop = (c * GRID_PX + GRID_PX).min(end);
+                if first >= stop {
+                    continue;
+                }
+                if let Some(span) = self.columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) {
+                    score_partial(span, first, y, cell, &thresholds);
+                }
             }
-            let Some(span) = self.columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) else {
-                continue;
-            };
-            score_cell(span, first, y, cell, min_interest, min_roundness);
         }
     }
 
@@ -409,6 +669,187 @@ pub fn select_with_min_distance(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The operator as it was before session 12 (commit de4e5b8), verbatim but for the state
+    /// passed in: the reference of `vo_1_optimised_operator_equals_the_reference`.
+    mod reference {
+        use super::super::*;
+
+        /// The rows a central-difference gradient row `y` needs, cut to the interior columns
+        /// `1..width-1`: left and right neighbours in row `y`, the pixels above and below. `None` at the
+        /// first and last rows.
+        fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[&'a [u8]; 4]> {
+            let up = image.row(y.checked_sub(1)?)?;
+            let mid = image.row(y)?;
+            let down = image.row(y + 1)?;
+            let n = IMAGE_WIDTH_PX - 2;
+            Some([
+                mid.get(..n)?,
+                mid.get(2..n + 2)?,
+                up.get(1..n + 1)?,
+                down.get(1..n + 1)?,
+            ])
+        }
+
+        /// Central-difference gradients `(gx, gy)` of the interior pixels of image row `y` (columns
+        /// 1..width-1), `None` at the first and last rows.
+        fn row_gradients<'a>(
+            image: &Image<'a>,
+            y: usize,
+        ) -> Option<impl Iterator<Item = (i32, i32)> + 'a> {
+            let [l, r, u, d] = gradient_rows(image, y)?;
+            Some(
+                l.iter()
+                    .zip(r)
+                    .zip(u.iter().zip(d))
+                    .map(|((&l, &r), (&u, &d))| {
+                        (i32::from(r) - i32::from(l), i32::from(d) - i32::from(u))
+                    }),
+            )
+        }
+
+        /// The column sums of the gradient products, `[xx, yy, xy]` per column.
+        type ColumnSums = [[i32; 3]; IMAGE_WIDTH_PX];
+
+        /// Adds the gradient products of image row `y` to the column sums.
+        fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
+            let Some(g) = row_gradients(image, y) else {
+                return;
+            };
+            for (s, (gx, gy)) in sums.iter_mut().skip(1).zip(g) {
+                s[0] += gx * gx;
+                s[1] += gy * gy;
+                s[2] += gx * gy;
+            }
+        }
+
+        /// Moves the window down one row: adds the products of row `add`, removes those of row
+        /// `remove` (one pass over the sums).
+        fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
+            let (Some([al, ar, au, ad]), Some([rl, rr, ru, rd])) =
+                (gradient_rows(image, add), gradient_rows(image, remove))
+            else {
+                return;
+            };
+            let added = al.iter().zip(ar).zip(au.iter().zip(ad));
+            let removed = rl.iter().zip(rr).zip(ru.iter().zip(rd));
+            for (s, (((&al, &ar), (&au, &ad)), ((&rl, &rr), (&ru, &rd)))) in
+                sums.iter_mut().skip(1).zip(added.zip(removed))
+            {
+                let (ax, ay) = (i32::from(ar) - i32::from(al), i32::from(ad) - i32::from(au));
+                let (rx, ry) = (i32::from(rr) - i32::from(rl), i32::from(rd) - i32::from(ru));
+                s[0] += ax * ax - rx * rx;
+                s[1] += ay * ay - ry * ry;
+                s[2] += ax * ay - rx * ry;
+            }
+        }
+
+        /// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
+        /// columns `first - WINDOW_HALF .. first + n + WINDOW_HALF` for the `n` centres
+        /// `first..first + n`; keeps the best pixel passing the thresholds in `cell`.
+        #[inline(always)]
+        fn score_cell(
+            span: &[[i32; 3]],
+            first: usize,
+            y: usize,
+            cell: &mut Candidate,
+            min_interest: f64,
+            min_roundness: f64,
+        ) {
+            const W: usize = 2 * WINDOW_HALF;
+            // Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
+            // window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
+            // and trace are exact in f64.
+            let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
+            for &[a, b, c] in span.iter().take(W) {
+                nxx += a;
+                nyy += b;
+                nxy += c;
+            }
+            // w = det / trace <= trace / 4 (det <= (trace / 2)^2 for a 2x2 normal matrix): a pixel
+            // whose trace is at most four times the cell's best cannot beat it. In integers (traces are
+            // integers, interests non-negative): trace > 4 w  <=>  trace > floor(4 w).
+            let bound = |interest: f32| (4.0 * f64::from(interest)) as i32;
+            let mut min_trace = bound(cell.interest);
+            for (k, (&[a, b, c], &[oa, ob, oc])) in span.iter().skip(W).zip(span.iter()).enumerate()
+            {
+                // Window over the columns centre-2..=centre+2.
+                nxx += a;
+                nyy += b;
+                nxy += c;
+                let trace = nxx + nyy;
+                if trace > min_trace && trace > 0 {
+                    let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
+                    let det_f = fxx * fyy - fxy * fxy;
+                    let trace_f = f64::from(trace);
+                    // Thresholds without divisions; the test against the cell's best comes first (most
+                    // pixels fail it), the division runs only for a new best.
+                    if det_f > 0.0
+                        && det_f > f64::from(cell.interest) * trace_f
+                        && !(det_f < min_interest * trace_f)
+                        && !(4.0 * det_f < min_roundness * trace_f * trace_f)
+                    {
+                        let interest = (det_f / trace_f) as f32;
+                        if interest > cell.interest {
+                            *cell = Candidate {
+                                interest,
+                                x: (first + k) as u16,
+                                y: y as u16,
+                            };
+                            min_trace = bound(interest);
+                        }
+                    }
+                }
+                nxx -= oa;
+                nyy -= ob;
+                nxy -= oc;
+            }
+        }
+
+        pub fn process_row_masked(
+            columns: &mut ColumnSums,
+            cells_all: &mut [Candidate; CELL_COUNT],
+            image: &Image,
+            y: usize,
+            config: &VoConfig,
+            skip_cells: u64,
+        ) {
+            if y == FIRST_ROW {
+                columns.fill([0; 3]);
+                cells_all.fill(NO_CANDIDATE);
+                for r in (FIRST_ROW - WINDOW_HALF)..=(FIRST_ROW + WINDOW_HALF) {
+                    add_row(image, r, columns);
+                }
+            } else {
+                slide_rows(image, y + WINDOW_HALF, y - WINDOW_HALF - 1, columns);
+            }
+            let cell_row = y / GRID_PX;
+            let (min_interest, min_roundness) = (
+                f64::from(config.min_interest),
+                f64::from(config.min_roundness),
+            );
+            let cells = cells_all
+                .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
+                .unwrap_or(&mut []);
+            // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
+            // last one ends inside the border), cell by cell.
+            let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
+            for (c, cell) in cells.iter_mut().enumerate() {
+                if c < u64::BITS as usize && skip_cells & (1u64 << c) != 0 {
+                    continue;
+                }
+                let first = (c * GRID_PX).max(BORDER_PX);
+                let stop = (c * GRID_PX + GRID_PX).min(end);
+                if first >= stop {
+                    continue;
+                }
+                let Some(span) = columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) else {
+                    continue;
+                };
+                score_cell(span, first, y, cell, min_interest, min_roundness);
+            }
+        }
+    }
     use rover_hal::IMAGE_PIXELS;
     use std::{boxed::Box, vec::Vec};
 
@@ -503,6 +944,112 @@ mod tests {
         let found = cells.iter().filter(|c| c.interest > 0.0).count();
         assert!(found > 1000, "{found} cells");
         assert_eq!(det.cells[..], cells[..]);
+    }
+
+    /// Runs the optimised operator and the reference on `img` with `config` and the skip mask
+    /// `mask(grid_row)`; asserts equal cells after every grid row. Returns the non-empty cells.
+    fn compare_with_reference(img: &[u8], config: &VoConfig, mask: impl Fn(usize) -> u64) -> usize {
+        let image = Image::new(img).unwrap();
+        let mut det = Box::new(ForstnerDetector::default());
+        let mut columns: Box<ColumnSums> = Box::new([[0; 3]; IMAGE_WIDTH_PX]);
+        let mut cells: Box<[Candidate; CELL_COUNT]> = Box::new([NO_CANDIDATE; CELL_COUNT]);
+        for y in FIRST_ROW..END_ROW {
+            let skip = mask(y / GRID_PX);
+            det.process_row_masked(&image, y, config, skip);
+            reference::process_row_masked(&mut columns, &mut cells, &image, y, config, skip);
+            if y % GRID_PX == GRID_PX - 1 || y + 1 == END_ROW {
+                // The reference keeps every interior column; the operator those a scored
+                // window reaches.
+                let column = (SUM_FIRST_COL..SUM_END_COL).find(|&c| det.columns[c] != columns[c]);
+                assert_eq!(column, None, "column sums differ, row {y}");
+                let cell = (0..CELL_COUNT).find(|&c| det.cells[c] != cells[c]);
+                if let Some(c) = cell {
+                    panic!("row {y} cell {c}: {:?} != {:?}", det.cells[c], cells[c]);
+                }
+            }
+        }
+        cells.iter().filter(|c| c.interest > 0.0).count()
+    }
+
+    /// xorshift64 noise image; `smooth` box-filters it horizontally over that many pixels
+    /// (lower contrast, more ties near the thresholds).
+    fn noise_image(seed: u64, smooth: usize) -> Vec<u8> {
+        let mut state = seed;
+        let raw: Vec<u8> = (0..IMAGE_PIXELS)
+            .map(|_| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state >> 56) as u8
+            })
+            .collect();
+        (0..IMAGE_PIXELS)
+            .map(|i| {
+                let n = smooth.max(1).min(IMAGE_PIXELS - i);
+                (raw[i..i + n].iter().map(|&v| u32::from(v)).sum::<u32>() / n as u32) as u8
+            })
+            .collect()
+    }
+
+    #[test]
+    fn vo_1_optimised_operator_equals_the_reference() {
+        // The session-12 operator (integer pre-tests, fixed-length cell loops, per-column slide)
+        // against the former code, verbatim in `reference`: the same column sums and the same
+        // cells (interest bits, positions) on random and rendered images, with and without skip
+        // masks, for the flight thresholds and for extreme ones.
+        use crate::types::Vec3;
+        use crate::vo::render::{hazcam, render_pair, RoverPose};
+        let configs = [
+            VoConfig::default(),
+            VoConfig {
+                min_interest: 2000.0,
+                ..VoConfig::default()
+            },
+            VoConfig {
+                min_interest: 0.5,
+                min_roundness: 0.0,
+                ..VoConfig::default()
+            },
+            VoConfig {
+                min_interest: 1.0e12,
+                ..VoConfig::default()
+            },
+            VoConfig {
+                min_interest: f32::NAN,
+                min_roundness: f32::NAN,
+                ..VoConfig::default()
+            },
+            VoConfig {
+                min_interest: -5.0,
+                min_roundness: 1.0,
+                ..VoConfig::default()
+            },
+        ];
+        let no_mask = |_: usize| 0u64;
+        let some_mask = |row: usize| 0x5555_0f0f_00ff_1234u64.rotate_left(row as u32);
+        let mut images = vec![
+            noise_image(0x1234_5678_9abc_def0, 1),
+            noise_image(0x0bad_cafe_dead_beef, 3),
+            noise_image(42, 9),
+        ];
+        let cal = hazcam();
+        for (yaw, x) in [(0.0, 0.0), (0.3, 0.5), (-0.2, 1.5)] {
+            images
+                .push(render_pair(&cal, &RoverPose::new(yaw, 0.0, 0.0, Vec3::new(x, 0.2, 0.0))).0);
+        }
+        let mut flight_cells = 0;
+        for (i, img) in images.iter().enumerate() {
+            for (k, config) in configs.iter().enumerate() {
+                let n = compare_with_reference(img, config, no_mask);
+                if k == 0 {
+                    flight_cells += n;
+                }
+            }
+            compare_with_reference(img, &VoConfig::default(), some_mask);
+            assert!(i < images.len());
+        }
+        // The comparison is not vacuous: the flight thresholds find many cells.
+        assert!(flight_cells > 6 * 1000, "{flight_cells} cells");
     }
 
     #[test]
