@@ -82,6 +82,8 @@ pub const GROUPS: &[Group] = &[
 /// One innermost loop and its simulated cost.
 #[derive(Debug, Clone)]
 pub struct LoopCost {
+    /// The function the loop is in (demangled).
+    pub function: String,
     /// Instructions of one iteration.
     pub insns: usize,
     /// Steady-state cycles of one iteration.
@@ -177,7 +179,10 @@ pub fn analyse(image: &Path) -> Result<Vec<GroupCost>> {
             cost.functions += 1;
             for body in innermost_loops(f) {
                 match simulate(&dir, &body)? {
-                    Some(l) => cost.loops.push(l),
+                    Some(mut l) => {
+                        l.function = f.name.clone();
+                        cost.loops.push(l);
+                    }
                     None => cost.skipped += 1,
                 }
             }
@@ -359,6 +364,7 @@ fn simulate(dir: &Path, body: &[String]) -> Result<Option<LoopCost>> {
     };
     let per_iter = f64::from(ITERATIONS);
     Ok(Some(LoopCost {
+        function: String::new(),
         insns: (insns / per_iter).round() as usize,
         cycles: cycles / per_iter,
     }))

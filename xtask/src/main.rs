@@ -92,7 +92,8 @@ fn main() -> Result<()> {
 /// `cargo xtask stack`: build the rover-CPU image and print the static stack analysis
 /// ([`stack`]) of its entry and of the flight software's frame.
 /// `cargo xtask cpi`: the Cortex-M7 pipeline model's CPI of the image's kernel loops
-/// ([`cpi`]), printed per group (the same figures as `docs/timing.md`).
+/// ([`cpi`]), printed per group (the same figures as `docs/timing.md`); `CPI_LOOPS=1` lists
+/// every loop with its function.
 fn cpi_command() -> Result<()> {
     run(cargo().args([
         "build",
@@ -117,6 +118,16 @@ fn cpi_command() -> Result<()> {
             c.skipped,
             g.label
         );
+        if std::env::var_os("CPI_LOOPS").is_some() {
+            for l in &c.loops {
+                println!(
+                    "    {:6.2} CPI  {:4} insns  {}",
+                    l.cycles / l.insns.max(1) as f64,
+                    l.insns,
+                    l.function
+                );
+            }
+        }
     }
     Ok(())
 }
