@@ -306,6 +306,33 @@ pub fn template_stats(template: &Template) -> (i64, i64) {
     (s, TEMPLATE_PIXELS as i64 * s2 - s * s)
 }
 
+/// Zero-mean normalised cross-correlation (-1..1) from the integer sums of `n` pixel pairs
+/// (`n` at most [`TEMPLATE_PIXELS`]): window sum `s`, sum of squares `s2`, sum of products with
+/// the template `st`, and the template's sum `ts` and `n sum_sq - sum^2` `tvar`. `None` when
+/// either patch has no contrast. With `n <= 121` and grey levels up to 255 every product and
+/// difference (`n s2`, `s^2`, `n st`, `ts s`: at most 121^2 * 255^2 = 952,031,025) fits in
+/// `i32`, so the sums need no 64-bit arithmetic and each converts to `f64` with one native
+/// instruction on the rover CPU (an `i64` conversion is a library call there); the value is the
+/// same as with 64-bit sums (identical `f64` operands).
+#[inline(always)]
+fn ncc_from_sums(n: i32, (s, s2, st): (u32, u32, u32), ts: i32, tvar: i32) -> Option<f32> {
+    let (s, s2, st) = (s as i32, s2 as i32, st as i32);
+    let ivar = n * s2 - s * s;
+    if ivar <= 0 || tvar <= 0 {
+        return None;
+    }
+    let cov = n * st - ts * s;
+    let denominator = libm::sqrt(f64::from(ivar) * f64::from(tvar));
+    Some((f64::from(cov) / denominator) as f32)
+}
+
+/// The template sums of [`template_stats`] / [`region_stats`] as `i32` (they are at most
+/// 30,855 and 952,031,025 for a template of grey levels), `None` outside that range.
+#[inline(always)]
+fn stats_i32(ts: i64, tvar: i64) -> Option<(i32, i32)> {
+    Some((i32::try_from(ts).ok()?, i32::try_from(tvar).ok()?))
+}
+
 /// Zero-mean normalised cross-correlation (-1..1) of `template` (with its [`template_stats`])
 /// against the image window centred on integer `(x, y)`; `None` if the window leaves the image or
 /// either patch has no contrast.
@@ -325,15 +352,8 @@ pub fn ncc(image: &Image, template: &Template, stats: (i64, i64), x: i32, y: i32
             st += p * u32::from(t);
         }
     }
-    let n = TEMPLATE_PIXELS as i64;
-    let (ts, tvar) = stats;
-    let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
-    if ivar <= 0 || tvar <= 0 {
-        return None;
-    }
-    let cov = n * i64::from(st) - ts * i64::from(s);
-    let denominator = libm::sqrt(ivar as f64 * tvar as f64);
-    Some((cov as f64 / denominator) as f32)
+    let (ts, tvar) = stats_i32(stats.0, stats.1)?;
+    ncc_from_sums(TEMPLATE_PIXELS as i32, (s, s2, st), ts, tvar)
 }
 
 /// A rectangle of template pixels: rows `rows.0..rows.1`, columns `cols.0..cols.1` (template
@@ -394,12 +414,11 @@ pub fn region_ncc(
         }
     }
     let (ts, tvar, n) = stats;
-    let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
-    if ivar <= 0 || tvar <= 0 {
+    let (ts, tvar) = stats_i32(ts, tvar)?;
+    if !(1..=TEMPLATE_PIXELS as i64).contains(&n) {
         return None;
     }
-    let cov = n * i64::from(st) - ts * i64::from(s);
-    Some((cov as f64 / libm::sqrt(ivar as f64 * tvar as f64)) as f32)
+    ncc_from_sums(n as i32, (s, s2, st), ts, tvar)
 }
 
 /// Largest number of columns [`ncc_scan`] covers in one call.
@@ -450,8 +469,9 @@ pub fn ncc_scan(
             *s2 += p * p;
         }
     }
-    let n = TEMPLATE_PIXELS as i64;
-    let (ts, tvar) = stats;
+    let Some((ts, tvar)) = stats_i32(stats.0, stats.1) else {
+        return;
+    };
     if tvar <= 0 {
         return;
     }
@@ -481,12 +501,9 @@ pub fn ncc_scan(
                 .map(|(&p, &t)| u32::from(p) * u32::from(t))
                 .sum::<u32>();
         }
-        let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
-        if ivar <= 0 {
-            continue;
+        if let Some(score) = ncc_from_sums(TEMPLATE_PIXELS as i32, (s, s2, st), ts, tvar) {
+            *value = score;
         }
-        let cov = n * i64::from(st) - ts * i64::from(s);
-        *value = (cov as f64 / libm::sqrt(ivar as f64 * tvar as f64)) as f32;
     }
 }
 
