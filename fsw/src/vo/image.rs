@@ -424,10 +424,70 @@ pub fn region_ncc(
 /// Largest number of columns [`ncc_scan`] covers in one call.
 pub const SCAN_MAX_COLUMNS: usize = 256;
 
+/// Largest step between the scanned positions of [`ncc_scan`] (larger steps are refused).
+pub const SCAN_MAX_STEP: usize = 4;
+
+/// Width of a packed template row of [`ScanTemplate`]: two windows `step` apart.
+const PACKED_WIDTH: usize = TEMPLATE_SIDE + SCAN_MAX_STEP;
+
+/// Bits of the low lane of a packed dot product: a sum of 121 products of grey levels is at
+/// most 121 * 255^2 = 7,868,025 < 2^23, so it cannot carry into the high lane.
+const LANE_BITS: u32 = 24;
+
+/// A template prepared for [`ncc_scan_prepared`] at one scan step: its sums
+/// ([`template_stats`]) and its rows packed for two neighbouring positions at once. Word `j`
+/// of row `r` is `t[r][j] + (t[r][j - step] << 24)` (a term is 0 where its column is outside
+/// `0..TEMPLATE_SIDE`), so one 32 x 32 -> 64-bit multiply-accumulate of image pixel
+/// `x0 + j` (`umlal` on the rover CPU) adds its product with the template of the window at
+/// `x0` to the low 24 bits and with that of the window at `x0 + step` to the high bits: two
+/// correlation terms per instruction, exact (each lane's sum stays below 2^23).
+#[derive(Debug, Clone)]
+pub struct ScanTemplate {
+    packed: [[u32; PACKED_WIDTH]; TEMPLATE_SIDE],
+    step: usize,
+    ts: i32,
+    tvar: i32,
+}
+
+impl ScanTemplate {
+    /// Prepares `template` for scans every `step` pixels (`1..=SCAN_MAX_STEP`; `None`
+    /// otherwise).
+    pub fn new(template: &Template, step: usize) -> Option<Self> {
+        Self::with_stats(template, template_stats(template), step)
+    }
+
+    /// [`Self::new`] with the template's [`template_stats`] already at hand.
+    pub fn with_stats(template: &Template, stats: (i64, i64), step: usize) -> Option<Self> {
+        if !(1..=SCAN_MAX_STEP).contains(&step) {
+            return None;
+        }
+        let (ts, tvar) = stats_i32(stats.0, stats.1)?;
+        let mut packed = [[0u32; PACKED_WIDTH]; TEMPLATE_SIDE];
+        for (out, t_row) in packed.iter_mut().zip(template.chunks_exact(TEMPLATE_SIDE)) {
+            for (j, word) in out.iter_mut().enumerate() {
+                let low = t_row.get(j).copied().map_or(0, u32::from);
+                let high = j
+                    .checked_sub(step)
+                    .and_then(|k| t_row.get(k))
+                    .copied()
+                    .map_or(0, u32::from);
+                *word = low | (high << LANE_BITS);
+            }
+        }
+        Some(Self {
+            packed,
+            step,
+            ts,
+            tvar,
+        })
+    }
+}
+
 /// Normalised cross-correlation of `template` along image row `y` at the columns
 /// `x_first + k * step` for `k` in `0..out.len()`, written to `out[k]` (`-inf` where the window
-/// leaves the image, has no contrast, or the span exceeds [`SCAN_MAX_COLUMNS`]). Same values as
-/// [`ncc`]; the window sums come from column sums computed once per call.
+/// leaves the image, has no contrast, or the span exceeds [`SCAN_MAX_COLUMNS`] or the step
+/// [`SCAN_MAX_STEP`]). Same values as [`ncc`]. [`ncc_scan_prepared`] with a template prepared
+/// for this call; a caller scanning several rows with one template prepares it once.
 pub fn ncc_scan(
     image: &Image,
     template: &Template,
@@ -437,74 +497,154 @@ pub fn ncc_scan(
     step: usize,
     out: &mut [f32],
 ) {
+    match ScanTemplate::with_stats(template, stats, step) {
+        Some(prepared) => ncc_scan_prepared(image, &prepared, y, x_first, out),
+        None => out.iter_mut().for_each(|v| *v = f32::NEG_INFINITY),
+    }
+}
+
+/// [`ncc_scan`] with a prepared template (its step). The window sums come from column sums of
+/// the scanned span (one pass, column by column, sums in registers) through prefix sums; the
+/// template products from the packed template, two neighbouring positions per pass
+/// ([`ScanTemplate`]).
+pub fn ncc_scan_prepared(
+    image: &Image,
+    template: &ScanTemplate,
+    y: i32,
+    x_first: i32,
+    out: &mut [f32],
+) {
+    match template.step {
+        1 => scan_rows::<1>(image, template, y, x_first, out),
+        2 => scan_rows::<2>(image, template, y, x_first, out),
+        3 => scan_rows::<3>(image, template, y, x_first, out),
+        _ => scan_rows::<4>(image, template, y, x_first, out),
+    }
+}
+
+/// [`ncc_scan_prepared`] at the compile-time step `STEP` (so the packed inner loops have
+/// constant trip counts, `TEMPLATE_SIDE + STEP`).
+#[inline(always)]
+fn scan_rows<const STEP: usize>(
+    image: &Image,
+    template: &ScanTemplate,
+    y: i32,
+    x_first: i32,
+    out: &mut [f32],
+) {
     out.iter_mut().for_each(|v| *v = f32::NEG_INFINITY);
+    if template.step != STEP || template.tvar <= 0 {
+        return;
+    }
     let half = TEMPLATE_HALF as i32;
     let Some(y0) = y.checked_sub(half).and_then(|v| usize::try_from(v).ok()) else {
         return;
     };
-    let mut rows: [&[u8]; TEMPLATE_SIDE] = [&[]; TEMPLATE_SIDE];
-    for (dy, slot) in rows.iter_mut().enumerate() {
-        match image.row(y0 + dy) {
-            Some(r) => *slot = r,
-            None => return,
-        }
+    if y0 + TEMPLATE_SIDE > IMAGE_HEIGHT_PX {
+        return;
     }
-    // Columns [c_first, c_end) of the image covered by all windows, clipped to the image.
-    let span = out.len().saturating_sub(1).saturating_mul(step) + TEMPLATE_SIDE;
+    // Columns [c_lo, c_hi) of the image covered by all windows, clipped to the image.
+    let span = out.len().saturating_sub(1).saturating_mul(STEP) + TEMPLATE_SIDE;
     let c_first = x_first.saturating_sub(half);
     let c_lo = c_first.max(0) as usize;
     let c_hi = (i64::from(c_first) + span as i64).clamp(0, IMAGE_WIDTH_PX as i64) as usize;
-    if span > SCAN_MAX_COLUMNS || c_lo >= c_hi {
+    if span > SCAN_MAX_COLUMNS || c_lo + TEMPLATE_SIDE > c_hi {
         return;
     }
-    let mut col_s = [0u32; SCAN_MAX_COLUMNS];
-    let mut col_s2 = [0u32; SCAN_MAX_COLUMNS];
-    for row in rows.iter() {
-        let Some(pixels) = row.get(c_lo..c_hi) else {
-            return;
-        };
-        for ((s, s2), &p) in col_s.iter_mut().zip(col_s2.iter_mut()).zip(pixels.iter()) {
-            let p = u32::from(p);
-            *s += p;
-            *s2 += p * p;
-        }
-    }
-    let Some((ts, tvar)) = stats_i32(stats.0, stats.1) else {
+    let width = c_hi - c_lo;
+    // Pixel (row r, column c_lo + j) of the window rows is block[r * W + j].
+    const ROWS_SPAN: usize = (TEMPLATE_SIDE - 1) * IMAGE_WIDTH_PX;
+    let base = y0 * IMAGE_WIDTH_PX + c_lo;
+    let Some(block) = image.data.get(base..base + ROWS_SPAN + width) else {
         return;
     };
-    if tvar <= 0 {
-        return;
-    }
-    for (k, value) in out.iter_mut().enumerate() {
-        let x0 = i64::from(c_first) + (k * step) as i64;
-        if x0 < c_lo as i64 || x0 + TEMPLATE_SIDE as i64 > c_hi as i64 {
-            continue;
+    // Prefix sums over the span of the column sums of p and p^2: pre[j] sums columns 0..j.
+    let mut pre_s = [0u32; SCAN_MAX_COLUMNS + 1];
+    let mut pre_s2 = [0u32; SCAN_MAX_COLUMNS + 1];
+    let (mut run_s, mut run_s2) = (0u32, 0u32);
+    for (j, (ps, ps2)) in pre_s
+        .iter_mut()
+        .zip(pre_s2.iter_mut())
+        .skip(1)
+        .take(width)
+        .enumerate()
+    {
+        let Some(column) = block.get(j..j + ROWS_SPAN + 1) else {
+            return;
+        };
+        for r in 0..TEMPLATE_SIDE {
+            let p = u32::from(column.get(r * IMAGE_WIDTH_PX).copied().unwrap_or(0));
+            run_s += p;
+            run_s2 += p * p;
         }
-        let x0 = x0 as usize;
+        *ps = run_s;
+        *ps2 = run_s2;
+    }
+    // Positions k_lo..k_hi have their window inside [c_lo, c_hi): x0(k) = c_first + k * step.
+    let k_lo = (c_lo as i64 - i64::from(c_first)).div_euclid(STEP as i64)
+        + i64::from((c_lo as i64 - i64::from(c_first)).rem_euclid(STEP as i64) != 0);
+    let k_hi = ((c_hi - TEMPLATE_SIDE) as i64 - i64::from(c_first)).div_euclid(STEP as i64) + 1;
+    let (k_lo, k_hi) = (
+        k_lo.max(0) as usize,
+        k_hi.clamp(0, out.len() as i64) as usize,
+    );
+    let sums = |local: usize| -> Option<(u32, u32)> {
+        let (a, b) = (pre_s.get(local)?, pre_s.get(local + TEMPLATE_SIDE)?);
+        let (a2, b2) = (pre_s2.get(local)?, pre_s2.get(local + TEMPLATE_SIDE)?);
+        Some((b.wrapping_sub(*a), b2.wrapping_sub(*a2)))
+    };
+    let n = TEMPLATE_PIXELS as i32;
+    let (ts, tvar) = (template.ts, template.tvar);
+    for k in (k_lo..k_hi).step_by(2) {
+        // k_lo >= 0 and x0 >= c_lo by construction of k_lo.
+        let x0 = (i64::from(c_first) + (k * STEP) as i64) as usize;
         let local = x0 - c_lo;
-        let (Some(cs), Some(cs2)) = (
-            col_s.get(local..local + TEMPLATE_SIDE),
-            col_s2.get(local..local + TEMPLATE_SIDE),
-        ) else {
+        let Some(window) = block.get(local..) else {
             continue;
         };
-        let s: u32 = cs.iter().sum();
-        let s2: u32 = cs2.iter().sum();
-        let mut st = 0u32;
-        for (row, t_row) in rows.iter().zip(template.chunks_exact(TEMPLATE_SIDE)) {
-            let Some(pixels) = row.get(x0..x0 + TEMPLATE_SIDE) else {
+        let pair = k + 1 < k_hi;
+        let acc = if pair {
+            dot_packed(window, &template.packed, TEMPLATE_SIDE + STEP)
+        } else {
+            dot_packed(window, &template.packed, TEMPLATE_SIDE)
+        };
+        let Some(acc) = acc else {
+            continue;
+        };
+        let lanes = [
+            (k, local, (acc & ((1 << LANE_BITS) - 1)) as u32),
+            (k + 1, local + STEP, (acc >> LANE_BITS) as u32),
+        ];
+        for (kk, ll, st) in lanes.into_iter().take(if pair { 2 } else { 1 }) {
+            let (Some((s, s2)), Some(value)) = (sums(ll), out.get_mut(kk)) else {
                 continue;
             };
-            st += pixels
-                .iter()
-                .zip(t_row.iter())
-                .map(|(&p, &t)| u32::from(p) * u32::from(t))
-                .sum::<u32>();
-        }
-        if let Some(score) = ncc_from_sums(TEMPLATE_PIXELS as i32, (s, s2, st), ts, tvar) {
-            *value = score;
+            if let Some(score) = ncc_from_sums(n, (s, s2, st), ts, tvar) {
+                *value = score;
+            }
         }
     }
+}
+
+/// Packed dot product of the 11 template rows with the image pixels `window[r * W + j]`,
+/// `j < cols` (`TEMPLATE_SIDE + step` for two windows, `TEMPLATE_SIDE` for the first only: its
+/// low lane is exact either way; a constant at each inlined call, so the loops unroll). `None`
+/// if the rows leave `window`.
+#[inline(always)]
+fn dot_packed(
+    window: &[u8],
+    packed: &[[u32; PACKED_WIDTH]; TEMPLATE_SIDE],
+    cols: usize,
+) -> Option<u64> {
+    let mut acc = 0u64;
+    for (r, words) in packed.iter().enumerate() {
+        let start = r * IMAGE_WIDTH_PX;
+        let pixels = window.get(start..start + cols)?;
+        for (&p, &w) in pixels.iter().zip(words.iter()) {
+            acc += u64::from(p) * u64::from(w);
+        }
+    }
+    Some(acc)
 }
 
 #[cfg(test)]
@@ -560,14 +700,35 @@ mod tests {
         let image = Image::new(&img).unwrap();
         let t = image.template(300, 200).unwrap();
         let stats = template_stats(&t);
-        for (y, x_first, step) in [(200, 250, 1usize), (203, -3, 2), (470, 600, 2), (4, 10, 1)] {
-            let mut out = [0f32; 60];
-            ncc_scan(&image, &t, stats, y, x_first, step, &mut out);
-            for (k, &v) in out.iter().enumerate() {
-                let x = x_first + (k * step) as i32;
-                let expected = ncc(&image, &t, stats, x, y).unwrap_or(f32::NEG_INFINITY);
-                assert_eq!(v, expected, "y {y} x {x}");
+        // Every step (the packed kernel pairs positions `step` apart), odd and even counts,
+        // windows leaving the image on either side and at the last rows.
+        let mut compared = 0;
+        for (y, x_first) in [
+            (200, 250),
+            (203, -3),
+            (470, 600),
+            (4, 10),
+            (474, 560),
+            (5, -20),
+        ] {
+            for step in 1..=SCAN_MAX_STEP {
+                for len in [1usize, 2, 5, 9, 60] {
+                    let mut out = [0f32; 60];
+                    let out = &mut out[..len];
+                    ncc_scan(&image, &t, stats, y, x_first, step, out);
+                    for (k, &v) in out.iter().enumerate() {
+                        let x = x_first + (k * step) as i32;
+                        let expected = ncc(&image, &t, stats, x, y).unwrap_or(f32::NEG_INFINITY);
+                        assert_eq!(v, expected, "y {y} x {x} step {step} len {len}");
+                        compared += usize::from(v > f32::NEG_INFINITY);
+                    }
+                }
             }
         }
+        assert!(compared > 1000, "{compared}");
+        // Steps the packed kernel does not take are refused.
+        let mut out = [0f32; 4];
+        ncc_scan(&image, &t, stats, 200, 250, SCAN_MAX_STEP + 1, &mut out);
+        assert!(out.iter().all(|&v| v == f32::NEG_INFINITY));
     }
 }

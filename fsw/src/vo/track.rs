@@ -6,7 +6,9 @@
 //! image; eq. 9 maps them into the new image, `x2 = a u + b v + c`, `y2 = d u + e v + f` (eq. 9
 //! with `x1, y1` taken relative to the feature, so `(c, f)` is the tracked feature position).
 
-use super::image::{ncc, ncc_scan, template_stats, Image, Template, TemplateF};
+use super::image::{
+    ncc, ncc_scan_prepared, template_stats, Image, ScanTemplate, Template, TemplateF,
+};
 use super::{MAX_SEARCH_RADIUS_PX, TEMPLATE_HALF, TEMPLATE_SIDE};
 use nalgebra::{SMatrix, SVector};
 use rover_hal::{IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX};
@@ -365,8 +367,9 @@ pub fn search_window(
     let columns = (x_hi - x_lo) as usize / 2 + 1;
     let mut scan = [f32::NEG_INFINITY; MAX_SEARCH_RADIUS_PX + 1];
     let window = scan.get_mut(..columns).unwrap_or(&mut []);
+    let prepared = ScanTemplate::with_stats(template, stats, 2)?;
     for y in (y_lo..=y_hi).step_by(2) {
-        ncc_scan(image, template, stats, y, x_lo, 2, window);
+        ncc_scan_prepared(image, &prepared, y, x_lo, window);
         for (k, &score) in window.iter().enumerate() {
             if score > f32::NEG_INFINITY && best.is_none_or(|(_, _, s)| score > s) {
                 best = Some((x_lo + 2 * k as i32, y, score));
