@@ -183,6 +183,54 @@ impl<'a> Image<'a> {
         Some(())
     }
 
+    /// [`Self::grid_bilinear`] in single precision: calls `f(k, value, dI/dx, dI/dy)` for
+    /// template pixel `k` (row-major) at `(x + u, y + v)`, grey levels and grey levels per
+    /// pixel; the shared interpolation weights are `f32` (the sub-pixel offset of `x, y` is
+    /// taken in `f64` first, so it carries no rounding of the absolute position). `None` (and
+    /// no call) if the grid leaves the image or `x, y` are not finite.
+    #[inline]
+    pub fn grid_bilinear_f32(
+        &self,
+        x: f64,
+        y: f64,
+        mut f: impl FnMut(usize, f32, f32, f32),
+    ) -> Option<()> {
+        let half = TEMPLATE_HALF as f64;
+        let (xs, ys) = (x - half, y - half);
+        let x_end = (IMAGE_WIDTH_PX - TEMPLATE_SIDE) as f64;
+        let y_end = (IMAGE_HEIGHT_PX - TEMPLATE_SIDE) as f64;
+        if !(xs >= 0.0 && xs < x_end && ys >= 0.0 && ys < y_end) {
+            return None;
+        }
+        let (x0, y0) = (xs as u32 as usize, ys as u32 as usize);
+        let fx = (xs - x0 as f64) as f32;
+        let fy = (ys - y0 as f64) as f32;
+        let span = |row: usize| -> Option<&[u8; TEMPLATE_SIDE + 1]> {
+            let start = row * IMAGE_WIDTH_PX + x0;
+            self.data
+                .get(start..start + TEMPLATE_SIDE + 1)?
+                .try_into()
+                .ok()
+        };
+        let mut upper = span(y0)?;
+        for r in 0..TEMPLATE_SIDE {
+            let lower = span(y0 + r + 1)?;
+            for c in 0..TEMPLATE_SIDE {
+                let p00 = f32::from(upper[c]);
+                let p01 = f32::from(lower[c]);
+                let d_top = f32::from(upper[c + 1]) - p00;
+                let d_bottom = f32::from(lower[c + 1]) - p01;
+                let top = p00 + fx * d_top;
+                let gy = (p01 + fx * d_bottom) - top;
+                let value = top + fy * gy;
+                let gx = d_top + fy * (d_bottom - d_top);
+                f(r * TEMPLATE_SIDE + c, value, gx, gy);
+            }
+            upper = lower;
+        }
+        Some(())
+    }
+
     /// The template centred on integer `(x, y)`, `None` if it leaves the image.
     pub fn template(&self, x: i32, y: i32) -> Option<Template> {
         let half = TEMPLATE_HALF as i32;

@@ -298,7 +298,9 @@ pub fn affine_normal_equations(
 }
 
 /// Eq. 10 normal equations of a translation warp (`(c, f)` only) with gain and bias:
-/// `J = [jx, jy, I2, 1]`. `None` if the template leaves the image.
+/// `J = [jx, jy, I2, 1]`. Per-pixel work and sums in single precision
+/// ([`Image::grid_bilinear_f32`]: one pair of interpolation weights for the whole template),
+/// returned in `f64`. `None` if the template leaves the image.
 pub fn translation_normal_equations(
     template: &TemplateF,
     image: &Image,
@@ -306,11 +308,12 @@ pub fn translation_normal_equations(
     gain: f64,
     bias: f64,
 ) -> Option<NormalEquations<4>> {
-    let mut s = [0.0f64; 10];
-    let (mut g, mut sum_sq) = ([0.0f64; 4], 0.0);
-    image.grid_bilinear(warp.c, warp.f, |k, value, gx, gy| {
+    let (gain, bias) = (gain as f32, bias as f32);
+    let mut s = [0.0f32; 9];
+    let (mut g, mut sum_sq) = ([0.0f32; 4], 0.0f32);
+    image.grid_bilinear_f32(warp.c, warp.f, |k, value, gx, gy| {
         let t = template.get(k).copied().unwrap_or(0.0);
-        let residual = gain * value + bias - f64::from(t);
+        let residual = gain * value + bias - t;
         let (jx, jy) = (gain * gx, gain * gy);
         let products = [
             jx * jx,
@@ -331,6 +334,7 @@ pub fn translation_normal_equations(
         }
         sum_sq += residual * residual;
     })?;
+    let s = s.map(f64::from);
     let n = template.len() as f64;
     let h = [
         [s[0], s[1], s[2], s[3]],
@@ -338,7 +342,11 @@ pub fn translation_normal_equations(
         [s[2], s[5], s[7], s[8]],
         [s[3], s[6], s[8], n],
     ];
-    Some(NormalEquations { h, g, sum_sq })
+    Some(NormalEquations {
+        h,
+        g: g.map(f64::from),
+        sum_sq: f64::from(sum_sq),
+    })
 }
 
 /// Correlation search: the integer position within `radius` pixels of `(x0, y0)` where the
