@@ -363,7 +363,12 @@ pub fn template_stats(template: &Template) -> (i64, i64) {
 /// instruction on the rover CPU (an `i64` conversion is a library call there); the value is the
 /// same as with 64-bit sums (identical `f64` operands).
 #[inline(always)]
-fn ncc_from_sums(n: i32, (s, s2, st): (u32, u32, u32), ts: i32, tvar: i32) -> Option<f32> {
+pub(super) fn ncc_from_sums(
+    n: i32,
+    (s, s2, st): (u32, u32, u32),
+    ts: i32,
+    tvar: i32,
+) -> Option<f32> {
     let (s, s2, st) = (s as i32, s2 as i32, st as i32);
     let ivar = n * s2 - s * s;
     if ivar <= 0 || tvar <= 0 {
@@ -377,7 +382,7 @@ fn ncc_from_sums(n: i32, (s, s2, st): (u32, u32, u32), ts: i32, tvar: i32) -> Op
 /// The template sums of [`template_stats`] / [`region_stats`] as `i32` (they are at most
 /// 30,855 and 952,031,025 for a template of grey levels), `None` outside that range.
 #[inline(always)]
-fn stats_i32(ts: i64, tvar: i64) -> Option<(i32, i32)> {
+pub(super) fn stats_i32(ts: i64, tvar: i64) -> Option<(i32, i32)> {
     Some((i32::try_from(ts).ok()?, i32::try_from(tvar).ok()?))
 }
 
