@@ -233,19 +233,34 @@ pub fn affine_normal_equations(
         let v = row as f32 - half;
         // Eq. 9 at (0, v); each column adds (a, d) times u.
         let (x_row, y_row) = (b * v + c, e * v + f);
-        let mut rows = [[0.0f32; 3]; 3];
-        let mut rows1 = [[0.0f32; 2]; 6];
-        for (col, &t) in t_row.iter().enumerate() {
-            let u = col as f32 - half;
+        // Pass 1: the samples of the row, [I2, jx, jy, r] per pixel. Passes 2 and 3 accumulate
+        // them in two groups, so each group's accumulators stay in registers.
+        let mut samples = [[0.0f32; 4]; TEMPLATE_SIDE];
+        let mut u = -half;
+        for (sample, &t) in samples.iter_mut().zip(t_row.iter()) {
             let (value, gx, gy) = image.bilinear_f32_inside(a * u + x_row, d * u + y_row)?;
-            let residual = gain * value + bias - t;
-            let (jx, jy) = (gain * gx, gain * gy);
+            *sample = [value, gain * gx, gain * gy, gain * value + bias - t];
+            u += 1.0;
+        }
+        let mut rows = [[0.0f32; 3]; 3];
+        let mut u = -half;
+        for &[value, jx, jy, residual] in samples.iter() {
             for (acc, p) in rows.iter_mut().zip([jx * jx, jx * jy, jy * jy]) {
                 let pu = p * u;
                 acc[0] += p;
                 acc[1] += pu;
                 acc[2] += pu * u;
             }
+            ii += value * value;
+            i1 += value;
+            ir += value * residual;
+            r1 += residual;
+            rr += residual * residual;
+            u += 1.0;
+        }
+        let mut rows1 = [[0.0f32; 2]; 6];
+        let mut u = -half;
+        for &[value, jx, jy, residual] in samples.iter() {
             for (acc, p) in
                 rows1
                     .iter_mut()
@@ -254,11 +269,7 @@ pub fn affine_normal_equations(
                 acc[0] += p;
                 acc[1] += p * u;
             }
-            ii += value * value;
-            i1 += value;
-            ir += value * residual;
-            r1 += residual;
-            rr += residual * residual;
+            u += 1.0;
         }
         let [rxx, rxy, ryy] = rows;
         xx.add_row(rxx, v);
