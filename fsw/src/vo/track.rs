@@ -129,7 +129,7 @@ pub fn refine_warp(
         if !shape_ok {
             return None;
         }
-        if delta[2].abs() < 1e-2 && delta[5].abs() < 1e-2 {
+        if delta[2].abs() < 2e-2 && delta[5].abs() < 2e-2 {
             break;
         }
     }
