@@ -244,13 +244,13 @@ impl<'a> Image<'a> {
         Some(out)
     }
 
-    /// The template centred on the sub-pixel position `(x, y)` by bilinear sampling, `None` if it
-    /// leaves the image.
+    /// The template centred on the sub-pixel position `(x, y)` by bilinear sampling in single
+    /// precision ([`Self::grid_bilinear_f32`]), `None` if it leaves the image.
     pub fn template_f(&self, x: f64, y: f64) -> Option<TemplateF> {
         let mut out = [0f32; TEMPLATE_PIXELS];
-        self.grid_bilinear(x, y, |k, value, _, _| {
+        self.grid_bilinear_f32(x, y, |k, value, _, _| {
             if let Some(slot) = out.get_mut(k) {
-                *slot = value as f32;
+                *slot = value;
             }
         })?;
         Some(out)
