@@ -517,14 +517,11 @@ impl ScanTemplate {
         let (ts, tvar) = stats_i32(stats.0, stats.1)?;
         let mut packed = [[0u32; PACKED_WIDTH]; TEMPLATE_SIDE];
         for (out, t_row) in packed.iter_mut().zip(template.chunks_exact(TEMPLATE_SIDE)) {
-            for (j, word) in out.iter_mut().enumerate() {
-                let low = t_row.get(j).copied().map_or(0, u32::from);
-                let high = j
-                    .checked_sub(step)
-                    .and_then(|k| t_row.get(k))
-                    .copied()
-                    .map_or(0, u32::from);
-                *word = low | (high << LANE_BITS);
+            for (word, &t) in out.iter_mut().zip(t_row) {
+                *word = u32::from(t);
+            }
+            for (word, &t) in out.iter_mut().skip(step).zip(t_row) {
+                *word |= u32::from(t) << LANE_BITS;
             }
         }
         Some(Self {
