@@ -344,13 +344,14 @@ impl CheckSums {
 
 /// Sums of a template for normalised cross-correlation: `(sum, n * sum_sq - sum^2)`.
 pub fn template_stats(template: &Template) -> (i64, i64) {
-    let mut s = 0i64;
-    let mut s2 = 0i64;
+    // 121 grey levels: the sum is at most 30,855 and the sum of squares 7,868,025 (u32).
+    let (mut s, mut s2) = (0u32, 0u32);
     for &p in template.iter() {
-        let v = i64::from(p);
+        let v = u32::from(p);
         s += v;
         s2 += v * v;
     }
+    let (s, s2) = (i64::from(s), i64::from(s2));
     (s, TEMPLATE_PIXELS as i64 * s2 - s * s)
 }
 
