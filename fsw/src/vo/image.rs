@@ -355,29 +355,50 @@ pub fn template_stats(template: &Template) -> (i64, i64) {
     (s, TEMPLATE_PIXELS as i64 * s2 - s * s)
 }
 
+/// `1 / sqrt(x)` in single precision for `x` in `1..=2^31` (the variances of [`ncc_from_sums`]),
+/// relative error below 3e-7 (`vo_11_inverse_square_root_is_accurate`): the classic bit-level
+/// first estimate (relative error below 3.5 %) and three Newton steps `y (1.5 - x/2 y^2)`
+/// (1.8e-3, 4.7e-6, then the f32 rounding). The rover CPU has no hardware square root
+/// reachable from `no_std` Rust, and `libm::sqrt` is a software routine of about 100
+/// instructions; this is 15. Plain IEEE single-precision
+/// operations, so host and target give the same bits.
+#[inline(always)]
+pub(super) fn inv_sqrt(x: f32) -> f32 {
+    let y = f32::from_bits(0x5f37_5a86_u32.wrapping_sub(x.to_bits() >> 1));
+    let half = 0.5 * x;
+    let y = y * (1.5 - half * y * y);
+    let y = y * (1.5 - half * y * y);
+    y * (1.5 - half * y * y)
+}
+
+/// The template factor of [`ncc_from_sums`]: `1 / sqrt(tvar)` for the template's
+/// `n sum_sq - sum^2`, `None` when the template has no contrast (`tvar <= 0`).
+#[inline(always)]
+pub(super) fn template_scale(tvar: i32) -> Option<f32> {
+    (tvar > 0).then(|| inv_sqrt(tvar as f32))
+}
+
 /// Zero-mean normalised cross-correlation (-1..1) from the integer sums of `n` pixel pairs
 /// (`n` at most [`TEMPLATE_PIXELS`]): window sum `s`, sum of squares `s2`, sum of products with
-/// the template `st`, and the template's sum `ts` and `n sum_sq - sum^2` `tvar`. `None` when
-/// either patch has no contrast. With `n <= 121` and grey levels up to 255 every product and
-/// difference (`n s2`, `s^2`, `n st`, `ts s`: at most 121^2 * 255^2 = 952,031,025) fits in
-/// `i32`, so the sums need no 64-bit arithmetic and each converts to `f64` with one native
-/// instruction on the rover CPU (an `i64` conversion is a library call there); the value is the
-/// same as with 64-bit sums (identical `f64` operands).
+/// the template `st`, the template's sum `ts` and its factor `t_scale` ([`template_scale`]).
+/// `None` when the window has no contrast. With `n <= 121` and grey levels up to 255 every
+/// product and difference (`n s2`, `s^2`, `n st`, `ts s`: at most 121^2 * 255^2 = 952,031,025)
+/// fits in `i32`, so the sums need no 64-bit arithmetic. The normalisation is single precision
+/// with [`inv_sqrt`] (relative error of the score below 1e-6; clamped to -1..1).
 #[inline(always)]
 pub(super) fn ncc_from_sums(
     n: i32,
     (s, s2, st): (u32, u32, u32),
     ts: i32,
-    tvar: i32,
+    t_scale: f32,
 ) -> Option<f32> {
     let (s, s2, st) = (s as i32, s2 as i32, st as i32);
     let ivar = n * s2 - s * s;
-    if ivar <= 0 || tvar <= 0 {
+    if ivar <= 0 {
         return None;
     }
     let cov = n * st - ts * s;
-    let denominator = libm::sqrt(f64::from(ivar) * f64::from(tvar));
-    Some((f64::from(cov) / denominator) as f32)
+    Some((cov as f32 * (inv_sqrt(ivar as f32) * t_scale)).clamp(-1.0, 1.0))
 }
 
 /// The template sums of [`template_stats`] / [`region_stats`] as `i32` (they are at most
@@ -407,7 +428,12 @@ pub fn ncc(image: &Image, template: &Template, stats: (i64, i64), x: i32, y: i32
         }
     }
     let (ts, tvar) = stats_i32(stats.0, stats.1)?;
-    ncc_from_sums(TEMPLATE_PIXELS as i32, (s, s2, st), ts, tvar)
+    ncc_from_sums(
+        TEMPLATE_PIXELS as i32,
+        (s, s2, st),
+        ts,
+        template_scale(tvar)?,
+    )
 }
 
 /// A rectangle of template pixels: rows `rows.0..rows.1`, columns `cols.0..cols.1` (template
@@ -472,7 +498,7 @@ pub fn region_ncc(
     if !(1..=TEMPLATE_PIXELS as i64).contains(&n) {
         return None;
     }
-    ncc_from_sums(n as i32, (s, s2, st), ts, tvar)
+    ncc_from_sums(n as i32, (s, s2, st), ts, template_scale(tvar)?)
 }
 
 /// Largest number of columns [`ncc_scan`] covers in one call.
@@ -500,12 +526,12 @@ pub struct ScanTemplate {
     packed: [[u32; PACKED_WIDTH]; TEMPLATE_SIDE],
     step: usize,
     ts: i32,
-    tvar: i32,
+    t_scale: f32,
 }
 
 impl ScanTemplate {
     /// Prepares `template` for scans every `step` pixels (`1..=SCAN_MAX_STEP`; `None`
-    /// otherwise).
+    /// otherwise, or when the template has no contrast).
     pub fn new(template: &Template, step: usize) -> Option<Self> {
         Self::with_stats(template, template_stats(template), step)
     }
@@ -516,6 +542,7 @@ impl ScanTemplate {
             return None;
         }
         let (ts, tvar) = stats_i32(stats.0, stats.1)?;
+        let t_scale = template_scale(tvar)?;
         let mut packed = [[0u32; PACKED_WIDTH]; TEMPLATE_SIDE];
         for (out, t_row) in packed.iter_mut().zip(template.chunks_exact(TEMPLATE_SIDE)) {
             for (word, &t) in out.iter_mut().zip(t_row) {
@@ -529,7 +556,7 @@ impl ScanTemplate {
             packed,
             step,
             ts,
-            tvar,
+            t_scale,
         })
     }
 }
@@ -584,7 +611,7 @@ fn scan_rows<const STEP: usize>(
     out: &mut [f32],
 ) {
     out.iter_mut().for_each(|v| *v = f32::NEG_INFINITY);
-    if template.step != STEP || template.tvar <= 0 {
+    if template.step != STEP {
         return;
     }
     let half = TEMPLATE_HALF as i32;
@@ -645,7 +672,7 @@ fn scan_rows<const STEP: usize>(
         Some((b.wrapping_sub(*a), b2.wrapping_sub(*a2)))
     };
     let n = TEMPLATE_PIXELS as i32;
-    let (ts, tvar) = (template.ts, template.tvar);
+    let (ts, t_scale) = (template.ts, template.t_scale);
     for k in (k_lo..k_hi).step_by(2) {
         // k_lo >= 0 and x0 >= c_lo by construction of k_lo.
         let x0 = (i64::from(c_first) + (k * STEP) as i64) as usize;
@@ -670,7 +697,7 @@ fn scan_rows<const STEP: usize>(
             let (Some((s, s2)), Some(value)) = (sums(ll), out.get_mut(kk)) else {
                 continue;
             };
-            if let Some(score) = ncc_from_sums(n, (s, s2, st), ts, tvar) {
+            if let Some(score) = ncc_from_sums(n, (s, s2, st), ts, t_scale) {
                 *value = score;
             }
         }
@@ -729,6 +756,22 @@ mod tests {
         assert!(image.template(634, 474).is_some());
         assert!(image.template(635, 474).is_none());
         assert_eq!(Image::new(&img[1..]).err(), Some(VoError::WrongImageSize));
+    }
+
+    #[test]
+    fn vo_11_inverse_square_root_is_accurate() {
+        // Every power of two and 20,000 values spread over the range of the NCC variances.
+        let mut worst = 0.0f64;
+        let mut x = 1.0f64;
+        for k in 0..20_000 {
+            let v = if k < 32 { f64::from(1u32 << k) } else { x };
+            let got = f64::from(inv_sqrt(v as f32));
+            let exact = 1.0 / libm::sqrt(f64::from(v as f32));
+            worst = worst.max((got - exact).abs() / exact);
+            x = (x * 1.001_07).min(2.147e9);
+        }
+        println!("VO-11 inverse square root: largest relative error {worst:.2e}");
+        assert!(worst < 3e-7, "{worst}");
     }
 
     #[test]

@@ -5,7 +5,8 @@
 //! camera centre is `C1 = 0` and the right one `C2 = (baseline, 0, 0)`.
 
 use super::image::{
-    ncc, ncc_from_sums, ncc_scan, region_stats, stats_i32, template_stats, Image, TemplateRegion,
+    ncc, ncc_from_sums, ncc_scan, region_stats, stats_i32, template_scale, template_stats, Image,
+    TemplateRegion,
 };
 use super::track::{refine_warp, Affine2, WarpModel};
 use super::{VoConfig, VoError, MAX_DISPARITY_PX, TEMPLATE_HALF, TEMPLATE_SIDE};
@@ -502,7 +503,11 @@ fn check_discontinuity(
         if n <= 0 || !(var_n2 as f64 >= min_var * (n * n) as f64) {
             continue;
         }
-        *slot = stats_i32(ts, var_n2).map(|(ts, tvar)| (ts, tvar, n as i32));
+        // A textured region without contrast (possible with `half_min_std` 0) never scores, so
+        // it fails the rule.
+        let (ts, tvar) = stats_i32(ts, var_n2).ok_or(StereoReject::Discontinuity)?;
+        let t_scale = template_scale(tvar).ok_or(StereoReject::Discontinuity)?;
+        *slot = Some((ts, t_scale, n as i32));
     }
     if textured.iter().all(Option::is_none) {
         return Ok(());
@@ -519,10 +524,10 @@ fn check_discontinuity(
             .zip(best.iter_mut())
             .zip(at_match.iter_mut())
         {
-            let Some((ts, tvar, n)) = *stats else {
+            let Some((ts, t_scale, n)) = *stats else {
                 continue;
             };
-            let Some(score) = ncc_from_sums(n, sums, ts, tvar) else {
+            let Some(score) = ncc_from_sums(n, sums, ts, t_scale) else {
                 continue;
             };
             if d == best_d {
@@ -959,7 +964,9 @@ mod tests {
                     let stats = region_stats(&template, region);
                     let expected = region_ncc(&right, &template, region, stats, x - d, y);
                     let (ts, tvar) = stats_i32(stats.0, stats.1).unwrap();
-                    let got = sums.and_then(|s| ncc_from_sums(stats.2 as i32, s[k], ts, tvar));
+                    let got = sums.and_then(|s| {
+                        ncc_from_sums(stats.2 as i32, s[k], ts, template_scale(tvar)?)
+                    });
                     assert_eq!(got, expected, "({x}, {y}) d {d} region {k}");
                     compared += usize::from(got.is_some());
                 }
