@@ -88,7 +88,7 @@ pub fn refine_warp(
     let mut warp = init;
     let mut gain = 1.0f64;
     let mut bias = 0.0f64;
-    let mut residual_rms = f64::INFINITY;
+    let mut last_sum_sq = f64::INFINITY;
     for _ in 0..iterations.max(1) {
         // Parameters: [a, b, c, d, e, f, gain, bias]; the translation model estimates only
         // [c, f, gain, bias] from a 4x4 system.
@@ -109,7 +109,7 @@ pub fn refine_warp(
                 (delta, system.sum_sq)
             }
         };
-        residual_rms = libm::sqrt(sum_sq / template.len() as f64);
+        last_sum_sq = sum_sq;
         if !delta.iter().all(|v| v.is_finite()) {
             return None;
         }
@@ -135,7 +135,7 @@ pub fn refine_warp(
     }
     Some(Refined {
         warp,
-        residual_rms,
+        residual_rms: libm::sqrt(last_sum_sq / template.len() as f64),
         gain,
     })
 }
