@@ -90,6 +90,50 @@ impl<'a> Image<'a> {
         Some((value, gx, gy))
     }
 
+    /// [`Self::bilinear`] in single precision (the affine refinement's per-pixel sampling, H04
+    /// eq. 10): bilinear grey level at `(x, y)` pixels and its gradient `(dI/dx, dI/dy)`, grey
+    /// levels per pixel. `None` when the 2x2 neighbourhood leaves the image or `x, y` are not
+    /// finite. Positions below 640 carry about 6e-5 px of rounding in `f32`.
+    #[inline(always)]
+    pub fn bilinear_f32(&self, x: f32, y: f32) -> Option<(f32, f32, f32)> {
+        // One range test per axis; NaN and infinities fail it. Non-negative and in range, so
+        // truncation is the floor.
+        if !(x >= 0.0 && x < (IMAGE_WIDTH_PX - 1) as f32 && y >= 0.0) {
+            return None;
+        }
+        if !(y < (IMAGE_HEIGHT_PX - 1) as f32) {
+            return None;
+        }
+        self.bilinear_f32_inside(x, y)
+    }
+
+    /// [`Self::bilinear_f32`] without the floating-point range tests, for a caller that has
+    /// checked the positions (the affine refinement tests the corners of the warped template
+    /// once). Defined for every input: a negative or NaN coordinate takes the row or column 0
+    /// (saturating conversion; the weight then extrapolates), a neighbourhood past the end of
+    /// the image data is `None`.
+    #[inline(always)]
+    pub fn bilinear_f32_inside(&self, x: f32, y: f32) -> Option<(f32, f32, f32)> {
+        let (x0, y0) = (x as u32, y as u32);
+        let start = y0 as usize * IMAGE_WIDTH_PX + x0 as usize;
+        let q: &[u8; IMAGE_WIDTH_PX + 2] = self
+            .data
+            .get(start..start + IMAGE_WIDTH_PX + 2)?
+            .try_into()
+            .ok()?;
+        let p00 = f32::from(q[0]);
+        let p01 = f32::from(q[IMAGE_WIDTH_PX]);
+        let d_top = f32::from(q[1]) - p00;
+        let d_bottom = f32::from(q[IMAGE_WIDTH_PX + 1]) - p01;
+        let fx = x - x0 as f32;
+        let fy = y - y0 as f32;
+        let top = p00 + fx * d_top;
+        let gy = (p01 + fx * d_bottom) - top;
+        let value = top + fy * gy;
+        let gx = d_top + fy * (d_bottom - d_top);
+        Some((value, gx, gy))
+    }
+
     /// Bilinear grey levels and gradients (as [`Self::bilinear`]) on the template grid centred
     /// on the sub-pixel position `(x, y)`: calls `f(k, value, dI/dx, dI/dy)` for template pixel
     /// `k` (row-major) at `(x + u, y + v)`, `u, v` in `-TEMPLATE_HALF..=TEMPLATE_HALF`. All
@@ -139,6 +183,54 @@ impl<'a> Image<'a> {
         Some(())
     }
 
+    /// [`Self::grid_bilinear`] in single precision: calls `f(k, value, dI/dx, dI/dy)` for
+    /// template pixel `k` (row-major) at `(x + u, y + v)`, grey levels and grey levels per
+    /// pixel; the shared interpolation weights are `f32` (the sub-pixel offset of `x, y` is
+    /// taken in `f64` first, so it carries no rounding of the absolute position). `None` (and
+    /// no call) if the grid leaves the image or `x, y` are not finite.
+    #[inline]
+    pub fn grid_bilinear_f32(
+        &self,
+        x: f64,
+        y: f64,
+        mut f: impl FnMut(usize, f32, f32, f32),
+    ) -> Option<()> {
+        let half = TEMPLATE_HALF as f64;
+        let (xs, ys) = (x - half, y - half);
+        let x_end = (IMAGE_WIDTH_PX - TEMPLATE_SIDE) as f64;
+        let y_end = (IMAGE_HEIGHT_PX - TEMPLATE_SIDE) as f64;
+        if !(xs >= 0.0 && xs < x_end && ys >= 0.0 && ys < y_end) {
+            return None;
+        }
+        let (x0, y0) = (xs as u32 as usize, ys as u32 as usize);
+        let fx = (xs - x0 as f64) as f32;
+        let fy = (ys - y0 as f64) as f32;
+        let span = |row: usize| -> Option<&[u8; TEMPLATE_SIDE + 1]> {
+            let start = row * IMAGE_WIDTH_PX + x0;
+            self.data
+                .get(start..start + TEMPLATE_SIDE + 1)?
+                .try_into()
+                .ok()
+        };
+        let mut upper = span(y0)?;
+        for r in 0..TEMPLATE_SIDE {
+            let lower = span(y0 + r + 1)?;
+            for c in 0..TEMPLATE_SIDE {
+                let p00 = f32::from(upper[c]);
+                let p01 = f32::from(lower[c]);
+                let d_top = f32::from(upper[c + 1]) - p00;
+                let d_bottom = f32::from(lower[c + 1]) - p01;
+                let top = p00 + fx * d_top;
+                let gy = (p01 + fx * d_bottom) - top;
+                let value = top + fy * gy;
+                let gx = d_top + fy * (d_bottom - d_top);
+                f(r * TEMPLATE_SIDE + c, value, gx, gy);
+            }
+            upper = lower;
+        }
+        Some(())
+    }
+
     /// The template centred on integer `(x, y)`, `None` if it leaves the image.
     pub fn template(&self, x: i32, y: i32) -> Option<Template> {
         let half = TEMPLATE_HALF as i32;
@@ -152,13 +244,13 @@ impl<'a> Image<'a> {
         Some(out)
     }
 
-    /// The template centred on the sub-pixel position `(x, y)` by bilinear sampling, `None` if it
-    /// leaves the image.
+    /// The template centred on the sub-pixel position `(x, y)` by bilinear sampling in single
+    /// precision ([`Self::grid_bilinear_f32`]), `None` if it leaves the image.
     pub fn template_f(&self, x: f64, y: f64) -> Option<TemplateF> {
         let mut out = [0f32; TEMPLATE_PIXELS];
-        self.grid_bilinear(x, y, |k, value, _, _| {
+        self.grid_bilinear_f32(x, y, |k, value, _, _| {
             if let Some(slot) = out.get_mut(k) {
-                *slot = value as f32;
+                *slot = value;
             }
         })?;
         Some(out)
@@ -252,14 +344,68 @@ impl CheckSums {
 
 /// Sums of a template for normalised cross-correlation: `(sum, n * sum_sq - sum^2)`.
 pub fn template_stats(template: &Template) -> (i64, i64) {
-    let mut s = 0i64;
-    let mut s2 = 0i64;
+    // 121 grey levels: the sum is at most 30,855 and the sum of squares 7,868,025 (u32).
+    let (mut s, mut s2) = (0u32, 0u32);
     for &p in template.iter() {
-        let v = i64::from(p);
+        let v = u32::from(p);
         s += v;
         s2 += v * v;
     }
+    let (s, s2) = (i64::from(s), i64::from(s2));
     (s, TEMPLATE_PIXELS as i64 * s2 - s * s)
+}
+
+/// `1 / sqrt(x)` in single precision for `x` in `1..=2^31` (the variances of [`ncc_from_sums`]),
+/// relative error below 3e-7 (`vo_11_inverse_square_root_is_accurate`): the classic bit-level
+/// first estimate (relative error below 3.5 %) and three Newton steps `y (1.5 - x/2 y^2)`
+/// (1.8e-3, 4.7e-6, then the f32 rounding). The rover CPU has no hardware square root
+/// reachable from `no_std` Rust, and `libm::sqrt` is a software routine of about 100
+/// instructions; this is 15. Plain IEEE single-precision
+/// operations, so host and target give the same bits.
+#[inline(always)]
+pub(super) fn inv_sqrt(x: f32) -> f32 {
+    let y = f32::from_bits(0x5f37_5a86_u32.wrapping_sub(x.to_bits() >> 1));
+    let half = 0.5 * x;
+    let y = y * (1.5 - half * y * y);
+    let y = y * (1.5 - half * y * y);
+    y * (1.5 - half * y * y)
+}
+
+/// The template factor of [`ncc_from_sums`]: `1 / sqrt(tvar)` for the template's
+/// `n sum_sq - sum^2`, `None` when the template has no contrast (`tvar <= 0`).
+#[inline(always)]
+pub(super) fn template_scale(tvar: i32) -> Option<f32> {
+    (tvar > 0).then(|| inv_sqrt(tvar as f32))
+}
+
+/// Zero-mean normalised cross-correlation (-1..1) from the integer sums of `n` pixel pairs
+/// (`n` at most [`TEMPLATE_PIXELS`]): window sum `s`, sum of squares `s2`, sum of products with
+/// the template `st`, the template's sum `ts` and its factor `t_scale` ([`template_scale`]).
+/// `None` when the window has no contrast. With `n <= 121` and grey levels up to 255 every
+/// product and difference (`n s2`, `s^2`, `n st`, `ts s`: at most 121^2 * 255^2 = 952,031,025)
+/// fits in `i32`, so the sums need no 64-bit arithmetic. The normalisation is single precision
+/// with [`inv_sqrt`] (relative error of the score below 1e-6; clamped to -1..1).
+#[inline(always)]
+pub(super) fn ncc_from_sums(
+    n: i32,
+    (s, s2, st): (u32, u32, u32),
+    ts: i32,
+    t_scale: f32,
+) -> Option<f32> {
+    let (s, s2, st) = (s as i32, s2 as i32, st as i32);
+    let ivar = n * s2 - s * s;
+    if ivar <= 0 {
+        return None;
+    }
+    let cov = n * st - ts * s;
+    Some((cov as f32 * (inv_sqrt(ivar as f32) * t_scale)).clamp(-1.0, 1.0))
+}
+
+/// The template sums of [`template_stats`] / [`region_stats`] as `i32` (they are at most
+/// 30,855 and 952,031,025 for a template of grey levels), `None` outside that range.
+#[inline(always)]
+pub(super) fn stats_i32(ts: i64, tvar: i64) -> Option<(i32, i32)> {
+    Some((i32::try_from(ts).ok()?, i32::try_from(tvar).ok()?))
 }
 
 /// Zero-mean normalised cross-correlation (-1..1) of `template` (with its [`template_stats`])
@@ -281,15 +427,13 @@ pub fn ncc(image: &Image, template: &Template, stats: (i64, i64), x: i32, y: i32
             st += p * u32::from(t);
         }
     }
-    let n = TEMPLATE_PIXELS as i64;
-    let (ts, tvar) = stats;
-    let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
-    if ivar <= 0 || tvar <= 0 {
-        return None;
-    }
-    let cov = n * i64::from(st) - ts * i64::from(s);
-    let denominator = libm::sqrt(ivar as f64 * tvar as f64);
-    Some((cov as f64 / denominator) as f32)
+    let (ts, tvar) = stats_i32(stats.0, stats.1)?;
+    ncc_from_sums(
+        TEMPLATE_PIXELS as i32,
+        (s, s2, st),
+        ts,
+        template_scale(tvar)?,
+    )
 }
 
 /// A rectangle of template pixels: rows `rows.0..rows.1`, columns `cols.0..cols.1` (template
@@ -350,21 +494,78 @@ pub fn region_ncc(
         }
     }
     let (ts, tvar, n) = stats;
-    let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
-    if ivar <= 0 || tvar <= 0 {
+    let (ts, tvar) = stats_i32(ts, tvar)?;
+    if !(1..=TEMPLATE_PIXELS as i64).contains(&n) {
         return None;
     }
-    let cov = n * i64::from(st) - ts * i64::from(s);
-    Some((cov as f64 / libm::sqrt(ivar as f64 * tvar as f64)) as f32)
+    ncc_from_sums(n as i32, (s, s2, st), ts, template_scale(tvar)?)
 }
 
 /// Largest number of columns [`ncc_scan`] covers in one call.
 pub const SCAN_MAX_COLUMNS: usize = 256;
 
+/// Largest step between the scanned positions of [`ncc_scan`] (larger steps are refused).
+pub const SCAN_MAX_STEP: usize = 4;
+
+/// Width of a packed template row of [`ScanTemplate`]: two windows `step` apart.
+const PACKED_WIDTH: usize = TEMPLATE_SIDE + SCAN_MAX_STEP;
+
+/// Bits of the low lane of a packed dot product: a sum of 121 products of grey levels is at
+/// most 121 * 255^2 = 7,868,025 < 2^23, so it cannot carry into the high lane.
+const LANE_BITS: u32 = 24;
+
+/// A template prepared for [`ncc_scan_prepared`] at one scan step: its sums
+/// ([`template_stats`]) and its rows packed for two neighbouring positions at once. Word `j`
+/// of row `r` is `t[r][j] + (t[r][j - step] << 24)` (a term is 0 where its column is outside
+/// `0..TEMPLATE_SIDE`), so one 32 x 32 -> 64-bit multiply-accumulate of image pixel
+/// `x0 + j` (`umlal` on the rover CPU) adds its product with the template of the window at
+/// `x0` to the low 24 bits and with that of the window at `x0 + step` to the high bits: two
+/// correlation terms per instruction, exact (each lane's sum stays below 2^23).
+#[derive(Debug, Clone)]
+pub struct ScanTemplate {
+    packed: [[u32; PACKED_WIDTH]; TEMPLATE_SIDE],
+    step: usize,
+    ts: i32,
+    t_scale: f32,
+}
+
+impl ScanTemplate {
+    /// Prepares `template` for scans every `step` pixels (`1..=SCAN_MAX_STEP`; `None`
+    /// otherwise, or when the template has no contrast).
+    pub fn new(template: &Template, step: usize) -> Option<Self> {
+        Self::with_stats(template, template_stats(template), step)
+    }
+
+    /// [`Self::new`] with the template's [`template_stats`] already at hand.
+    pub fn with_stats(template: &Template, stats: (i64, i64), step: usize) -> Option<Self> {
+        if !(1..=SCAN_MAX_STEP).contains(&step) {
+            return None;
+        }
+        let (ts, tvar) = stats_i32(stats.0, stats.1)?;
+        let t_scale = template_scale(tvar)?;
+        let mut packed = [[0u32; PACKED_WIDTH]; TEMPLATE_SIDE];
+        for (out, t_row) in packed.iter_mut().zip(template.chunks_exact(TEMPLATE_SIDE)) {
+            for (word, &t) in out.iter_mut().zip(t_row) {
+                *word = u32::from(t);
+            }
+            for (word, &t) in out.iter_mut().skip(step).zip(t_row) {
+                *word |= u32::from(t) << LANE_BITS;
+            }
+        }
+        Some(Self {
+            packed,
+            step,
+            ts,
+            t_scale,
+        })
+    }
+}
+
 /// Normalised cross-correlation of `template` along image row `y` at the columns
 /// `x_first + k * step` for `k` in `0..out.len()`, written to `out[k]` (`-inf` where the window
-/// leaves the image, has no contrast, or the span exceeds [`SCAN_MAX_COLUMNS`]). Same values as
-/// [`ncc`]; the window sums come from column sums computed once per call.
+/// leaves the image, has no contrast, or the span exceeds [`SCAN_MAX_COLUMNS`] or the step
+/// [`SCAN_MAX_STEP`]). Same values as [`ncc`]. [`ncc_scan_prepared`] with a template prepared
+/// for this call; a caller scanning several rows with one template prepares it once.
 pub fn ncc_scan(
     image: &Image,
     template: &Template,
@@ -374,76 +575,182 @@ pub fn ncc_scan(
     step: usize,
     out: &mut [f32],
 ) {
+    match ScanTemplate::with_stats(template, stats, step) {
+        Some(prepared) => ncc_scan_prepared(image, &prepared, y, x_first, out),
+        None => out.iter_mut().for_each(|v| *v = f32::NEG_INFINITY),
+    }
+}
+
+/// [`ncc_scan`] with a prepared template (its step). The window sums come from column sums of
+/// the scanned span (one pass, column by column, sums in registers) through prefix sums; the
+/// template products from the packed template, two neighbouring positions per pass
+/// ([`ScanTemplate`]).
+pub fn ncc_scan_prepared(
+    image: &Image,
+    template: &ScanTemplate,
+    y: i32,
+    x_first: i32,
+    out: &mut [f32],
+) {
+    match template.step {
+        1 => scan_rows::<1>(image, template, y, x_first, out),
+        2 => scan_rows::<2>(image, template, y, x_first, out),
+        3 => scan_rows::<3>(image, template, y, x_first, out),
+        _ => scan_rows::<4>(image, template, y, x_first, out),
+    }
+}
+
+/// [`ncc_scan_prepared`] at the compile-time step `STEP` (so the packed inner loops have
+/// constant trip counts, `TEMPLATE_SIDE + STEP`).
+#[inline(always)]
+fn scan_rows<const STEP: usize>(
+    image: &Image,
+    template: &ScanTemplate,
+    y: i32,
+    x_first: i32,
+    out: &mut [f32],
+) {
     out.iter_mut().for_each(|v| *v = f32::NEG_INFINITY);
+    if template.step != STEP {
+        return;
+    }
     let half = TEMPLATE_HALF as i32;
     let Some(y0) = y.checked_sub(half).and_then(|v| usize::try_from(v).ok()) else {
         return;
     };
-    let mut rows: [&[u8]; TEMPLATE_SIDE] = [&[]; TEMPLATE_SIDE];
-    for (dy, slot) in rows.iter_mut().enumerate() {
-        match image.row(y0 + dy) {
-            Some(r) => *slot = r,
-            None => return,
-        }
+    if y0 + TEMPLATE_SIDE > IMAGE_HEIGHT_PX {
+        return;
     }
-    // Columns [c_first, c_end) of the image covered by all windows, clipped to the image.
-    let span = out.len().saturating_sub(1).saturating_mul(step) + TEMPLATE_SIDE;
+    // Columns [c_lo, c_hi) of the image covered by all windows, clipped to the image.
+    let span = out.len().saturating_sub(1).saturating_mul(STEP) + TEMPLATE_SIDE;
     let c_first = x_first.saturating_sub(half);
     let c_lo = c_first.max(0) as usize;
     let c_hi = (i64::from(c_first) + span as i64).clamp(0, IMAGE_WIDTH_PX as i64) as usize;
-    if span > SCAN_MAX_COLUMNS || c_lo >= c_hi {
+    if span > SCAN_MAX_COLUMNS || c_lo + TEMPLATE_SIDE > c_hi {
         return;
     }
-    let mut col_s = [0u32; SCAN_MAX_COLUMNS];
-    let mut col_s2 = [0u32; SCAN_MAX_COLUMNS];
-    for row in rows.iter() {
-        let Some(pixels) = row.get(c_lo..c_hi) else {
+    let width = c_hi - c_lo;
+    // Pixel (row r, column c_lo + j) of the window rows is block[r * W + j].
+    const ROWS_SPAN: usize = (TEMPLATE_SIDE - 1) * IMAGE_WIDTH_PX;
+    let base = y0 * IMAGE_WIDTH_PX + c_lo;
+    let Some(block) = image.data.get(base..base + ROWS_SPAN + width) else {
+        return;
+    };
+    // Prefix sums over the span of the column sums of p and p^2: pre[j] sums columns 0..j; in
+    // arrays sized for short spans when the span is short (zeroing the full-size arrays costs
+    // about 1,400 instructions per call on the rover CPU, more than a short scan itself).
+    if width <= SHORT_SPAN {
+        scan_span::<STEP, { SHORT_SPAN + 1 }>(template, (c_first, c_lo, c_hi), block, out);
+    } else {
+        scan_span::<STEP, { SCAN_MAX_COLUMNS + 1 }>(template, (c_first, c_lo, c_hi), block, out);
+    }
+}
+
+/// Columns of a short scan span ([`scan_rows`]): the tracking search and the windowed stereo of
+/// a tracked feature scan 19-27 columns.
+const SHORT_SPAN: usize = 32;
+
+/// The scan of [`scan_rows`] over the span `[c_lo, c_hi)` (window columns `c_first + k * STEP`)
+/// of `block` (pixel `(r, j)` of the span at `block[r * W + j]`), with prefix-sum arrays of
+/// `N >= c_hi - c_lo + 1` entries.
+#[inline(always)]
+fn scan_span<const STEP: usize, const N: usize>(
+    template: &ScanTemplate,
+    (c_first, c_lo, c_hi): (i32, usize, usize),
+    block: &[u8],
+    out: &mut [f32],
+) {
+    const ROWS_SPAN: usize = (TEMPLATE_SIDE - 1) * IMAGE_WIDTH_PX;
+    let width = c_hi - c_lo;
+    if width + 1 > N {
+        return;
+    }
+    let mut pre_s = [0u32; N];
+    let mut pre_s2 = [0u32; N];
+    let (mut run_s, mut run_s2) = (0u32, 0u32);
+    for (j, (ps, ps2)) in pre_s
+        .iter_mut()
+        .zip(pre_s2.iter_mut())
+        .skip(1)
+        .take(width)
+        .enumerate()
+    {
+        let Some(column) = block.get(j..j + ROWS_SPAN + 1) else {
             return;
         };
-        for ((s, s2), &p) in col_s.iter_mut().zip(col_s2.iter_mut()).zip(pixels.iter()) {
-            let p = u32::from(p);
-            *s += p;
-            *s2 += p * p;
+        for r in 0..TEMPLATE_SIDE {
+            let p = u32::from(column.get(r * IMAGE_WIDTH_PX).copied().unwrap_or(0));
+            run_s += p;
+            run_s2 += p * p;
         }
+        *ps = run_s;
+        *ps2 = run_s2;
     }
-    let n = TEMPLATE_PIXELS as i64;
-    let (ts, tvar) = stats;
-    if tvar <= 0 {
-        return;
-    }
-    for (k, value) in out.iter_mut().enumerate() {
-        let x0 = i64::from(c_first) + (k * step) as i64;
-        if x0 < c_lo as i64 || x0 + TEMPLATE_SIDE as i64 > c_hi as i64 {
-            continue;
-        }
-        let x0 = x0 as usize;
+    // Positions k_lo..k_hi have their window inside [c_lo, c_hi): x0(k) = c_first + k * step.
+    let k_lo = (c_lo as i64 - i64::from(c_first)).div_euclid(STEP as i64)
+        + i64::from((c_lo as i64 - i64::from(c_first)).rem_euclid(STEP as i64) != 0);
+    let k_hi = ((c_hi - TEMPLATE_SIDE) as i64 - i64::from(c_first)).div_euclid(STEP as i64) + 1;
+    let (k_lo, k_hi) = (
+        k_lo.max(0) as usize,
+        k_hi.clamp(0, out.len() as i64) as usize,
+    );
+    let sums = |local: usize| -> Option<(u32, u32)> {
+        let (a, b) = (pre_s.get(local)?, pre_s.get(local + TEMPLATE_SIDE)?);
+        let (a2, b2) = (pre_s2.get(local)?, pre_s2.get(local + TEMPLATE_SIDE)?);
+        Some((b.wrapping_sub(*a), b2.wrapping_sub(*a2)))
+    };
+    let n = TEMPLATE_PIXELS as i32;
+    let (ts, t_scale) = (template.ts, template.t_scale);
+    for k in (k_lo..k_hi).step_by(2) {
+        // k_lo >= 0 and x0 >= c_lo by construction of k_lo.
+        let x0 = (i64::from(c_first) + (k * STEP) as i64) as usize;
         let local = x0 - c_lo;
-        let (Some(cs), Some(cs2)) = (
-            col_s.get(local..local + TEMPLATE_SIDE),
-            col_s2.get(local..local + TEMPLATE_SIDE),
-        ) else {
+        let Some(window) = block.get(local..) else {
             continue;
         };
-        let s: u32 = cs.iter().sum();
-        let s2: u32 = cs2.iter().sum();
-        let mut st = 0u32;
-        for (row, t_row) in rows.iter().zip(template.chunks_exact(TEMPLATE_SIDE)) {
-            let Some(pixels) = row.get(x0..x0 + TEMPLATE_SIDE) else {
+        let pair = k + 1 < k_hi;
+        let acc = if pair {
+            dot_packed(window, &template.packed, TEMPLATE_SIDE + STEP)
+        } else {
+            dot_packed(window, &template.packed, TEMPLATE_SIDE)
+        };
+        let Some(acc) = acc else {
+            continue;
+        };
+        let lanes = [
+            (k, local, (acc & ((1 << LANE_BITS) - 1)) as u32),
+            (k + 1, local + STEP, (acc >> LANE_BITS) as u32),
+        ];
+        for (kk, ll, st) in lanes.into_iter().take(if pair { 2 } else { 1 }) {
+            let (Some((s, s2)), Some(value)) = (sums(ll), out.get_mut(kk)) else {
                 continue;
             };
-            st += pixels
-                .iter()
-                .zip(t_row.iter())
-                .map(|(&p, &t)| u32::from(p) * u32::from(t))
-                .sum::<u32>();
+            if let Some(score) = ncc_from_sums(n, (s, s2, st), ts, t_scale) {
+                *value = score;
+            }
         }
-        let ivar = n * i64::from(s2) - i64::from(s) * i64::from(s);
-        if ivar <= 0 {
-            continue;
-        }
-        let cov = n * i64::from(st) - ts * i64::from(s);
-        *value = (cov as f64 / libm::sqrt(ivar as f64 * tvar as f64)) as f32;
     }
+}
+
+/// Packed dot product of the 11 template rows with the image pixels `window[r * W + j]`,
+/// `j < cols` (`TEMPLATE_SIDE + step` for two windows, `TEMPLATE_SIDE` for the first only: its
+/// low lane is exact either way; a constant at each inlined call, so the loops unroll). `None`
+/// if the rows leave `window`.
+#[inline(always)]
+fn dot_packed(
+    window: &[u8],
+    packed: &[[u32; PACKED_WIDTH]; TEMPLATE_SIDE],
+    cols: usize,
+) -> Option<u64> {
+    let mut acc = 0u64;
+    for (r, words) in packed.iter().enumerate() {
+        let start = r * IMAGE_WIDTH_PX;
+        let pixels = window.get(start..start + cols)?;
+        for (&p, &w) in pixels.iter().zip(words.iter()) {
+            acc += u64::from(p) * u64::from(w);
+        }
+    }
+    Some(acc)
 }
 
 #[cfg(test)]
@@ -480,6 +787,22 @@ mod tests {
     }
 
     #[test]
+    fn vo_11_inverse_square_root_is_accurate() {
+        // Every power of two and 20,000 values spread over the range of the NCC variances.
+        let mut worst = 0.0f64;
+        let mut x = 1.0f64;
+        for k in 0..20_000 {
+            let v = if k < 32 { f64::from(1u32 << k) } else { x };
+            let got = f64::from(inv_sqrt(v as f32));
+            let exact = 1.0 / libm::sqrt(f64::from(v as f32));
+            worst = worst.max((got - exact).abs() / exact);
+            x = (x * 1.001_07).min(2.147e9);
+        }
+        println!("VO-11 inverse square root: largest relative error {worst:.2e}");
+        assert!(worst < 3e-7, "{worst}");
+    }
+
+    #[test]
     fn vo_11_ncc_is_one_on_itself() {
         let img = ramp();
         let image = Image::new(&img).unwrap();
@@ -499,14 +822,35 @@ mod tests {
         let image = Image::new(&img).unwrap();
         let t = image.template(300, 200).unwrap();
         let stats = template_stats(&t);
-        for (y, x_first, step) in [(200, 250, 1usize), (203, -3, 2), (470, 600, 2), (4, 10, 1)] {
-            let mut out = [0f32; 60];
-            ncc_scan(&image, &t, stats, y, x_first, step, &mut out);
-            for (k, &v) in out.iter().enumerate() {
-                let x = x_first + (k * step) as i32;
-                let expected = ncc(&image, &t, stats, x, y).unwrap_or(f32::NEG_INFINITY);
-                assert_eq!(v, expected, "y {y} x {x}");
+        // Every step (the packed kernel pairs positions `step` apart), odd and even counts,
+        // windows leaving the image on either side and at the last rows.
+        let mut compared = 0;
+        for (y, x_first) in [
+            (200, 250),
+            (203, -3),
+            (470, 600),
+            (4, 10),
+            (474, 560),
+            (5, -20),
+        ] {
+            for step in 1..=SCAN_MAX_STEP {
+                for len in [1usize, 2, 5, 9, 60] {
+                    let mut out = [0f32; 60];
+                    let out = &mut out[..len];
+                    ncc_scan(&image, &t, stats, y, x_first, step, out);
+                    for (k, &v) in out.iter().enumerate() {
+                        let x = x_first + (k * step) as i32;
+                        let expected = ncc(&image, &t, stats, x, y).unwrap_or(f32::NEG_INFINITY);
+                        assert_eq!(v, expected, "y {y} x {x} step {step} len {len}");
+                        compared += usize::from(v > f32::NEG_INFINITY);
+                    }
+                }
             }
         }
+        assert!(compared > 1000, "{compared}");
+        // Steps the packed kernel does not take are refused.
+        let mut out = [0f32; 4];
+        ncc_scan(&image, &t, stats, 200, 250, SCAN_MAX_STEP + 1, &mut out);
+        assert!(out.iter().all(|&v| v == f32::NEG_INFINITY));
     }
 }

@@ -5,7 +5,8 @@
 //! camera centre is `C1 = 0` and the right one `C2 = (baseline, 0, 0)`.
 
 use super::image::{
-    ncc, ncc_scan, region_ncc, region_stats, template_stats, Image, TemplateRegion,
+    ncc, ncc_from_sums, ncc_scan, region_stats, stats_i32, template_scale, template_stats, Image,
+    TemplateRegion,
 };
 use super::track::{refine_warp, Affine2, WarpModel};
 use super::{VoConfig, VoError, MAX_DISPARITY_PX, TEMPLATE_HALF, TEMPLATE_SIDE};
@@ -345,20 +346,38 @@ fn match_in_range(
             best = (score, disparity(k));
         }
     }
+    // Scores computed off the scan grid (the neighbours of the coarse peak): (disparity, score
+    // or -inf).
+    let mut extra = [(usize::MAX, f32::NEG_INFINITY); 2];
     if step > 1 {
         // The peak lies within step / 2 of the best sample: try its neighbours.
         let centre = best.1;
-        for d in centre.saturating_sub(1)..=(centre + 1).min(d_max) {
-            if d == centre || d < d_min {
+        for (slot, d) in [centre.wrapping_sub(1), centre + 1].into_iter().enumerate() {
+            if d < d_min || d > d_max {
                 continue;
             }
-            if let Some(score) = ncc(right, &template, stats, xi - d as i32, yi) {
+            let score = ncc(right, &template, stats, xi - d as i32, yi);
+            if let Some(e) = extra.get_mut(slot) {
+                *e = (d, score.unwrap_or(f32::NEG_INFINITY));
+            }
+            if let Some(score) = score {
                 if score > best.0 {
                     best = (score, d);
                 }
             }
         }
     }
+    // The score at disparity d if computed above (on the scan grid or a neighbour).
+    let known = |d: usize| -> Option<f32> {
+        if let Some(&(_, score)) = extra.iter().find(|&&(e, _)| e == d) {
+            return Some(score);
+        }
+        let offset = d_max.checked_sub(d)?;
+        if d < d_min || offset % step != 0 {
+            return None;
+        }
+        scan.get(offset / step).copied()
+    };
     let (best_score, best_d) = best;
     if !(best_score >= config.min_correlation) {
         return Err(StereoReject::WeakCorrelation);
@@ -374,7 +393,15 @@ fn match_in_range(
         return Err(StereoReject::Ambiguous);
     }
     let lo = d_min;
-    check_range_end(right, &template, stats, (xi, yi), best_d, (lo, d_max))?;
+    check_range_end(
+        right,
+        &template,
+        stats,
+        (xi, yi),
+        best_d,
+        (lo, d_max),
+        known,
+    )?;
     check_discontinuity(right, &template, (xi, yi), best_d, (lo, d_max), config)?;
     let template_f = left.template_f(xl, yl).ok_or(StereoReject::OutOfImage)?;
     let x0 = xl - best_d as f64;
@@ -404,14 +431,17 @@ fn check_range_end(
     (xi, yi): (i32, i32),
     best_d: usize,
     (lo, hi): (usize, usize),
+    known: impl Fn(usize) -> Option<f32>,
 ) -> Result<(), StereoReject> {
     if best_d <= lo || best_d >= hi {
         return Err(StereoReject::RangeEnd);
     }
-    let d = best_d as i32;
-    let inside = ncc(right, template, stats, xi - d - 1, yi).is_some()
-        && ncc(right, template, stats, xi - d + 1, yi).is_some();
-    if inside {
+    // A score already computed by the scan is reused (-inf: window outside or no contrast).
+    let inside = |d: usize| match known(d) {
+        Some(score) => score > f32::NEG_INFINITY,
+        None => ncc(right, template, stats, xi - d as i32, yi).is_some(),
+    };
+    if inside(best_d - 1) && inside(best_d + 1) {
         Ok(())
     } else {
         Err(StereoReject::RangeEnd)
@@ -465,30 +495,110 @@ fn check_discontinuity(
         (best_d + window).min(hi),
     );
     let min_var = f64::from(config.half_min_std) * f64::from(config.half_min_std);
-    for region in HALVES {
+    // The regions with texture, with their template sums.
+    let mut textured = [None; HALVES.len()];
+    for (slot, region) in textured.iter_mut().zip(HALVES) {
         let stats = region_stats(template, region);
-        let (_, var_n2, n) = stats;
+        let (ts, var_n2, n) = stats;
         if n <= 0 || !(var_n2 as f64 >= min_var * (n * n) as f64) {
             continue;
         }
-        let mut best = (f32::NEG_INFINITY, best_d);
-        let mut at_match = f32::NEG_INFINITY;
-        for d in d_lo..=d_hi {
-            let Some(score) = region_ncc(right, template, region, stats, xi - d as i32, yi) else {
+        // A textured region without contrast (possible with `half_min_std` 0) never scores, so
+        // it fails the rule.
+        let (ts, tvar) = stats_i32(ts, var_n2).ok_or(StereoReject::Discontinuity)?;
+        let t_scale = template_scale(tvar).ok_or(StereoReject::Discontinuity)?;
+        *slot = Some((ts, t_scale, n as i32));
+    }
+    if textured.iter().all(Option::is_none) {
+        return Ok(());
+    }
+    let mut best = [(f32::NEG_INFINITY, best_d); HALVES.len()];
+    let mut at_match = [f32::NEG_INFINITY; HALVES.len()];
+    for d in d_lo..=d_hi {
+        let Some(sums) = halves_sums(right, template, xi - d as i32, yi) else {
+            continue;
+        };
+        for (((stats, sums), best), at_match) in textured
+            .iter()
+            .zip(sums)
+            .zip(best.iter_mut())
+            .zip(at_match.iter_mut())
+        {
+            let Some((ts, t_scale, n)) = *stats else {
+                continue;
+            };
+            let Some(score) = ncc_from_sums(n, sums, ts, t_scale) else {
                 continue;
             };
             if d == best_d {
-                at_match = score;
+                *at_match = score;
             }
             if score > best.0 {
-                best = (score, d);
+                *best = (score, d);
             }
         }
-        if best.1.abs_diff(best_d) > 1 || !(at_match >= config.half_min_correlation) {
+    }
+    for ((stats, best), at_match) in textured.iter().zip(best).zip(at_match) {
+        if stats.is_some()
+            && (best.1.abs_diff(best_d) > 1 || !(at_match >= config.half_min_correlation))
+        {
             return Err(StereoReject::Discontinuity);
         }
     }
     Ok(())
+}
+
+/// The window sums `(sum p, sum p^2, sum p t)` of the image window centred on integer `(x, y)`
+/// against `template` over each region of [`HALVES`] (in that order), in one pass over the
+/// 11x11 window: every row is split into the column segments 0..3, 3..5, 5, 6..8, 8..11 that
+/// the regions are made of. The same sums as [`super::image::region_ncc`] forms per region; `None` if the
+/// window leaves the image.
+fn halves_sums(
+    image: &Image,
+    template: &super::image::Template,
+    x: i32,
+    y: i32,
+) -> Option<[(u32, u32, u32); 5]> {
+    const C: usize = TEMPLATE_HALF;
+    let half = TEMPLATE_HALF as i32;
+    let x0 = usize::try_from(x.checked_sub(half)?).ok()?;
+    let y0 = usize::try_from(y.checked_sub(half)?).ok()?;
+    let add = |a: (u32, u32, u32), b: (u32, u32, u32)| (a.0 + b.0, a.1 + b.1, a.2 + b.2);
+    let zero = (0u32, 0u32, 0u32);
+    let (mut centre, mut left, mut right, mut top, mut bottom) = (zero, zero, zero, zero, zero);
+    for (r, t_row) in template.chunks_exact(TEMPLATE_SIDE).enumerate() {
+        let pixels: &[u8; TEMPLATE_SIDE] = image
+            .row(y0 + r)?
+            .get(x0..x0 + TEMPLATE_SIDE)?
+            .try_into()
+            .ok()?;
+        let segment = |cols: core::ops::Range<usize>| {
+            let mut acc = zero;
+            for c in cols {
+                let p = u32::from(pixels.get(c).copied().unwrap_or(0));
+                let t = u32::from(t_row.get(c).copied().unwrap_or(0));
+                acc = (acc.0 + p, acc.1 + p * p, acc.2 + p * t);
+            }
+            acc
+        };
+        let (s0, s1, s2) = (segment(0..C - 2), segment(C - 2..C), segment(C..C + 1));
+        let (s3, s4) = (segment(C + 1..C + 3), segment(C + 3..TEMPLATE_SIDE));
+        let l = add(add(s0, s1), s2);
+        let rr = add(add(s2, s3), s4);
+        let row = add(l, add(s3, s4));
+        left = add(left, l);
+        right = add(right, rr);
+        if r <= C {
+            top = add(top, row);
+        }
+        if r >= C {
+            bottom = add(bottom, row);
+        }
+        if (C - 2..=C + 2).contains(&r) {
+            centre = add(centre, add(add(s1, s2), s3));
+        }
+    }
+    Some([centre, left, right, top, bottom])
 }
 
 /// Left-right consistency rule: the right template at the match (integer column nearest `xr`,
@@ -829,6 +939,40 @@ mod tests {
             Err(StereoReject::RangeEnd)
         );
         assert!(match_along_row_near(&left, &right, 400.0, 200.0, 18.0, &windowed).is_ok());
+    }
+
+    #[test]
+    fn vo_2_one_pass_half_sums_equal_region_ncc() {
+        use super::super::image::region_ncc;
+        let (l, r) = step_pair(40.0);
+        let (left, right) = (Image::new(&l).unwrap(), Image::new(&r).unwrap());
+        let mut compared = 0;
+        for (x, y) in [
+            (200, 240),
+            (296, 100),
+            (310, 300),
+            (5, 5),
+            (634, 474),
+            (4, 200),
+        ] {
+            let Some(template) = left.template(x, y) else {
+                continue;
+            };
+            for d in 0..30 {
+                let sums = halves_sums(&right, &template, x - d, y);
+                for (k, region) in HALVES.into_iter().enumerate() {
+                    let stats = region_stats(&template, region);
+                    let expected = region_ncc(&right, &template, region, stats, x - d, y);
+                    let (ts, tvar) = stats_i32(stats.0, stats.1).unwrap();
+                    let got = sums.and_then(|s| {
+                        ncc_from_sums(stats.2 as i32, s[k], ts, template_scale(tvar)?)
+                    });
+                    assert_eq!(got, expected, "({x}, {y}) d {d} region {k}");
+                    compared += usize::from(got.is_some());
+                }
+            }
+        }
+        assert!(compared > 400, "{compared}");
     }
 
     #[test]

@@ -6,9 +6,12 @@
 //! image; eq. 9 maps them into the new image, `x2 = a u + b v + c`, `y2 = d u + e v + f` (eq. 9
 //! with `x1, y1` taken relative to the feature, so `(c, f)` is the tracked feature position).
 
-use super::image::{ncc, ncc_scan, template_stats, Image, Template, TemplateF};
+use super::image::{
+    ncc, ncc_scan_prepared, template_stats, Image, ScanTemplate, Template, TemplateF,
+};
 use super::{MAX_SEARCH_RADIUS_PX, TEMPLATE_HALF, TEMPLATE_SIDE};
 use nalgebra::{SMatrix, SVector};
+use rover_hal::{IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX};
 
 /// Eq. 9 (H04): the affine map of template coordinates into the new image, pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -85,7 +88,7 @@ pub fn refine_warp(
     let mut warp = init;
     let mut gain = 1.0f64;
     let mut bias = 0.0f64;
-    let mut residual_rms = f64::INFINITY;
+    let mut last_sum_sq = f64::INFINITY;
     for _ in 0..iterations.max(1) {
         // Parameters: [a, b, c, d, e, f, gain, bias]; the translation model estimates only
         // [c, f, gain, bias] from a 4x4 system.
@@ -106,7 +109,7 @@ pub fn refine_warp(
                 (delta, system.sum_sq)
             }
         };
-        residual_rms = libm::sqrt(sum_sq / template.len() as f64);
+        last_sum_sq = sum_sq;
         if !delta.iter().all(|v| v.is_finite()) {
             return None;
         }
@@ -126,13 +129,13 @@ pub fn refine_warp(
         if !shape_ok {
             return None;
         }
-        if delta[2].abs() < 1e-2 && delta[5].abs() < 1e-2 {
+        if delta[2].abs() < 2e-2 && delta[5].abs() < 2e-2 {
             break;
         }
     }
     Some(Refined {
         warp,
-        residual_rms,
+        residual_rms: libm::sqrt(last_sum_sq / template.len() as f64),
         gain,
     })
 }
@@ -152,21 +155,23 @@ pub struct NormalEquations<const P: usize> {
 /// Sums of a per-pixel quantity `p` over the template weighted by the monomials of the
 /// template coordinates: `[sum p, sum p u, sum p v, sum p u^2, sum p u v, sum p v^2]`, built
 /// from per-row sums `sum_u p`, `sum_u p u`, `sum_u p u^2` (so the per-pixel work does not grow
-/// with the number of monomials).
+/// with the number of monomials). Single precision: the per-pixel terms are below 1e7 and a
+/// template has 121 of them, so a sum carries a relative rounding error of about 1e-5 of the
+/// sum of magnitudes, far below what the Gauss-Newton step of eq. 10 needs.
 #[derive(Debug, Clone, Copy, Default)]
 struct Moments {
-    s: f64,
-    su: f64,
-    sv: f64,
-    suu: f64,
-    suv: f64,
-    svv: f64,
+    s: f32,
+    su: f32,
+    sv: f32,
+    suu: f32,
+    suv: f32,
+    svv: f32,
 }
 
 impl Moments {
     /// Adds the row sums `r = [sum p, sum p u, sum p u^2]` of template row `v`.
     #[inline(always)]
-    fn add_row(&mut self, r: [f64; 3], v: f64) {
+    fn add_row(&mut self, r: [f32; 3], v: f32) {
         self.s += r[0];
         self.su += r[1];
         self.suu += r[2];
@@ -176,12 +181,18 @@ impl Moments {
     }
 }
 
+/// Margin of the corners of the warped template inside the bilinear sampling range of
+/// [`affine_normal_equations`], pixels.
+const CORNER_MARGIN_PX: f64 = 1.0 / 64.0;
+
 /// Eq. 10 normal equations of the affine warp (eq. 9) with gain and bias, at `warp`: the
 /// Jacobian of the residual `gain * I2(x2, y2) + bias - I1` per template pixel `(u, v)` is
 /// `J = [jx u, jx v, jx, jy u, jy v, jy, I2, 1]` with `(jx, jy) = gain * grad I2`. The 36
 /// distinct entries of `sum J J^T` are sums of 11 per-pixel products times monomials in
-/// `(u, v)`, accumulated per template row ([`Moments`]). `None` if the warped template leaves
-/// the image.
+/// `(u, v)`, accumulated per template row ([`Moments`]). The per-pixel work (warp, bilinear
+/// sample [`Image::bilinear_f32`], products, sums) is single precision (the rover CPU's FPU has
+/// 32 single registers against 16 double ones, so the accumulators stay in registers); the
+/// sums are returned in `f64`. `None` if the warped template leaves the image.
 pub fn affine_normal_equations(
     template: &TemplateF,
     image: &Image,
@@ -189,7 +200,24 @@ pub fn affine_normal_equations(
     gain: f64,
     bias: f64,
 ) -> Option<NormalEquations<8>> {
-    let half = TEMPLATE_HALF as f64;
+    let half = TEMPLATE_HALF as f32;
+    let (a, b, c) = (warp.a as f32, warp.b as f32, warp.c as f32);
+    let (d, e, f) = (warp.d as f32, warp.e as f32, warp.f as f32);
+    let (gain, bias) = (gain as f32, bias as f32);
+    // The warped template is the parallelogram spanned by its four corners (eq. 9 is affine):
+    // with the corners at least `CORNER_MARGIN_PX` inside the sampling range, every pixel's
+    // 2x2 neighbourhood is in the image (the margin covers the f32 rounding of the per-pixel
+    // positions, below 1e-4 px), so the pixel loop needs no floating-point range tests. NaN
+    // parameters fail the test.
+    let x_hi = (IMAGE_WIDTH_PX - 1) as f64 - CORNER_MARGIN_PX;
+    let y_hi = (IMAGE_HEIGHT_PX - 1) as f64 - CORNER_MARGIN_PX;
+    let h64 = TEMPLATE_HALF as f64;
+    for (u, v) in [(-h64, -h64), (h64, -h64), (-h64, h64), (h64, h64)] {
+        let (x, y) = warp.apply(u, v);
+        if !(x >= CORNER_MARGIN_PX && x < x_hi && y >= CORNER_MARGIN_PX && y < y_hi) {
+            return None;
+        }
+    }
     // Per-pixel products with their u-moments: jx^2, jx jy, jy^2 (up to u^2); jx I2, jy I2,
     // jx, jy, jx r, jy r (up to u); I2^2, I2, I2 r, r, r^2 (plain sums).
     let (mut xx, mut xy, mut yy) = (Moments::default(), Moments::default(), Moments::default());
@@ -200,23 +228,39 @@ pub fn affine_normal_equations(
         Moments::default(),
     );
     let (mut xr, mut yr) = (Moments::default(), Moments::default());
-    let (mut ii, mut i1, mut ir, mut r1, mut rr) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut ii, mut i1, mut ir, mut r1, mut rr) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
     for (row, t_row) in template.chunks_exact(TEMPLATE_SIDE).enumerate() {
-        let v = row as f64 - half;
-        let mut rows = [[0.0f64; 3]; 3];
-        let mut rows1 = [[0.0f64; 3]; 6];
-        for (col, &t) in t_row.iter().enumerate() {
-            let u = col as f64 - half;
-            let (x2, y2) = warp.apply(u, v);
-            let (value, gx, gy) = image.bilinear(x2, y2)?;
-            let residual = gain * value + bias - f64::from(t);
-            let (jx, jy) = (gain * gx, gain * gy);
+        let v = row as f32 - half;
+        // Eq. 9 at (0, v); each column adds (a, d) times u.
+        let (x_row, y_row) = (b * v + c, e * v + f);
+        // Pass 1: the samples of the row, [I2, jx, jy, r] per pixel. Passes 2 and 3 accumulate
+        // them in two groups, so each group's accumulators stay in registers.
+        let mut samples = [[0.0f32; 4]; TEMPLATE_SIDE];
+        let mut u = -half;
+        for (sample, &t) in samples.iter_mut().zip(t_row.iter()) {
+            let (value, gx, gy) = image.bilinear_f32_inside(a * u + x_row, d * u + y_row)?;
+            *sample = [value, gain * gx, gain * gy, gain * value + bias - t];
+            u += 1.0;
+        }
+        let mut rows = [[0.0f32; 3]; 3];
+        let mut u = -half;
+        for &[value, jx, jy, residual] in samples.iter() {
             for (acc, p) in rows.iter_mut().zip([jx * jx, jx * jy, jy * jy]) {
                 let pu = p * u;
                 acc[0] += p;
                 acc[1] += pu;
                 acc[2] += pu * u;
             }
+            ii += value * value;
+            i1 += value;
+            ir += value * residual;
+            r1 += residual;
+            rr += residual * residual;
+            u += 1.0;
+        }
+        let mut rows1 = [[0.0f32; 2]; 6];
+        let mut u = -half;
+        for &[value, jx, jy, residual] in samples.iter() {
             for (acc, p) in
                 rows1
                     .iter_mut()
@@ -225,17 +269,13 @@ pub fn affine_normal_equations(
                 acc[0] += p;
                 acc[1] += p * u;
             }
-            ii += value * value;
-            i1 += value;
-            ir += value * residual;
-            r1 += residual;
-            rr += residual * residual;
+            u += 1.0;
         }
         let [rxx, rxy, ryy] = rows;
         xx.add_row(rxx, v);
         xy.add_row(rxy, v);
         yy.add_row(ryy, v);
-        let [rxi, ryi, rx1, ry1, rxr, ryr] = rows1;
+        let [rxi, ryi, rx1, ry1, rxr, ryr] = rows1.map(|[s0, s1]| [s0, s1, 0.0]);
         xi.add_row(rxi, v);
         yi.add_row(ryi, v);
         x1.add_row(rx1, v);
@@ -243,7 +283,7 @@ pub fn affine_normal_equations(
         xr.add_row(rxr, v);
         yr.add_row(ryr, v);
     }
-    let n = template.len() as f64;
+    let n = template.len() as f32;
     // Upper triangle, J = [jx u, jx v, jx, jy u, jy v, jy, I2, 1].
     let upper = [
         [xx.suu, xx.suv, xx.su, xy.suu, xy.suv, xy.su, xi.su, x1.su],
@@ -258,18 +298,20 @@ pub fn affine_normal_equations(
     let mut h = [[0.0; 8]; 8];
     for r in 0..8 {
         for c in 0..8 {
-            h[r][c] = if c >= r { upper[r][c] } else { upper[c][r] };
+            h[r][c] = f64::from(if c >= r { upper[r][c] } else { upper[c][r] });
         }
     }
     Some(NormalEquations {
         h,
-        g: [xr.su, xr.sv, xr.s, yr.su, yr.sv, yr.s, ir, r1],
-        sum_sq: rr,
+        g: [xr.su, xr.sv, xr.s, yr.su, yr.sv, yr.s, ir, r1].map(f64::from),
+        sum_sq: f64::from(rr),
     })
 }
 
 /// Eq. 10 normal equations of a translation warp (`(c, f)` only) with gain and bias:
-/// `J = [jx, jy, I2, 1]`. `None` if the template leaves the image.
+/// `J = [jx, jy, I2, 1]`. Per-pixel work and sums in single precision
+/// ([`Image::grid_bilinear_f32`]: one pair of interpolation weights for the whole template),
+/// returned in `f64`. `None` if the template leaves the image.
 pub fn translation_normal_equations(
     template: &TemplateF,
     image: &Image,
@@ -277,11 +319,12 @@ pub fn translation_normal_equations(
     gain: f64,
     bias: f64,
 ) -> Option<NormalEquations<4>> {
-    let mut s = [0.0f64; 10];
-    let (mut g, mut sum_sq) = ([0.0f64; 4], 0.0);
-    image.grid_bilinear(warp.c, warp.f, |k, value, gx, gy| {
+    let (gain, bias) = (gain as f32, bias as f32);
+    let mut s = [0.0f32; 9];
+    let (mut g, mut sum_sq) = ([0.0f32; 4], 0.0f32);
+    image.grid_bilinear_f32(warp.c, warp.f, |k, value, gx, gy| {
         let t = template.get(k).copied().unwrap_or(0.0);
-        let residual = gain * value + bias - f64::from(t);
+        let residual = gain * value + bias - t;
         let (jx, jy) = (gain * gx, gain * gy);
         let products = [
             jx * jx,
@@ -302,6 +345,7 @@ pub fn translation_normal_equations(
         }
         sum_sq += residual * residual;
     })?;
+    let s = s.map(f64::from);
     let n = template.len() as f64;
     let h = [
         [s[0], s[1], s[2], s[3]],
@@ -309,7 +353,11 @@ pub fn translation_normal_equations(
         [s[2], s[5], s[7], s[8]],
         [s[3], s[6], s[8], n],
     ];
-    Some(NormalEquations { h, g, sum_sq })
+    Some(NormalEquations {
+        h,
+        g: g.map(f64::from),
+        sum_sq: f64::from(sum_sq),
+    })
 }
 
 /// Correlation search: the integer position within `radius` pixels of `(x0, y0)` where the
@@ -338,8 +386,9 @@ pub fn search_window(
     let columns = (x_hi - x_lo) as usize / 2 + 1;
     let mut scan = [f32::NEG_INFINITY; MAX_SEARCH_RADIUS_PX + 1];
     let window = scan.get_mut(..columns).unwrap_or(&mut []);
+    let prepared = ScanTemplate::with_stats(template, stats, 2)?;
     for y in (y_lo..=y_hi).step_by(2) {
-        ncc_scan(image, template, stats, y, x_lo, 2, window);
+        ncc_scan_prepared(image, &prepared, y, x_lo, window);
         for (k, &score) in window.iter().enumerate() {
             if score > f32::NEG_INFINITY && best.is_none_or(|(_, _, s)| score > s) {
                 best = Some((x_lo + 2 * k as i32, y, score));
@@ -460,15 +509,18 @@ mod tests {
         }
     }
 
-    /// The normal equations by the textbook sum over pixels of `J J^T` and `J r`.
+    /// The normal equations by the textbook sum over pixels of `J J^T` and `J r` in `f64`, and
+    /// the same sums of the terms' magnitudes (the scale of the single-precision rounding).
+    #[allow(clippy::type_complexity)]
     fn direct_sums(
         t: &TemplateF,
         image: &Image,
         w: &Affine2,
         gain: f64,
         bias: f64,
-    ) -> ([[f64; 8]; 8], [f64; 8], f64) {
+    ) -> (([[f64; 8]; 8], [f64; 8], f64), ([[f64; 8]; 8], [f64; 8])) {
         let (mut h, mut g, mut ss) = ([[0.0; 8]; 8], [0.0; 8], 0.0);
+        let (mut h_mag, mut g_mag) = ([[0.0; 8]; 8], [0.0; 8]);
         for (k, &tv) in t.iter().enumerate() {
             let u = (k % TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
             let v = (k / TEMPLATE_SIDE) as f64 - TEMPLATE_HALF as f64;
@@ -477,15 +529,17 @@ mod tests {
             let r = gain * value + bias - f64::from(tv);
             let (jx, jy) = (gain * gx, gain * gy);
             let j = [jx * u, jx * v, jx, jy * u, jy * v, jy, value, 1.0];
-            for ((row, ga), ja) in h.iter_mut().zip(g.iter_mut()).zip(j) {
-                for (hab, jb) in row.iter_mut().zip(j) {
-                    *hab += ja * jb;
+            for (a, ja) in j.into_iter().enumerate() {
+                for (b, jb) in j.into_iter().enumerate() {
+                    h[a][b] += ja * jb;
+                    h_mag[a][b] += (ja * jb).abs();
                 }
-                *ga += ja * r;
+                g[a] += ja * r;
+                g_mag[a] += (ja * r).abs();
             }
             ss += r * r;
         }
-        (h, g, ss)
+        ((h, g, ss), (h_mag, g_mag))
     }
 
     #[test]
@@ -493,37 +547,53 @@ mod tests {
         let img = render(|x, y| (x, y));
         let i = Image::new(&img).unwrap();
         let t = i.template_f(200.3, 150.7).unwrap();
+        // (No sample within 1e-3 px of a pixel boundary, where the bilinear gradient is
+        // one-sided and the f32 and f64 positions could take different sides.)
         let w = Affine2 {
-            a: 1.05,
-            b: 0.1,
-            c: 203.4,
-            d: -0.07,
-            e: 0.93,
-            f: 148.2,
+            a: 1.0513,
+            b: 0.1037,
+            c: 203.41,
+            d: -0.0711,
+            e: 0.9319,
+            f: 148.23,
         };
         let (gain, bias) = (1.1, -4.0);
-        let (h, g, ss) = direct_sums(&t, &i, &w, gain, bias);
-        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+        let ((h, g, ss), (h_mag, g_mag)) = direct_sums(&t, &i, &w, gain, bias);
+        // Single-precision sums: within 1e-5 of the sum of the terms' magnitudes (the f32
+        // rounding of 121 terms, of the positions and of the bilinear samples; measured up to
+        // 2.4e-6, the residual's cancellation `gain I2 + bias - I1`); a wrong term would be off
+        // by its whole size.
+        let close = |a: f64, b: f64, mag: f64| (a - b).abs() <= 1e-5 * mag + 1e-6;
         let affine = affine_normal_equations(&t, &i, &w, gain, bias).unwrap();
+        let mut worst = 0.0f64;
         for (a, (row, expected)) in affine.h.iter().zip(&h).enumerate() {
             for (b, (&x, &y)) in row.iter().zip(expected).enumerate() {
-                assert!(close(x, y), "H[{a}][{b}]");
+                worst = worst.max((x - y).abs() / h_mag[a][b]);
+                assert!(close(x, y, h_mag[a][b]), "H[{a}][{b}] {x} {y}");
             }
-            assert!(close(affine.g[a], g[a]), "g[{a}]");
+            worst = worst.max((affine.g[a] - g[a]).abs() / g_mag[a]);
+            assert!(
+                close(affine.g[a], g[a], g_mag[a]),
+                "g[{a}] {} {} {}",
+                affine.g[a],
+                g[a],
+                g_mag[a]
+            );
         }
-        assert!(close(affine.sum_sq, ss));
+        println!("VO-5 normal equations: largest error / magnitude {worst:.2e}");
+        assert!(close(affine.sum_sq, ss, ss));
         // The translation system is the [c, f, gain, bias] block of the affine one.
         let shift = Affine2::translation(w.c, w.f);
-        let (h, g, ss) = direct_sums(&t, &i, &shift, gain, bias);
+        let ((h, g, ss), (h_mag, g_mag)) = direct_sums(&t, &i, &shift, gain, bias);
         let tr = translation_normal_equations(&t, &i, &shift, gain, bias).unwrap();
         let idx = [2, 5, 6, 7];
         for (a, &ia) in idx.iter().enumerate() {
             for (b, &ib) in idx.iter().enumerate() {
-                assert!(close(tr.h[a][b], h[ia][ib]), "H[{a}][{b}]");
+                assert!(close(tr.h[a][b], h[ia][ib], h_mag[ia][ib]), "H[{a}][{b}]");
             }
-            assert!(close(tr.g[a], g[ia]), "g[{a}]");
+            assert!(close(tr.g[a], g[ia], g_mag[ia]), "g[{a}]");
         }
-        assert!(close(tr.sum_sq, ss));
+        assert!(close(tr.sum_sq, ss, ss));
         assert!(
             affine_normal_equations(&t, &i, &Affine2::translation(3.0, 3.0), 1.0, 0.0).is_none()
         );
