@@ -572,6 +572,34 @@ impl ForstnerDetector {
         }
     }
 
+    /// One step of building the best-first heap of the compacted candidates (a max-heap on
+    /// the rank: the root is the best), for `start` from `n / 2 - 1` down to 0 after
+    /// [`Self::compact_candidates`]. Then [`Self::pop_best`] gives the candidates in the order
+    /// of [`Self::sort_candidates`] (the rank is a strict total order: no two cells share a
+    /// pixel), one at a time, so the selection stops as soon as it has its features instead of
+    /// sorting every cell (issue 18).
+    pub fn best_heapify_step(&mut self, start: usize) {
+        let n = self.candidate_count;
+        if let Some(list) = self.cells.get_mut(..n) {
+            sift_down_best(list, start, n);
+        }
+    }
+
+    /// The best candidate of the best-first heap of the first `len` compacted candidates
+    /// (see [`Self::best_heapify_step`]), moved to position `len - 1`; the heap is then the
+    /// first `len - 1`. `None` when `len` is 0 or beyond the candidates.
+    pub fn pop_best(&mut self, len: usize) -> Option<Candidate> {
+        if len == 0 || len > self.candidate_count {
+            return None;
+        }
+        let list = self.cells.get_mut(..len)?;
+        if let [first, .., last] = list {
+            core::mem::swap(first, last);
+        }
+        sift_down_best(list, 0, len - 1);
+        list.last().copied()
+    }
+
     /// The sorted candidates (after [`Self::sort_candidates`]).
     pub fn candidates(&self) -> &[Candidate] {
         self.cells.get(..self.candidate_count).unwrap_or(&[])
@@ -608,6 +636,34 @@ fn sift_down(list: &mut [Candidate], mut root: usize, end: usize) {
             return;
         };
         if ranks_before(c, p) {
+            return;
+        }
+        list.swap(root, child);
+        root = child;
+    }
+}
+
+/// Moves element `root` down the best-first heap of the first `end` elements (max-heap on the
+/// rank: the child that ranks earlier goes up).
+fn sift_down_best(list: &mut [Candidate], mut root: usize, end: usize) {
+    for _ in 0..usize::BITS {
+        let left = 2 * root + 1;
+        if left >= end {
+            return;
+        }
+        let right = left + 1;
+        let mut child = left;
+        if right < end {
+            if let (Some(l), Some(r)) = (list.get(left), list.get(right)) {
+                if ranks_before(r, l) {
+                    child = right;
+                }
+            }
+        }
+        let (Some(c), Some(p)) = (list.get(child), list.get(root)) else {
+            return;
+        };
+        if ranks_before(p, c) {
             return;
         }
         list.swap(root, child);
@@ -1050,6 +1106,38 @@ mod tests {
         }
         // The comparison is not vacuous: the flight thresholds find many cells.
         assert!(flight_cells > 6 * 1000, "{flight_cells} cells");
+    }
+
+    #[test]
+    fn vo_1_best_first_heap_pops_in_sorted_order() {
+        // Cells with many equal interests (ties broken by row, then column), as the detector
+        // leaves them: popping the best-first heap gives the full sort's order.
+        let mut det = ForstnerDetector::EMPTY;
+        for (k, cell) in det.cells.iter_mut().enumerate().step_by(3) {
+            let k = k as u32;
+            *cell = Candidate {
+                interest: ((k * 7919) % 97) as f32 + 1.0,
+                x: ((k * 13) % 640) as u16,
+                y: ((k * 7) % 480) as u16,
+            };
+        }
+        let mut sorted = det.clone();
+        let n = sorted.sort_candidates();
+        let expect = sorted.candidates().to_vec();
+        assert_eq!(det.compact_candidates(), n);
+        assert!(n > 900);
+        for start in (0..n / 2).rev() {
+            det.best_heapify_step(start);
+        }
+        let mut popped = Vec::new();
+        let mut left = n;
+        while let Some(c) = det.pop_best(left) {
+            popped.push(c);
+            left -= 1;
+        }
+        assert_eq!(popped, expect);
+        assert_eq!(det.pop_best(0), None);
+        assert_eq!(det.pop_best(n + 1), None);
     }
 
     #[test]

@@ -7,7 +7,8 @@
 //! maximum-likelihood iteration (1 each), carry the motion's inliers into the next keyframe
 //! (chunks of 64: feature persistence, `docs/vo.md`), one image row of the Forstner operator (1
 //! each, 464 rows; cells covered by the carried features skipped), compact the candidates (1),
-//! sort them (chunks of 64 heap steps), select the features (chunks of 64 candidates), write the
+//! build a best-first heap of them (chunks of 64 heap steps), pop and select the features (chunks
+//! of 64 candidates, only until the features are found), write the
 //! carried features' templates (chunks of 64), stereo match one new feature (1 each), finish (1).
 //! The sequence of items depends only on the input, so the number of steps is deterministic.
 
@@ -88,11 +89,9 @@ enum Phase {
     Heapify {
         next: usize,
     },
-    SortDown {
-        end: usize,
-    },
     Choose {
-        next: usize,
+        /// Candidates left in the best-first heap.
+        left: usize,
     },
     Carry {
         next: usize,
@@ -434,7 +433,6 @@ impl<const N: usize> VisualOdometry<N> {
             Phase::Seed { .. }
             | Phase::Select
             | Phase::Heapify { .. }
-            | Phase::SortDown { .. }
             | Phase::Choose { .. }
             | Phase::Carry { .. } => WorkKind::Select,
             Phase::StereoNew { .. } => WorkKind::Stereo,
@@ -640,40 +638,38 @@ impl<const N: usize> VisualOdometry<N> {
             Phase::Heapify { next } => {
                 let stop = next.saturating_sub(SORT_CHUNK);
                 for start in (stop..next).rev() {
-                    self.detector.heapify_step(start);
+                    self.detector.best_heapify_step(start);
                 }
                 self.phase = if stop == 0 {
-                    Phase::SortDown {
-                        end: self.detector.candidates().len(),
+                    Phase::Choose {
+                        left: self.detector.candidates().len(),
                     }
                 } else {
                     Phase::Heapify { next: stop }
                 };
             }
-            Phase::SortDown { end } => {
-                let stop = end.saturating_sub(SORT_CHUNK).max(1);
-                for e in (stop..end).rev() {
-                    self.detector.sort_step(e);
+            Phase::Choose { mut left } => {
+                // The candidates best first, popped from the heap only as far as the greedy
+                // selection needs them (the order of the full sort, `features::pop_best`).
+                let mut count = self.selected_count;
+                for _ in 0..SORT_CHUNK {
+                    if count >= self.selected.len() {
+                        break;
+                    }
+                    let Some(c) = self.detector.pop_best(left) else {
+                        break;
+                    };
+                    left -= 1;
+                    count = select_more(
+                        core::slice::from_ref(&c),
+                        self.config.min_distance_px,
+                        &mut self.selected,
+                        count,
+                    );
                 }
-                self.phase = if stop <= 1 {
-                    Phase::Choose { next: 0 }
-                } else {
-                    Phase::SortDown { end: stop }
-                };
-            }
-            Phase::Choose { next } => {
-                let candidates = self.detector.candidates();
-                let stop = (next + SORT_CHUNK).min(candidates.len());
-                let chunk = candidates.get(next..stop).unwrap_or(&[]);
-                let count = select_more(
-                    chunk,
-                    self.config.min_distance_px,
-                    &mut self.selected,
-                    self.selected_count,
-                );
                 self.selected_count = count;
-                if stop < candidates.len() && count < self.selected.len() {
-                    self.phase = Phase::Choose { next: stop };
+                if left > 0 && count < self.selected.len() {
+                    self.phase = Phase::Choose { left };
                     return None;
                 }
                 self.quality.features = count as u16;
