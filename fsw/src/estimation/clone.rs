@@ -122,8 +122,17 @@ impl Ekf {
                 *c = None;
             }
             let i = clone_index(slot);
-            self.p.fixed_view_mut::<CLONE_DIM, DIM>(i, 0).fill(0.0);
-            self.p.fixed_view_mut::<DIM, CLONE_DIM>(0, i).fill(0.0);
+            // P is column-major: the clone's columns are one contiguous run, its rows six
+            // entries of every column (plain slice fills instead of strided views).
+            let p = self.p.as_mut_slice();
+            if let Some(cols) = p.get_mut(i * DIM..(i + CLONE_DIM) * DIM) {
+                cols.fill(0.0);
+            }
+            for col in p.chunks_exact_mut(DIM) {
+                if let Some(rows) = col.get_mut(i..i + CLONE_DIM) {
+                    rows.fill(0.0);
+                }
+            }
         }
         Ok(())
     }

@@ -699,3 +699,40 @@ fn in_place_init_equals_new() {
     used.init(config).unwrap();
     assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
 }
+
+/// LOC-9: the search's cell of a point (truncation and one correction, issue 18) equals
+/// `libm::floor` on both signs, at integers, next to them and at the edges of its range, and
+/// refuses what `libm::floor` would put outside +-1e6 or NaN.
+#[test]
+fn loc_9_floor_cell_equals_libm_floor() {
+    let reference = |u: f64, v: f64| {
+        let (fu, fv) = (libm::floor(u), libm::floor(v));
+        let lim = 1.0e6;
+        (fu >= -lim && fu <= lim && fv >= -lim && fv <= lim).then_some((fu as i32, fv as i32))
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let mut values: Vec<f64> = (0..20_000).map(|_| rng.gen_range(-300.0..300.0)).collect();
+    for k in -5..=5 {
+        let k = f64::from(k);
+        values.extend([k, k - 1e-12, k + 1e-12, k - 0.5, k + 0.5]);
+    }
+    values.extend([
+        1.0e6,
+        1.0e6 + 0.999,
+        1.0e6 + 1.0,
+        -1.0e6,
+        -1.0e6 - 1e-9,
+        5e9,
+        -5e9,
+    ]);
+    values.extend([f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0]);
+    for w in values.windows(2) {
+        assert_eq!(
+            search::Localizer::floor_cell(w[0], w[1]),
+            reference(w[0], w[1]),
+            "{} {}",
+            w[0],
+            w[1]
+        );
+    }
+}

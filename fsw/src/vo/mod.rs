@@ -209,7 +209,7 @@ impl VoConfig {
         min_inliers: 6,
         min_image_std: 3.0,
         max_clipped_fraction: 0.5,
-        work_cost: [15, 34, 7, 28, 9, 14, 16, 1],
+        work_cost: [6, 34, 7, 28, 9, 14, 16, 1],
     };
 }
 
