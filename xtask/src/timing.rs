@@ -1042,6 +1042,8 @@ fn document(
     writeln!(d, "|---|---:|---:|---|---:|---:|---:|---:|")?;
     let mut u = [0.0; 2];
     let mut u_model = 0.0;
+    // Issue 18's binding figure: each group at CPI 2.0 or its model CPI, whichever is higher.
+    let mut u_bind = 0.0;
     for g in &groups {
         let ui = CPI.map(|c| secs(g.insns, c) / g.period_s);
         u[0] += ui[0];
@@ -1049,6 +1051,7 @@ fn document(
         let c = model_cpi(g.name, loops);
         let um = secs(g.insns, c) / g.period_s;
         u_model += um;
+        u_bind += secs(g.insns, c.max(CPI[1])) / g.period_s;
         writeln!(
             d,
             "| {} | {} | {} | {} | {:.2} % | {:.2} % | {:.2} | {:.2} % |",
@@ -1078,28 +1081,20 @@ fn document(
         100.0 * rt_u[0],
         100.0 * rt_u[1]
     )?;
-    let highest = groups
-        .iter()
-        .map(|g| model_cpi(g.name, loops))
-        .fold(0.0, f64::max);
     writeln!(
         d,
         "The model CPI of a group is the largest CPI of the code groups its tasks run (section \
-         \"Cycles per instruction\" below: LLVM's Cortex-M7 pipeline model, zero-wait memory). \
-         {} (issue 18: \"at CPI 2.0 or at the justified CPI, whichever is higher\"): the \
-         binding utilisation is **{:.2} %**.\n",
-        if highest <= CPI[1] {
-            format!(
-                "The highest is {highest:.2}, below {:.1}: the CPI {:.1} column binds",
-                CPI[1], CPI[1]
-            )
-        } else {
-            format!(
-                "The highest is {highest:.2}, above {:.1}: the model column binds",
-                CPI[1]
-            )
-        },
-        100.0 * u[1].max(u_model)
+         \"Cycles per instruction\" below: LLVM's Cortex-M7 pipeline model, zero-wait memory, \
+         every loop of a code group weighted by its size, not by how often it runs). Issue 18 \
+         asks for the utilisation \"at CPI 2.0 or at the justified CPI, whichever is higher\": \
+         with each group at the higher of {:.1} and its model CPI the total is **{:.2} %**. The \
+         groups whose model CPI is above {:.1} (the executive's and the EKF's code) are pulled up \
+         by store-bound fill loops (`vstm` of 8-16 doubles per instruction: clone release, \
+         recorder reset) that the static weighting counts like the hot loops; execution counts \
+         per loop (QEMU's block log) would weight them by what runs.\n",
+        CPI[1],
+        100.0 * u_bind,
+        CPI[1]
     )?;
     writeln!(
         d,
@@ -1412,6 +1407,15 @@ fn document(
             pass(u[i] <= DESIGN_MARGIN)
         )?;
     }
+    writeln!(
+        d,
+        "| total utilisation at {:.0} MHz <= {:.0} %, each group at CPI {:.1} or its model CPI, whichever is higher | {:.1} % | {} |",
+        CLOCK_HZ / 1e6,
+        100.0 * DESIGN_MARGIN,
+        CPI[1],
+        100.0 * u_bind,
+        pass(u_bind <= DESIGN_MARGIN)
+    )?;
     let st = stack("flight").max(stack("bench"));
     writeln!(
         d,
@@ -1525,18 +1529,20 @@ fn cpi_section(d: &mut String, mca: &str, loops: &[GroupCost]) -> Result<()> {
     }
     writeln!(
         d,
-        "\nThe largest loop CPIs are the loops around an FP64 divide or square root (Cholesky \
-         factors, normalisations: 20-30 cycles for one instruction); the image loops (NCC, \
-         Forstner, rectification) are integer and load/store code that dual-issues (CPI below \
-         1). Not modelled: data-cache misses on the stereo images, which live in external RAM \
+        "\nThe largest loop CPIs are store-bound fills (`vstm` of 8-16 doubles in one \
+         instruction) and the loops around an FP64 divide or square root (Cholesky factors, \
+         normalisations: 20-30 cycles for one instruction); the image groups (NCC, Forstner, \
+         rectification, hazard mapper) are integer and load/store code that dual-issues, near \
+         CPI 1. Not modelled: data-cache misses on the stereo images, which live in external RAM \
          (`.extram`). The image kernels stream their rows (a 640-pixel row is 20 lines of 32 \
          bytes): the Forstner operator touches at most 4 image rows per 640-pixel work item of \
          about 40,000 instructions (80 line fills), the rectification at most 3 raw rows and one \
          output row per output row of about 18,000 (80 line fills); at an assumed 50 cycles per \
          line fill from SDRAM (not a published figure of a flight board) that adds at most about \
          0.1 and 0.25 cycles per instruction, less where the rows of the previous item are still \
-         cached; the NCC scans reuse an 11-row window. With that allowance every group stays \
-         below CPI 2.0, which the utilisation table therefore keeps as its binding figure.\n"
+         cached; the NCC scans reuse an 11-row window. With that allowance the image groups stay \
+         well below CPI 2.0; the utilisation table applies the higher of 2.0 and each group's \
+         model CPI.\n"
     )?;
     Ok(())
 }
