@@ -711,7 +711,9 @@ fn loc_9_floor_cell_equals_libm_floor() {
         (fu >= -lim && fu <= lim && fv >= -lim && fv <= lim).then_some((fu as i32, fv as i32))
     };
     let mut rng = ChaCha8Rng::seed_from_u64(9);
-    let mut values: Vec<f64> = (0..20_000).map(|_| rng.random_range(-300.0..300.0)).collect();
+    let mut values: Vec<f64> = (0..20_000)
+        .map(|_| rng.random_range(-300.0..300.0))
+        .collect();
     for k in -5..=5 {
         let k = f64::from(k);
         values.extend([k, k - 1e-12, k + 1e-12, k - 0.5, k + 0.5]);
