@@ -89,23 +89,13 @@ fn main() -> Result<()> {
     }
 }
 
-/// `cargo xtask stack`: build the rover-CPU image and print the static stack analysis
-/// ([`stack`]) of its entry and of the flight software's frame.
 /// `cargo xtask cpi`: the Cortex-M7 pipeline model's CPI of the image's kernel loops
 /// ([`cpi`]), printed per group (the same figures as `docs/timing.md`); `CPI_LOOPS=1` lists
 /// every loop with its function.
 fn cpi_command() -> Result<()> {
-    run(cargo().args([
-        "build",
-        "--profile",
-        FLIGHT_PROFILE,
-        "--target",
-        TARGET,
-        "-p",
-        "fsw-image",
-    ]))?;
+    let image = build_image()?;
     println!("{}", cpi::tool_version()?);
-    for (g, c) in cpi::GROUPS.iter().zip(cpi::analyse(&image_path())?) {
+    for (g, c) in cpi::GROUPS.iter().zip(cpi::analyse(&image)?) {
         let (lo, hi) = c.range().unwrap_or((0.0, 0.0));
         println!(
             "{:.2} CPI ({:.2}-{:.2}) over {} loops, {} instructions, {} functions, {} skipped: {}",
@@ -132,17 +122,10 @@ fn cpi_command() -> Result<()> {
     Ok(())
 }
 
+/// `cargo xtask stack`: build the rover-CPU image and print the static stack analysis
+/// ([`stack`]) of its entry and of the flight software's frame.
 fn stack_command() -> Result<()> {
-    run(cargo().args([
-        "build",
-        "--profile",
-        FLIGHT_PROFILE,
-        "--target",
-        TARGET,
-        "-p",
-        "fsw-image",
-    ]))?;
-    let r = stack::analyse(&image_path())?;
+    let r = stack::analyse(&build_image()?)?;
     let s = stack::summarise(&r);
     let rows = std::env::var("STACK_ROWS")
         .ok()
@@ -393,16 +376,7 @@ fn fuzz(args: &[String]) -> Result<()> {
 
 /// Build the image and run it in QEMU; returns what it printed.
 fn qemu_run() -> Result<String> {
-    run(cargo().args([
-        "build",
-        "--profile",
-        FLIGHT_PROFILE,
-        "--target",
-        TARGET,
-        "-p",
-        "fsw-image",
-    ]))?;
-    let image = image_path();
+    let image = build_image()?;
     let output = Command::new("timeout")
         .arg("600")
         .arg("qemu-system-arm")
@@ -422,6 +396,20 @@ fn qemu_run() -> Result<String> {
 }
 
 /// The rover-CPU image built by `cargo build --profile flight --target thumbv7em-none-eabihf`.
+/// Build the rover-CPU image (`flight` profile) and return its path.
+fn build_image() -> Result<PathBuf> {
+    run(cargo().args([
+        "build",
+        "--profile",
+        FLIGHT_PROFILE,
+        "--target",
+        TARGET,
+        "-p",
+        "fsw-image",
+    ]))?;
+    Ok(image_path())
+}
+
 fn image_path() -> PathBuf {
     Path::new("target")
         .join(TARGET)

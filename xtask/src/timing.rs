@@ -4,7 +4,7 @@
 use crate::cpi::{self, GroupCost};
 use crate::elf::{self, ElfReport};
 use crate::stack::{self, StackReport, Summary as StackSummary};
-use crate::{cargo, image_path, qemu_args, run, step, FLIGHT_PROFILE, TARGET};
+use crate::{build_image, cargo, qemu_args, run, step, TARGET};
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -292,16 +292,7 @@ pub fn timing() -> Result<()> {
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
 
     let t = step("timing: rover-CPU image, two runs in QEMU (-icount shift=0)");
-    run(cargo().args([
-        "build",
-        "--profile",
-        FLIGHT_PROFILE,
-        "--target",
-        TARGET,
-        "-p",
-        "fsw-image",
-    ]))?;
-    let image = image_path();
+    let image = build_image()?;
     let first = run_qemu(&image)?;
     let qemu_s = t.elapsed().as_secs_f64();
     let second = run_qemu(&image)?;

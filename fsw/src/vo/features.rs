@@ -616,36 +616,26 @@ fn ranks_before(a: &Candidate, b: &Candidate) -> bool {
 
 /// Moves element `root` down the heap of the first `end` elements (min-heap on the rank, so the
 /// final order is best first).
-fn sift_down(list: &mut [Candidate], mut root: usize, end: usize) {
-    for _ in 0..usize::BITS {
-        let left = 2 * root + 1;
-        if left >= end {
-            return;
-        }
-        let right = left + 1;
-        let mut child = left;
-        if right < end {
-            if let (Some(l), Some(r)) = (list.get(left), list.get(right)) {
-                // Min-heap by rank: the child that ranks later goes up.
-                if ranks_before(l, r) {
-                    child = right;
-                }
-            }
-        }
-        let (Some(c), Some(p)) = (list.get(child), list.get(root)) else {
-            return;
-        };
-        if ranks_before(c, p) {
-            return;
-        }
-        list.swap(root, child);
-        root = child;
-    }
+fn sift_down(list: &mut [Candidate], root: usize, end: usize) {
+    sift_down_by(list, root, end, ranks_before);
 }
 
 /// Moves element `root` down the best-first heap of the first `end` elements (max-heap on the
 /// rank: the child that ranks earlier goes up).
-fn sift_down_best(list: &mut [Candidate], mut root: usize, end: usize) {
+fn sift_down_best(list: &mut [Candidate], root: usize, end: usize) {
+    sift_down_by(list, root, end, |a, b| ranks_before(b, a));
+}
+
+/// The sift-down of both heaps: the right child is taken when `before(left, right)`, and the
+/// element stops when `before(child, element)` (`ranks_before` for the min-heap on the rank,
+/// its converse for the max-heap).
+#[inline(always)]
+fn sift_down_by(
+    list: &mut [Candidate],
+    mut root: usize,
+    end: usize,
+    before: impl Fn(&Candidate, &Candidate) -> bool,
+) {
     for _ in 0..usize::BITS {
         let left = 2 * root + 1;
         if left >= end {
@@ -655,7 +645,7 @@ fn sift_down_best(list: &mut [Candidate], mut root: usize, end: usize) {
         let mut child = left;
         if right < end {
             if let (Some(l), Some(r)) = (list.get(left), list.get(right)) {
-                if ranks_before(r, l) {
+                if before(l, r) {
                     child = right;
                 }
             }
@@ -663,7 +653,7 @@ fn sift_down_best(list: &mut [Candidate], mut root: usize, end: usize) {
         let (Some(c), Some(p)) = (list.get(child), list.get(root)) else {
             return;
         };
-        if ranks_before(p, c) {
+        if before(c, p) {
             return;
         }
         list.swap(root, child);

@@ -135,59 +135,13 @@ impl<'a> Image<'a> {
     }
 
     /// Bilinear grey levels and gradients (as [`Self::bilinear`]) on the template grid centred
-    /// on the sub-pixel position `(x, y)`: calls `f(k, value, dI/dx, dI/dy)` for template pixel
-    /// `k` (row-major) at `(x + u, y + v)`, `u, v` in `-TEMPLATE_HALF..=TEMPLATE_HALF`. All
-    /// samples share one pair of interpolation weights, so this costs a fraction of
-    /// [`TEMPLATE_PIXELS`] calls of [`Self::bilinear`]. `None` (and no call) if the grid leaves
-    /// the image or `x, y` are not finite.
-    #[inline]
-    pub fn grid_bilinear(
-        &self,
-        x: f64,
-        y: f64,
-        mut f: impl FnMut(usize, f64, f64, f64),
-    ) -> Option<()> {
-        let half = TEMPLATE_HALF as f64;
-        let (xs, ys) = (x - half, y - half);
-        let x_end = (IMAGE_WIDTH_PX - TEMPLATE_SIDE) as f64;
-        let y_end = (IMAGE_HEIGHT_PX - TEMPLATE_SIDE) as f64;
-        if !(xs >= 0.0 && xs < x_end && ys >= 0.0 && ys < y_end) {
-            return None;
-        }
-        let (x0, y0) = (xs as u32 as usize, ys as u32 as usize);
-        let fx = xs - x0 as f64;
-        let fy = ys - y0 as f64;
-        let span = |row: usize| -> Option<&[u8; TEMPLATE_SIDE + 1]> {
-            let start = row * IMAGE_WIDTH_PX + x0;
-            self.data
-                .get(start..start + TEMPLATE_SIDE + 1)?
-                .try_into()
-                .ok()
-        };
-        let mut upper = span(y0)?;
-        for r in 0..TEMPLATE_SIDE {
-            let lower = span(y0 + r + 1)?;
-            for c in 0..TEMPLATE_SIDE {
-                let p00 = f64::from(upper[c]);
-                let p10 = f64::from(upper[c + 1]);
-                let p01 = f64::from(lower[c]);
-                let p11 = f64::from(lower[c + 1]);
-                let top = p00 + fx * (p10 - p00);
-                let bottom = p01 + fx * (p11 - p01);
-                let value = top + fy * (bottom - top);
-                let gx = (1.0 - fy) * (p10 - p00) + fy * (p11 - p01);
-                f(r * TEMPLATE_SIDE + c, value, gx, bottom - top);
-            }
-            upper = lower;
-        }
-        Some(())
-    }
-
-    /// [`Self::grid_bilinear`] in single precision: calls `f(k, value, dI/dx, dI/dy)` for
-    /// template pixel `k` (row-major) at `(x + u, y + v)`, grey levels and grey levels per
-    /// pixel; the shared interpolation weights are `f32` (the sub-pixel offset of `x, y` is
-    /// taken in `f64` first, so it carries no rounding of the absolute position). `None` (and
-    /// no call) if the grid leaves the image or `x, y` are not finite.
+    /// on the sub-pixel position `(x, y)`, in single precision: calls `f(k, value, dI/dx,
+    /// dI/dy)` for template pixel `k` (row-major) at `(x + u, y + v)`, `u, v` in
+    /// `-TEMPLATE_HALF..=TEMPLATE_HALF`, grey levels and grey levels per pixel. All samples share
+    /// one pair of interpolation weights in `f32` (the sub-pixel offset of `x, y` is taken in
+    /// `f64` first, so it carries no rounding of the absolute position). `None` (and no call)
+    /// if the grid leaves the image or `x, y` are not finite. (The `f64` version it replaced in
+    /// issue 18 is gone.)
     #[inline]
     pub fn grid_bilinear_f32(
         &self,
