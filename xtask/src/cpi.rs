@@ -10,9 +10,13 @@
 //!   in the same function whose span contains no other backward branch) is a micro-benchmark:
 //!   its body, in address order, is handed to `llvm-mca`, which simulates 100 iterations
 //!   back to back and reports the steady-state cycles per iteration;
-//! - a group's CPI is the sum of its loops' cycles per iteration over the sum of their
-//!   instructions (each loop weighted by its size, one iteration each: the tape's execution
-//!   counts are not known per loop), with the smallest and largest loop CPI beside it.
+//! - a group's static CPI is the sum of its loops' cycles per iteration over the sum of their
+//!   instructions (each loop weighted by its size, one iteration each), with the smallest and
+//!   largest loop CPI beside it;
+//! - with the block counts of a run (QEMU plugin `xtask/qemu/block_count.c`: every translated
+//!   block, straight-line code up to a branch, with its execution count), the group's model CPI
+//!   is its executed blocks' simulated cycles weighted by their counts, the hottest blocks
+//!   simulated until they cover [`COVERAGE`] of the group's executed instructions.
 //!
 //! What the model assumes: code and data in zero-wait memory (ITCM/DTCM or cache hits), no
 //! branch mispredictions (the loop branch is predicted), calls inside a loop as one instruction
@@ -20,11 +24,12 @@
 //! images in external RAM are not modelled: they add to the figure (see `docs/timing.md`).
 
 use anyhow::{bail, Context, Result};
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Command;
 
 /// Simulated iterations of each loop body.
-const ITERATIONS: u32 = 100;
+pub const ITERATIONS: u32 = 100;
 /// Loop bodies longer than this are left out (a branch back over a whole function body is a
 /// retry path, not a kernel loop).
 const MAX_LOOP_INSNS: usize = 400;
@@ -77,6 +82,10 @@ pub const GROUPS: &[Group] = &[
         label: "libm (f64 sin, cos, atan2, sqrt)",
         prefixes: &["libm::"],
     },
+    Group {
+        label: "runtime (`memcpy`, `memset`, conversions, division: compiler builtins)",
+        prefixes: &["compiler_builtins::", "__aeabi", "__", "memcpy", "memset", "memmove"],
+    },
 ];
 
 /// One innermost loop and its simulated cost.
@@ -99,11 +108,60 @@ pub struct GroupCost {
     pub loops: Vec<LoopCost>,
     /// Loops `llvm-mca` could not read (an instruction its assembler refuses).
     pub skipped: usize,
+    /// The group's executed code on the tape, when QEMU's block counts are given.
+    pub profile: Option<Profile>,
 }
 
-impl GroupCost {
-    /// Size-weighted CPI over the loops, `None` without loops.
+/// The executed code of one group: QEMU's translated blocks with their execution counts
+/// (`xtask/qemu/block_count.c`), the hottest simulated by `llvm-mca`.
+#[derive(Debug, Clone, Default)]
+pub struct Profile {
+    /// Instructions executed in the group's functions.
+    pub executed: u64,
+    /// Distinct blocks executed.
+    pub blocks: usize,
+    /// Blocks simulated (the hottest, until [`COVERAGE`] of `executed` or [`MAX_BLOCKS`]).
+    pub simulated_blocks: usize,
+    /// Executed instructions in the simulated blocks.
+    pub simulated: u64,
+    /// Their modelled cycles: each block's steady-state cycles per pass times its count.
+    pub cycles: f64,
+}
+
+impl Profile {
+    /// Cycles per executed instruction over the simulated blocks.
     pub fn cpi(&self) -> Option<f64> {
+        (self.simulated > 0).then(|| self.cycles / self.simulated as f64)
+    }
+
+    /// Share of the group's executed instructions that was simulated.
+    pub fn coverage(&self) -> f64 {
+        if self.executed == 0 {
+            0.0
+        } else {
+            self.simulated as f64 / self.executed as f64
+        }
+    }
+}
+
+/// Blocks are simulated, hottest first, until they cover this share of a group's executed
+/// instructions...
+pub const COVERAGE: f64 = 0.995;
+/// ... or this many blocks per group.
+pub const MAX_BLOCKS: usize = 1500;
+
+impl GroupCost {
+    /// The group's CPI: weighted by execution counts when a profile is given, else by loop
+    /// size ([`GroupCost::loop_cpi`]).
+    pub fn cpi(&self) -> Option<f64> {
+        self.profile
+            .as_ref()
+            .and_then(Profile::cpi)
+            .or_else(|| self.loop_cpi())
+    }
+
+    /// Size-weighted CPI over the loops, `None` without loops.
+    pub fn loop_cpi(&self) -> Option<f64> {
         let insns: usize = self.loops.iter().map(|l| l.insns).sum();
         let cycles: f64 = self.loops.iter().map(|l| l.cycles).sum();
         (insns > 0).then(|| cycles / insns as f64)
@@ -142,6 +200,31 @@ struct Function {
     insns: Vec<Insn>,
 }
 
+/// The QEMU plugin that counts block executions, its source in the repository.
+const PLUGIN_SRC: &str = "xtask/qemu/block_count.c";
+/// Where `cargo xtask timing` builds the plugin.
+pub const PLUGIN: &str = "target/timing/libblock_count.so";
+/// Where the timing run's block counts are written (read by `cargo xtask cpi` when present).
+pub const BLOCKS: &str = "target/timing/blocks.txt";
+
+/// Build the block-count plugin with the host C compiler (`cc`, present wherever Rust links).
+pub fn build_plugin() -> Result<std::path::PathBuf> {
+    let out = std::path::PathBuf::from(PLUGIN);
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let status = Command::new("cc")
+        .args(["-O2", "-shared", "-fPIC", "-Wall", "-Werror", "-o"])
+        .arg(&out)
+        .arg(PLUGIN_SRC)
+        .status()
+        .context("cannot run the C compiler `cc` for the QEMU plugin")?;
+    if !status.success() {
+        bail!("building the QEMU plugin {PLUGIN_SRC} failed");
+    }
+    Ok(out)
+}
+
 /// The version line of `llvm-mca`, or an error when it is missing.
 pub fn tool_version() -> Result<String> {
     let out = Command::new("llvm-mca")
@@ -156,10 +239,12 @@ pub fn tool_version() -> Result<String> {
         .unwrap_or_else(|| "llvm-mca".into()))
 }
 
-/// Disassemble `image` and simulate the innermost loops of every group.
-pub fn analyse(image: &Path) -> Result<Vec<GroupCost>> {
+/// Disassemble `image` and simulate the innermost loops of every group; with `blocks` (the
+/// block counts of a run of the image, `xtask/qemu/block_count.c`), also the executed blocks
+/// weighted by their counts.
+pub fn analyse(image: &Path, blocks: Option<&Path>) -> Result<Vec<GroupCost>> {
     let out = Command::new("llvm-objdump")
-        .args(["-d", "-C", "--no-show-raw-insn"])
+        .args(["-d", "-C", "--no-show-raw-insn", "--mcpu=cortex-m7"])
         .arg(image)
         .output()
         .context("llvm-objdump not found")?;
@@ -189,8 +274,91 @@ pub fn analyse(image: &Path) -> Result<Vec<GroupCost>> {
         }
         result.push(cost);
     }
+    if let Some(path) = blocks {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read the block counts {}", path.display()))?;
+        let counts = parse_blocks(&text)?;
+        for (group, cost) in GROUPS.iter().zip(result.iter_mut()) {
+            cost.profile = Some(profile(&dir, &functions, group, &counts)?);
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
     Ok(result)
+}
+
+/// Block counts `<address hex> <instructions> <executions>`, summed over the translations of
+/// each (address, length).
+fn parse_blocks(text: &str) -> Result<BTreeMap<(u64, usize), u64>> {
+    let mut counts = BTreeMap::new();
+    for line in text.lines().filter(|l| !l.trim().is_empty()) {
+        let mut f = line.split_whitespace();
+        let (Some(a), Some(n), Some(c)) = (f.next(), f.next(), f.next()) else {
+            bail!("bad block-count line {line:?}");
+        };
+        let key = (u64::from_str_radix(a, 16)?, n.parse::<usize>()?);
+        *counts.entry(key).or_insert(0) += c.parse::<u64>()?;
+    }
+    Ok(counts)
+}
+
+/// The executed blocks of `group`'s functions, the hottest simulated.
+fn profile(
+    dir: &Path,
+    functions: &[Function],
+    group: &Group,
+    counts: &BTreeMap<(u64, usize), u64>,
+) -> Result<Profile> {
+    // (executed instructions, count, body) of every block that starts at an instruction of
+    // the group's functions.
+    let mut blocks: Vec<(u64, u64, Vec<String>)> = Vec::new();
+    for f in functions
+        .iter()
+        .filter(|f| group.prefixes.iter().any(|p| f.name.starts_with(p)))
+    {
+        let (Some(first), Some(last)) = (f.insns.first(), f.insns.last()) else {
+            continue;
+        };
+        for (&(addr, n), &count) in counts.range((first.addr, 0)..=(last.addr, usize::MAX)) {
+            let Some(start) = f.insns.iter().position(|i| i.addr == addr) else {
+                continue;
+            };
+            let body: Vec<String> = f
+                .insns
+                .iter()
+                .skip(start)
+                .take(n)
+                .map(|i| i.text.clone())
+                .collect();
+            blocks.push((n as u64 * count, count, body));
+        }
+    }
+    blocks.sort_by_key(|b| std::cmp::Reverse(b.0));
+    let executed: u64 = blocks.iter().map(|b| b.0).sum();
+    let mut p = Profile {
+        executed,
+        blocks: blocks.len(),
+        ..Profile::default()
+    };
+    let mut chosen = 0u64;
+    let take = blocks
+        .iter()
+        .take_while(|b| {
+            let more = (chosen as f64) < COVERAGE * executed as f64;
+            chosen += b.0;
+            more
+        })
+        .take(MAX_BLOCKS)
+        .count();
+    let bodies: Vec<&[String]> = blocks.iter().take(take).map(|b| b.2.as_slice()).collect();
+    let costs = simulate_all(dir, &bodies)?;
+    for (b, cost) in blocks.iter().zip(costs) {
+        if let Some((_, cycles)) = cost {
+            p.simulated_blocks += 1;
+            p.simulated += b.0;
+            p.cycles += cycles * b.1 as f64;
+        }
+    }
+    Ok(p)
 }
 
 fn parse_disassembly(text: &str) -> Vec<Function> {
@@ -201,6 +369,11 @@ fn parse_disassembly(text: &str) -> Vec<Function> {
             .filter(|(a, _)| !a.is_empty() && a.chars().all(|c| c.is_ascii_hexdigit()))
             .and_then(|(_, rest)| rest.strip_suffix(">:"))
         {
+            // `$t` and `$d` are mapping symbols (code and data inside a function, after a
+            // literal pool), not functions.
+            if name.starts_with('$') {
+                continue;
+            }
             functions.push(Function {
                 name: name.to_string(),
                 insns: Vec::new(),
@@ -286,12 +459,17 @@ const CONDS: [&str; 16] = [
     "eq", "ne", "cs", "hs", "cc", "lo", "mi", "pl", "vs", "vc", "hi", "ls", "ge", "lt", "gt", "le",
 ];
 
-/// A loop body as `llvm-mca` reads it. Its assembler refuses three things the disassembly has,
-/// none of which changes the issue timing of the instructions: absolute branch targets (every
-/// branch goes to the body's own label, in the 32-bit encoding that reaches it), and `IT`
-/// blocks (`llvm-mca` does not model `IT`: it is dropped and the instructions it predicates
-/// are simulated unconditionally, as the core issues them whatever the condition).
-fn mca_body(body: &[String]) -> Vec<String> {
+/// A code sequence as `llvm-mca` reads it, labelled `begin` at its start and `end` after it.
+/// Its assembler refuses, and its model mistimes, a few things the disassembly has; none of the
+/// replacements changes the issue timing of the instructions:
+/// - absolute branch targets: every `b`/`b<cond>` goes to `begin`, in the 32-bit encoding that
+///   reaches it, and `cbz`/`cbnz` to `end` (they only branch forward);
+/// - calls: `llvm-mca` gives a call 100 cycles of latency ("call instructions are not correctly
+///   modeled"); on the core `bl` is a predicted branch, so `bl` is simulated as `b.w` and
+///   `blx rN` as `bx rN` (the callee's own code is measured where it is);
+/// - `IT` blocks (`llvm-mca` does not model `IT`): dropped, and the instructions they predicate
+///   are simulated unconditionally, as the core issues them whatever the condition.
+fn mca_body(body: &[String], begin: &str, end: &str) -> Vec<String> {
     let mut out = Vec::with_capacity(body.len());
     let mut predicated = 0usize;
     for line in body {
@@ -317,24 +495,59 @@ fn mca_body(body: &[String]) -> Vec<String> {
                 }
             }
         }
-        if is_branch(&mnemonic) && operands.trim().starts_with("0x") {
-            let base = mnemonic.trim_end_matches(".w").trim_end_matches(".n");
-            out.push(format!("{base}.w .Lloop"));
+        let base = mnemonic.trim_end_matches(".w").trim_end_matches(".n");
+        let operands = operands.trim();
+        if is_branch(&mnemonic) && operands.starts_with("0x") {
+            out.push(format!("{base}.w {begin}"));
             continue;
+        }
+        if base == "bl" {
+            out.push(format!("b.w {end}"));
+            continue;
+        }
+        if base == "blx" {
+            out.push(format!("bx {operands}"));
+            continue;
+        }
+        if base == "cbz" || base == "cbnz" {
+            if let Some((reg, _)) = operands.split_once(',') {
+                out.push(format!("{base} {reg}, {end}"));
+                continue;
+            }
         }
         out.push(format!("{mnemonic} {operands}").trim().to_string());
     }
     out
 }
 
-/// `llvm-mca` on one loop body: steady-state cycles per iteration, `None` when the body does
-/// not assemble.
-fn simulate(dir: &Path, body: &[String]) -> Result<Option<LoopCost>> {
-    let file = dir.join("loop.s");
-    let mut text = String::from(".syntax unified\n.thumb\n.Lloop:\n");
-    for l in mca_body(body) {
-        text.push_str(&l);
-        text.push('\n');
+/// The cost `llvm-mca` gives one code region: instructions and cycles per iteration.
+fn region_cost(report: &str) -> Option<(f64, f64)> {
+    let field = |name: &str| -> Option<f64> {
+        report
+            .lines()
+            .find_map(|l| l.trim().strip_prefix(name))
+            .and_then(|v| v.trim().parse::<f64>().ok())
+    };
+    let per_iter = f64::from(ITERATIONS);
+    Some((
+        field("Instructions:")? / per_iter,
+        field("Total Cycles:")? / per_iter,
+    ))
+}
+
+/// `llvm-mca` on code regions: the steady-state instructions and cycles per iteration of each
+/// (`ITERATIONS` back to back), `None` for the whole set when it does not assemble.
+fn simulate_regions(dir: &Path, bodies: &[&[String]]) -> Result<Option<Vec<(f64, f64)>>> {
+    let file = dir.join("regions.s");
+    let mut text = String::from(".syntax unified\n.thumb\n");
+    for (i, body) in bodies.iter().enumerate() {
+        let (begin, end) = (format!(".Lb{i}"), format!(".Le{i}"));
+        text.push_str(&format!("# LLVM-MCA-BEGIN r{i}\n{begin}:\n"));
+        for l in mca_body(body, &begin, &end) {
+            text.push_str(&l);
+            text.push('\n');
+        }
+        text.push_str(&format!("{end}:\n# LLVM-MCA-END\n"));
     }
     std::fs::write(&file, text)?;
     let out = Command::new("llvm-mca")
@@ -353,20 +566,44 @@ fn simulate(dir: &Path, body: &[String]) -> Result<Option<LoopCost>> {
         return Ok(None);
     }
     let report = String::from_utf8_lossy(&out.stdout);
-    let field = |name: &str| -> Option<f64> {
-        report
-            .lines()
-            .find_map(|l| l.trim().strip_prefix(name))
-            .and_then(|v| v.trim().parse::<f64>().ok())
+    // With one region `llvm-mca` prints no region header.
+    let parts: Vec<&str> = if bodies.len() == 1 {
+        vec![&report]
+    } else {
+        report.split("Code Region - ").skip(1).collect()
     };
-    let (Some(insns), Some(cycles)) = (field("Instructions:"), field("Total Cycles:")) else {
+    if parts.len() != bodies.len() {
         return Ok(None);
-    };
-    let per_iter = f64::from(ITERATIONS);
-    Ok(Some(LoopCost {
+    }
+    Ok(parts.iter().map(|p| region_cost(p)).collect())
+}
+
+/// Costs of many regions: in batches, a batch that does not assemble region by region (a
+/// region that does not assemble alone gets `None`).
+fn simulate_all(dir: &Path, bodies: &[&[String]]) -> Result<Vec<Option<(f64, f64)>>> {
+    const BATCH: usize = 200;
+    let mut out = Vec::with_capacity(bodies.len());
+    for batch in bodies.chunks(BATCH) {
+        match simulate_regions(dir, batch)? {
+            Some(costs) => out.extend(costs.into_iter().map(Some)),
+            None => {
+                for body in batch {
+                    out.push(simulate_regions(dir, &[body])?.and_then(|c| c.first().copied()));
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// `llvm-mca` on one loop body: steady-state cycles per iteration, `None` when the body does
+/// not assemble.
+fn simulate(dir: &Path, body: &[String]) -> Result<Option<LoopCost>> {
+    let cost = simulate_regions(dir, &[body])?.and_then(|c| c.first().copied());
+    Ok(cost.map(|(insns, cycles)| LoopCost {
         function: String::new(),
-        insns: (insns / per_iter).round() as usize,
-        cycles: cycles / per_iter,
+        insns: insns.round() as usize,
+        cycles,
     }))
 }
 
@@ -406,13 +643,21 @@ mod tests {
         .map(|s| s.to_string())
         .collect();
         assert_eq!(
-            mca_body(&body),
+            mca_body(&body, ".Lb", ".Le"),
             vec![
                 "mov r4, r8",
                 "add.w r0, r1, #1",
                 "vmovgt.f64 d0, d1",
-                "bne.w .Lloop"
+                "bne.w .Lb"
             ]
+        );
+        let calls: Vec<String> = ["bl 0x2000", "blx r3", "cbnz r2, 0x1010"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        assert_eq!(
+            mca_body(&calls, ".Lb", ".Le"),
+            vec!["b.w .Le", "bx r3", "cbnz r2, .Le"]
         );
     }
 }

@@ -95,11 +95,34 @@ fn main() -> Result<()> {
 fn cpi_command() -> Result<()> {
     let image = build_image()?;
     println!("{}", cpi::tool_version()?);
-    for (g, c) in cpi::GROUPS.iter().zip(cpi::analyse(&image)?) {
+    let blocks = Path::new(cpi::BLOCKS);
+    let blocks = blocks.exists().then_some(blocks);
+    match blocks {
+        Some(b) => println!(
+            "block counts: {} (from the last `cargo xtask timing`; stale if the image changed)",
+            b.display()
+        ),
+        None => println!(
+            "no block counts ({}): run `cargo xtask timing`",
+            cpi::BLOCKS
+        ),
+    }
+    for (g, c) in cpi::GROUPS.iter().zip(cpi::analyse(&image, blocks)?) {
+        if let Some(p) = &c.profile {
+            println!(
+                "{:.2} CPI over {} executed instructions ({} of {} blocks simulated, {:.1} % of \
+                 the instructions)",
+                p.cpi().unwrap_or(f64::NAN),
+                p.executed,
+                p.simulated_blocks,
+                p.blocks,
+                100.0 * p.coverage()
+            );
+        }
         let (lo, hi) = c.range().unwrap_or((0.0, 0.0));
         println!(
             "{:.2} CPI ({:.2}-{:.2}) over {} loops, {} instructions, {} functions, {} skipped: {}",
-            c.cpi().unwrap_or(f64::NAN),
+            c.loop_cpi().unwrap_or(f64::NAN),
             lo,
             hi,
             c.loops.len(),
