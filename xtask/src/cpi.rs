@@ -392,7 +392,12 @@ fn parse_disassembly(text: &str) -> Vec<Function> {
             Some(i) => code[..i].trim(),
             None => code,
         };
-        if code.is_empty() || code.starts_with('.') || code.starts_with("<unknown>") {
+        // Literal-pool data keeps its raw bytes even with `--no-show-raw-insn`
+        // (`00 00 f0 7f  .word 0x7ff00000`).
+        let data = code
+            .split_whitespace()
+            .any(|t| matches!(t, ".word" | ".short" | ".byte" | ".long"));
+        if code.is_empty() || data || code.starts_with('.') || code.starts_with("<unknown>") {
             continue;
         }
         let mnemonic = code.split_whitespace().next().unwrap_or("");
@@ -610,6 +615,31 @@ fn simulate(dir: &Path, body: &[String]) -> Result<Option<LoopCost>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn mapping_symbols_stay_in_their_function_and_block_counts_sum() {
+        let text = "00002000 <fsw::estimation::f::h1>:\n\
+                        2000:      \tvldr\td0, [r0]\n\
+                        2004:      \tb\t0x2010 <$t+0x4> @ imm = #8\n\
+                    \n\
+                    00002008 <$d>:\n\
+                        2008:\t00 00 00 00\t.word\t0x00000000\n\
+                    \n\
+                    0000200c <$t>:\n\
+                        200c:      \tvmla.f64\td0, d1, d2\n\
+                        2010:      \tbx\tlr\n";
+        let f = parse_disassembly(text);
+        assert_eq!(f.len(), 1, "`$d` and `$t` are not functions");
+        assert_eq!(f[0].insns.len(), 4);
+        let counts = parse_blocks("2000 2 5\n200c 2 7\n2000 2 3\n").unwrap();
+        assert_eq!(
+            counts.get(&(0x2000, 2)),
+            Some(&8),
+            "retranslations are summed"
+        );
+        assert_eq!(counts.get(&(0x200c, 2)), Some(&7));
+        assert!(parse_blocks("2000 x 1\n").is_err());
+    }
 
     #[test]
     fn finds_innermost_loops_and_branches() {
