@@ -147,11 +147,11 @@ fn rotate(a: &mut [[f64; 3]; 3], v: &mut [[f64; 3]; 3], p: usize, q: usize) {
     }
     let theta = (aqq - app) / (2.0 * apq);
     let t = if theta >= 0.0 {
-        1.0 / (theta + libm::sqrt(theta * theta + 1.0))
+        1.0 / (theta + crate::linalg::sqrt(theta * theta + 1.0))
     } else {
-        -1.0 / (-theta + libm::sqrt(theta * theta + 1.0))
+        -1.0 / (-theta + crate::linalg::sqrt(theta * theta + 1.0))
     };
-    let c = 1.0 / libm::sqrt(t * t + 1.0);
+    let c = 1.0 / crate::linalg::sqrt(t * t + 1.0);
     let s = t * c;
     // A <- J' A J with J the rotation in the (p, q) plane.
     for k in 0..3 {
@@ -204,7 +204,7 @@ fn rotate(a: &mut [[f64; 3]; 3], v: &mut [[f64; 3]; 3], p: usize, q: usize) {
 /// singular value is zero (the caller's rank test needs at least two directions).
 pub fn svd3(h: &Mat3) -> Option<(Mat3, Vec3, Mat3)> {
     let (lambda, v) = symmetric_eigen3(&(h.transpose() * h))?;
-    let sigma = lambda.map(|l| libm::sqrt(l.max(0.0)));
+    let sigma = lambda.map(|l| crate::linalg::sqrt(l.max(0.0)));
     let (v1, v2) = (v.column(0).into_owned(), v.column(1).into_owned());
     if sigma.y.is_nan() || sigma.y <= 0.0 {
         return None;
@@ -284,5 +284,92 @@ mod tests {
             assert!((s - Vec3::new(r[0], r[1], r[2])).norm() < 1e-7 * (1.0 + s.x));
         }
         assert!(svd3(&Mat3::zeros()).is_none());
+    }
+}
+
+/// Square root, correctly rounded: the FPU's `vsqrt.f64` on the rover CPU, `libm::sqrt` on the
+/// host (bit-identical, [`rover_hal::fpu`]). Any unit: the root of the caller's quantity.
+#[inline(always)]
+pub fn sqrt(x: f64) -> f64 {
+    rover_hal::fpu::sqrt(x)
+}
+
+/// Euclidean norm of a vector or matrix (frame and unit of the caller's quantity): nalgebra's
+/// `norm` (the root of `norm_squared`) with the FPU's square root ([`sqrt`]), bit-identical.
+#[inline(always)]
+pub fn norm<const R: usize, const C: usize>(v: &nalgebra::SMatrix<f64, R, C>) -> f64 {
+    sqrt(v.norm_squared())
+}
+
+/// Cholesky factor `m = L L'` of a symmetric positive-definite `N x N` matrix (its lower
+/// triangle is read; any frame and unit), computed operation for operation as nalgebra's
+/// `Cholesky::new` (column `j` less `L(j, k)` times column `k` for every `k < j`, the root of
+/// the pivot, the column below it divided by the root), so the factor is bit-identical to it,
+/// with the FPU's square root ([`sqrt`]) instead of `libm`'s emulation (issue 18). `None` when
+/// a pivot is zero, negative or NaN, as nalgebra. The result is nalgebra's `Cholesky`, so its
+/// `solve`, `inverse` and `l_dirty` are nalgebra's own.
+// Index loops over constant ranges: the optimiser proves them in bounds (the image's
+// panic-site count checks that it does).
+#[allow(clippy::needless_range_loop)]
+pub fn cholesky<const N: usize>(
+    m: nalgebra::SMatrix<f64, N, N>,
+) -> Option<nalgebra::linalg::Cholesky<f64, nalgebra::Const<N>>> {
+    let mut a = m;
+    for j in 0..N {
+        for k in 0..j {
+            let factor = -a[(j, k)];
+            for i in j..N {
+                // nalgebra's `axpy(factor, col_k, 1)`: `factor * x + 1 * y`; `1 * y` is `y` and
+                // the addition commutes exactly.
+                a[(i, j)] += factor * a[(i, k)];
+            }
+        }
+        let diag = a[(j, j)];
+        if diag <= 0.0 || diag.is_nan() {
+            return None;
+        }
+        let denom = sqrt(diag);
+        a[(j, j)] = denom;
+        for i in j + 1..N {
+            a[(i, j)] /= denom;
+        }
+    }
+    Some(nalgebra::linalg::Cholesky::pack_dirty(a))
+}
+
+#[cfg(test)]
+mod cholesky_tests {
+    use super::*;
+    use nalgebra::SMatrix;
+    use rand::{Rng, SeedableRng};
+
+    fn check<const N: usize>(rng: &mut rand_chacha::ChaCha8Rng) {
+        let a = SMatrix::<f64, N, N>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+        let m = a * a.transpose() + SMatrix::<f64, N, N>::identity() * 1e-3;
+        let ours = cholesky(m).expect("positive definite");
+        let theirs = m.cholesky().expect("positive definite");
+        for (x, y) in ours.l_dirty().iter().zip(theirs.l_dirty().iter()) {
+            assert_eq!(x.to_bits(), y.to_bits());
+        }
+        let b = SMatrix::<f64, N, 1>::from_fn(|r, _| r as f64 - 0.5);
+        assert_eq!(ours.solve(&b), theirs.solve(&b));
+    }
+
+    #[test]
+    fn factor_is_nalgebras_bit_for_bit_and_refuses_what_it_refuses() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(18);
+        for _ in 0..200 {
+            check::<1>(&mut rng);
+            check::<3>(&mut rng);
+            check::<6>(&mut rng);
+        }
+        let mut m = Mat3::identity();
+        m[(1, 1)] = 0.0;
+        assert!(cholesky(m).is_none() && m.cholesky().is_none());
+        m[(1, 1)] = -1.0;
+        assert!(cholesky(m).is_none());
+        m[(1, 1)] = f64::NAN;
+        assert!(cholesky(m).is_none());
+        assert_eq!(norm(&Vec3::new(3.0, 4.0, 12.0)), 13.0);
     }
 }

@@ -140,7 +140,7 @@ impl NavTelemetry {
             Some(e) => {
                 let p = e.covariance();
                 let i = crate::estimation::state::I_P;
-                let s = |k: usize| libm::sqrt(p[(i + k, i + k)].max(0.0)) as f32;
+                let s = |k: usize| crate::linalg::sqrt(p[(i + k, i + k)].max(0.0)) as f32;
                 let v = e.state().v_n;
                 (
                     [v.x as f32, v.y as f32, v.z as f32],

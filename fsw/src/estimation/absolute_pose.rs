@@ -227,7 +227,7 @@ mod tests {
         assert_eq!(*ekf.state(), before.0);
         assert_eq!(*ekf.covariance(), before.1);
         // A heading outlier too: innovation sigma sqrt(4e-4 + 1e-4) rad.
-        let m = measurement(&ekf, 0.0, 0.0, 10.0 * libm::sqrt(5e-4));
+        let m = measurement(&ekf, 0.0, 0.0, 10.0 * crate::linalg::sqrt(5e-4));
         assert!(!ekf.gate_absolute_pose(&m).unwrap().accepted);
     }
 

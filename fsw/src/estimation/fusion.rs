@@ -80,7 +80,7 @@ impl<const M: usize, const C: usize> Innovation<M, C> {
 
     /// Eq. 46: `d_m^2 = r' S^-1 r`; `None` when `S` is not positive definite.
     pub fn mahalanobis2(&self) -> Option<f64> {
-        let chol = self.s.cholesky()?;
+        let chol = crate::linalg::cholesky(self.s)?;
         let y = chol.solve(&self.r);
         let d2 = self.r.dot(&y);
         d2.is_finite().then_some(d2)
@@ -139,10 +139,7 @@ impl Ekf {
         &mut self,
         inn: &Innovation<M, C>,
     ) -> Result<(), EstError> {
-        let chol = inn
-            .s
-            .cholesky()
-            .ok_or(EstError::ResidualCovarianceNotPositive)?;
+        let chol = crate::linalg::cholesky(inn.s).ok_or(EstError::ResidualCovarianceNotPositive)?;
         let l = chol.l_dirty();
         // Reciprocals of the factor's diagonal (positive: the factorisation succeeded).
         let mut inv_diag = [0.0; M];

@@ -352,6 +352,6 @@ impl Ekf {
         let c = self.x.q_nr.to_rotation_matrix().into_inner();
         let e = c.transpose() * Vec3::z();
         let ptt = self.p.fixed_view::<3, 3>(state::I_THETA, state::I_THETA);
-        libm::sqrt((e.transpose() * ptt * e)[(0, 0)].max(0.0))
+        crate::linalg::sqrt((e.transpose() * ptt * e)[(0, 0)].max(0.0))
     }
 }

@@ -99,7 +99,7 @@ pub fn skew(o: &Vec3) -> Mat3 {
 /// `libm`.
 pub fn renormalize(q: &Quat) -> Quat {
     let c = q.coords;
-    let n = libm::sqrt(c.dot(&c));
+    let n = crate::linalg::sqrt(c.dot(&c));
     if n > 0.0 && n.is_finite() {
         UnitQuaternion::new_unchecked(nalgebra::Quaternion::from(c / n))
     } else {
@@ -109,7 +109,7 @@ pub fn renormalize(q: &Quat) -> Quat {
 
 /// Rotation by the rotation vector `theta` (rad), `exp([theta]x)` as a quaternion.
 pub fn exp_quat(theta: &Vec3) -> Quat {
-    let angle = libm::sqrt(theta.dot(theta));
+    let angle = crate::linalg::sqrt(theta.dot(theta));
     if angle < 1.0e-12 {
         let h = theta * 0.5;
         return renormalize(&UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(
@@ -133,7 +133,7 @@ pub fn log_quat(q: &Quat) -> Vec3 {
     } else {
         (q.w, q.imag())
     };
-    let s = libm::sqrt(v.dot(&v));
+    let s = crate::linalg::sqrt(v.dot(&v));
     if s < 1.0e-12 {
         return v * 2.0;
     }

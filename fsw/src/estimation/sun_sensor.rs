@@ -113,7 +113,7 @@ fn tangent_basis(s: &Vec3) -> (Vec3, Vec3) {
         Vec3::y()
     };
     let e1 = s.cross(&a);
-    let e1 = e1 / libm::sqrt(e1.dot(&e1));
+    let e1 = e1 / crate::linalg::sqrt(e1.dot(&e1));
     let e2 = s.cross(&e1);
     (e1, e2)
 }

@@ -73,7 +73,7 @@ impl Ekf {
         }
         for k in 0..2 {
             let i = super::state::I_P + k;
-            let sigma = libm::sqrt(self.p[(i, i)].max(0.0));
+            let sigma = crate::linalg::sqrt(self.p[(i, i)].max(0.0));
             self.p[(i, i)] += 2.0 * sigma * delta_m + delta_m * delta_m;
         }
         self.check_health()

@@ -67,11 +67,11 @@ fn furthest_intersection<const N: usize>(
         if disc < 0.0 || qa <= 0.0 {
             continue;
         }
-        let root = libm::sqrt(disc);
+        let root = crate::linalg::sqrt(disc);
         // The larger root is further along this segment; fall back to the smaller one.
         for t in [(-qb + root) / (2.0 * qa), (-qb - root) / (2.0 * qa)] {
             if (0.0..=1.0).contains(&t) {
-                let along = s0 + t * libm::sqrt(qa);
+                let along = s0 + t * crate::linalg::sqrt(qa);
                 if best.is_none_or(|(_, s)| along > s) {
                     best = Some(([a[0] + t * d[0], a[1] + t * d[1]], along));
                 }

@@ -81,7 +81,7 @@ fn max_x_dot(
         if room < 0.0 {
             return None;
         }
-        let half = libm::sqrt(room);
+        let half = crate::linalg::sqrt(room);
         let centre = phi_dot * w[1];
         upper = upper.min(centre + half);
         lower = lower.max(centre - half);

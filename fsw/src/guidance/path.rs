@@ -127,13 +127,13 @@ impl<const N: usize> Path<N> {
             let d2 = e[0] * e[0] + e[1] * e[1];
             if d2 < best_d2 {
                 best_d2 = d2;
-                let l = libm::sqrt(l2);
+                let l = crate::linalg::sqrt(l2);
                 // Cross product direction x offset: positive to the right in x-north/y-east.
                 let side = d[0] * e[1] - d[1] * e[0];
                 best = Projection {
                     segment: i,
                     along_m: s0 + t * l,
-                    cross_track_m: libm::copysign(libm::sqrt(d2), side),
+                    cross_track_m: libm::copysign(crate::linalg::sqrt(d2), side),
                 };
             }
         }

@@ -50,7 +50,7 @@ fn gnc_2_carrot_hand_calculation() {
     let path = straight_north(5.0);
     // Rover 0.2 m east of the path: circle r = 0.6 meets it at x = sqrt(0.36 - 0.04).
     let c = carrot::carrot(&path, [1.0, 0.2], 0.6).expect("carrot");
-    let dx = libm::sqrt(0.36 - 0.04);
+    let dx = crate::linalg::sqrt(0.36 - 0.04);
     assert!((c.point[0] - (1.0 + dx)).abs() < 1e-12);
     assert!(c.point[1].abs() < 1e-12);
     assert!((c.heading_rad - libm::atan2(-0.2, dx)).abs() < 1e-12);
@@ -58,7 +58,7 @@ fn gnc_2_carrot_hand_calculation() {
     // 2 m off the path: 0.6 -> 1.2 -> 2.4 m.
     let c = carrot::carrot(&path, [1.0, 2.0], 0.6).expect("carrot");
     assert_eq!(c.radius_m, 2.4);
-    assert!((c.point[0] - (1.0 + libm::sqrt(2.4 * 2.4 - 4.0))).abs() < 1e-12);
+    assert!((c.point[0] - (1.0 + crate::linalg::sqrt(2.4 * 2.4 - 4.0))).abs() < 1e-12);
     // Goal inside the circle.
     let c = carrot::carrot(&path, [4.7, 0.1], 0.6).expect("carrot");
     assert_eq!(c.point, [5.0, 0.0]);
@@ -66,7 +66,7 @@ fn gnc_2_carrot_hand_calculation() {
     let l = Path::<4>::new(&[[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]]).expect("valid");
     let c = carrot::carrot(&l, [1.8, 0.0], 0.5).expect("carrot");
     assert!((c.point[0] - 2.0).abs() < 1e-12);
-    assert!((c.point[1] - libm::sqrt(0.25 - 0.04)).abs() < 1e-12);
+    assert!((c.point[1] - crate::linalg::sqrt(0.25 - 0.04)).abs() < 1e-12);
     // Non-finite input.
     assert!(carrot::carrot(&path, [f64::NAN, 0.0], 0.6).is_none());
     assert!(carrot::carrot(&path, [0.0, 0.0], 0.0).is_none());
@@ -119,7 +119,7 @@ fn gnc_4_speed_limit_hand_calculation() {
     // Turning at 0.1 rad/s: wheel (0.5, -0.4) (left front) moves at
     // (x_dot + 0.04, 0.05); |.| <= 0.12 -> x_dot <= sqrt(0.0144 - 0.0025) - 0.04.
     let (x, _, _) = limit_forward_speed(&WHEELS, 0.0, 0.1, 0.12, 1.0).expect("feasible");
-    assert!((x - (libm::sqrt(0.0144 - 0.0025) - 0.04)).abs() < 1e-12);
+    assert!((x - (crate::linalg::sqrt(0.0144 - 0.0025) - 0.04)).abs() < 1e-12);
     // An impossible crab is shrunk until feasible.
     let (x, y, p) = limit_forward_speed(&WHEELS, 0.5, 0.0, 0.12, 0.08).expect("shrunk");
     assert_eq!(p, 0.0);

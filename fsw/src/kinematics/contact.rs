@@ -259,7 +259,7 @@ fn translation_step(
             g -= j_d[i] * (g_d[i] / h_dd[i]);
         }
     }
-    let chol = s.cholesky().ok_or(KinematicsError::Singular)?;
+    let chol = crate::linalg::cholesky(s).ok_or(KinematicsError::Singular)?;
     let d = chol.solve(&(-g));
     for i in 0..WHEEL_COUNT {
         if pr.estimated[i] {
@@ -448,11 +448,11 @@ pub(crate) fn contact_step_frames(
             // assertion the optimiser does not remove (no panic path, issue 18).
             let s3 = Mat3::from_fn(|r, c| s.get((r, c)).copied().unwrap_or(f64::NAN));
             let g3 = Vec3::new(g.x, g.y, g.z);
-            let chol = s3.cholesky().ok_or(KinematicsError::Singular)?;
+            let chol = crate::linalg::cholesky(s3).ok_or(KinematicsError::Singular)?;
             let d = chol.solve(&(-g3));
             Vec6::new(d.x, d.y, d.z, 0.0, 0.0, 0.0)
         } else {
-            let chol = s.cholesky().ok_or(KinematicsError::Unobservable {
+            let chol = crate::linalg::cholesky(s).ok_or(KinematicsError::Unobservable {
                 valid_wheels: count,
             })?;
             chol.solve(&(-g))
@@ -482,7 +482,7 @@ pub(crate) fn contact_step_frames(
                 sum += (dp + dphi.cross(&jac[i].contact_point_m) - b[i]).norm_squared();
             }
         }
-        residual_rms_m = libm::sqrt(sum / (3.0 * f64::from(count)));
+        residual_rms_m = crate::linalg::sqrt(sum / (3.0 * f64::from(count)));
         if !residual_rms_m.is_finite() {
             return Err(KinematicsError::NonFinite);
         }

@@ -90,20 +90,20 @@ impl ContactLeastSquares {
         if ixx.is_nan() || ixx <= tol {
             return Err(unobservable);
         }
-        let l11 = libm::sqrt(ixx);
+        let l11 = crate::linalg::sqrt(ixx);
         let l21 = ixy / l11;
         let l31 = ixz / l11;
         let d22 = iyy - l21 * l21;
         if d22.is_nan() || d22 <= tol {
             return Err(unobservable);
         }
-        let l22 = libm::sqrt(d22);
+        let l22 = crate::linalg::sqrt(d22);
         let l32 = (iyz - l31 * l21) / l22;
         let d33 = izz - l31 * l31 - l32 * l32;
         if d33.is_nan() || d33 <= tol {
             return Err(unobservable);
         }
-        let l33 = libm::sqrt(d33);
+        let l33 = crate::linalg::sqrt(d33);
         Ok(ContactLeastSquares {
             valid: *valid,
             count,
@@ -181,7 +181,7 @@ impl ContactLeastSquares {
                 sum += (v + w.cross(&p) - bi).norm_squared();
             }
         }
-        libm::sqrt(sum / (3.0 * f64::from(self.count)))
+        crate::linalg::sqrt(sum / (3.0 * f64::from(self.count)))
     }
 }
 

@@ -370,7 +370,7 @@ fn wheel_command(
     let x0 = f.rolling_dir;
     let y0 = f.steer_axis.cross(&x0);
     let (a, b) = (contact_v.dot(&x0), contact_v.dot(&y0));
-    let speed = libm::sqrt(a * a + b * b);
+    let speed = crate::linalg::sqrt(a * a + b * b);
     if !speed.is_finite() {
         return Err(KinematicsError::NonFinite);
     }

@@ -477,8 +477,8 @@ impl KinematicOdometry {
             // Articulation: the wheel's mean displacement per step relative to the body from
             // the suspension, over the articulation window, along, across and normal to its
             // rolling direction.
-            let moved = articulation[i].norm();
-            let n = drive_dir.norm();
+            let moved = crate::linalg::norm(&articulation[i]);
+            let n = crate::linalg::norm(&drive_dir);
             if moved > 0.0 && n > 0.0 {
                 let along = drive_dir / n;
                 let lateral = frames[i].steer_axis.cross(&along);
@@ -623,8 +623,9 @@ mod covariance_tests {
                 c.steer_noise_rad,
             );
             add(&one(travels[i]), c.wheel_radius_sigma);
-            let moved = articulation[i].norm();
-            let along = jac[i].drive.normalize();
+            let moved = crate::linalg::norm(&articulation[i]);
+            // nalgebra's `normalize`: the vector over its norm.
+            let along = jac[i].drive / crate::linalg::norm(&jac[i].drive);
             let lateral = frames[i].steer_axis.cross(&along);
             for v in [along, lateral, along.cross(&lateral)] {
                 add(&one(v), c.articulation_fraction * moved);

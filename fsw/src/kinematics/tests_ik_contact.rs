@@ -451,7 +451,7 @@ fn reference_ik(
         let cv = v + w.cross(&p) + dr * u[3] + db * rate_b;
         let x0 = f.rolling_dir;
         let (a, b) = (cv.dot(&x0), cv.dot(&f.steer_axis.cross(&x0)));
-        let speed = libm::sqrt(a * a + b * b);
+        let speed = crate::linalg::sqrt(a * a + b * b);
         let current = s.steer_rad[i];
         let (psi, rate) = if speed <= 1e-9 {
             (current, 0.0)

@@ -88,7 +88,7 @@ fn kin_5_hand_calculated_cases() {
     for i in 0..6 {
         let (x, y) = (p[i].x, p[i].y);
         let psi = -libm::atan(x / y);
-        let rate = -libm::copysign(1.0, y) * 0.2 * libm::sqrt(x * x + y * y) / 0.1;
+        let rate = -libm::copysign(1.0, y) * 0.2 * crate::linalg::sqrt(x * x + y * y) / 0.1;
         assert!(
             (ik.command.steer_angle_rad[i] - psi).abs() < 1e-9,
             "wheel {i}"
@@ -114,7 +114,7 @@ fn kin_5_hand_calculated_cases() {
     for i in 0..6 {
         let (x, y) = (p[i].x, p[i].y);
         let psi = libm::atan(x / (2.0 - y));
-        let rate = 0.05 * libm::sqrt(x * x + (2.0 - y) * (2.0 - y)) / 0.1;
+        let rate = 0.05 * crate::linalg::sqrt(x * x + (2.0 - y) * (2.0 - y)) / 0.1;
         assert!(
             (ik.command.steer_angle_rad[i] - psi).abs() < 1e-9,
             "wheel {i}"
@@ -241,7 +241,7 @@ fn kin_7_odometry_straight_and_turn() {
     let cov = pose.covariance;
     assert!((cov - cov.transpose()).norm() < 1e-15);
     assert!(cov.symmetric_eigenvalues().iter().all(|e| *e > -1e-15));
-    let sx = libm::sqrt(cov[(3, 3)]);
+    let sx = crate::linalg::sqrt(cov[(3, 3)]);
     assert!(sx > 1e-3 && sx < 0.1, "sigma x {sx}");
     // Quarter turn in place to the right: steering tangent, wheel rates from IK.
     let ik = inverse_kinematics(&ROCKY8, &level(), &cmd(0.0, 0.0, 0.1)).unwrap();

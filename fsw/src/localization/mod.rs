@@ -150,7 +150,7 @@ impl LocalizerConfig {
         finite
             && self.sigma_m > 0.0
             && self.outlier_distance_m > 0.0
-            && self.outlier_distance_m < libm::sqrt(f64::from(MAX_D2_CELLS)) * MAP_CELL_M
+            && self.outlier_distance_m < crate::linalg::sqrt(f64::from(MAX_D2_CELLS)) * MAP_CELL_M
             && self.window_sigmas > 0.0
             && self.min_window_m >= 0.0
             && self.min_yaw_window_rad >= 0.0

@@ -412,11 +412,13 @@ impl Localizer {
         let pc = congruence(&j, &prior_cov);
         let k = self.config.window_sigmas;
         let half_xy = |var: f64| {
-            let w = (k * libm::sqrt(var.max(0.0))).max(self.config.min_window_m) / MAP_CELL_M;
+            let w =
+                (k * crate::linalg::sqrt(var.max(0.0))).max(self.config.min_window_m) / MAP_CELL_M;
             libm::ceil(w).max(2.0)
         };
-        let half_t =
-            (k * libm::sqrt(pc[2][2].max(0.0))).max(self.config.min_yaw_window_rad) / self.yaw_step;
+        let half_t = (k * crate::linalg::sqrt(pc[2][2].max(0.0)))
+            .max(self.config.min_yaw_window_rad)
+            / self.yaw_step;
         let half = [
             half_xy(pc[0][0]),
             half_xy(pc[1][1]),

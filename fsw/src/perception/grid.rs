@@ -364,7 +364,7 @@ impl TerrainGrid {
             sum_sq += r * r;
             kept = kept.saturating_add(1);
         }
-        let roughness_m = libm::sqrt(sum_sq / f64::from(kept.max(1)));
+        let roughness_m = crate::linalg::sqrt(sum_sq / f64::from(kept.max(1)));
         let slope_rad = libm::atan(libm::hypot(plane.b, plane.c));
         // Step: the centre's highest point above the lowest point of the 3x3 neighbourhood.
         let top = f64::from(centre.max_mm) * 1e-3 - plane.at(0.0, 0.0);

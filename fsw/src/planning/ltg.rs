@@ -439,6 +439,6 @@ pub fn disc_exit(c: Point2, r: f64, p: Point2, q: Point2) -> Point2 {
     let b = 2.0 * dot(f, d);
     let cc = dot(f, f) - r * r;
     let disc = (b * b - 4.0 * a * cc).max(0.0);
-    let t = ((-b + libm::sqrt(disc)) / (2.0 * a)).clamp(0.0, 1.0);
+    let t = ((-b + crate::linalg::sqrt(disc)) / (2.0 * a)).clamp(0.0, 1.0);
     add_scaled(p, d, t)
 }

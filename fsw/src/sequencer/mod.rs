@@ -385,7 +385,7 @@ impl Sequencer {
         } else {
             0.0
         };
-        let length = libm::sqrt(dx * dx + dy * dy) * self.model.detour_factor + penalty;
+        let length = crate::linalg::sqrt(dx * dx + dy * dy) * self.model.detour_factor + penalty;
         let time = length / self.model.speed_m_s;
         (time, time * self.model.drive_power_w)
     }

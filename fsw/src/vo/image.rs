@@ -293,7 +293,7 @@ impl CheckSums {
         let n = f64::from(self.count.max(1));
         let mean = f64::from(self.sum) / n;
         let variance = (f64::from(self.sum_sq) / n - mean * mean).max(0.0);
-        if libm::sqrt(variance) < config.min_image_std {
+        if crate::linalg::sqrt(variance) < config.min_image_std {
             return Err(VoError::BlankImage);
         }
         if f64::from(self.clipped) > config.max_clipped_fraction * n {
@@ -755,7 +755,7 @@ mod tests {
         for k in 0..20_000 {
             let v = if k < 32 { f64::from(1u32 << k) } else { x };
             let got = f64::from(inv_sqrt(v as f32));
-            let exact = 1.0 / libm::sqrt(f64::from(v as f32));
+            let exact = 1.0 / crate::linalg::sqrt(f64::from(v as f32));
             worst = worst.max((got - exact).abs() / exact);
             x = (x * 1.001_07).min(2.147e9);
         }

@@ -40,7 +40,7 @@ impl Correspondence {
         rotation_prior: &Mat3,
     ) -> Option<Self> {
         let combined = cov_c + rotation_prior * cov_p * rotation_prior.transpose();
-        let info_prior = combined.cholesky()?.inverse();
+        let info_prior = crate::linalg::cholesky(combined)?.inverse();
         let c = Self {
             q_p,
             cov_p,
@@ -259,9 +259,7 @@ pub const CHI2_3_MEDIAN: f64 = 2.366;
 pub fn mahalanobis2(c: &Correspondence, motion: &RigidMotion) -> Option<f64> {
     let r = motion.residual(c);
     let combined = c.cov_c + motion.rotation * c.cov_p * motion.rotation.transpose();
-    combined
-        .cholesky()
-        .map(|ch| (r.transpose() * ch.inverse() * r)[(0, 0)])
+    crate::linalg::cholesky(combined).map(|ch| (r.transpose() * ch.inverse() * r)[(0, 0)])
 }
 
 /// Marks as inliers the correspondences whose squared Mahalanobis residual under `motion` (with
@@ -349,7 +347,9 @@ pub fn ml_iteration(
         let rq = motion.rotation * c.q_p;
         let r = c.q_c - rq - motion.translation_m;
         let combined = c.cov_c + motion.rotation * c.cov_p * motion.rotation.transpose();
-        let w = combined.cholesky().ok_or(VoError::NonFinite)?.inverse();
+        let w = crate::linalg::cholesky(combined)
+            .ok_or(VoError::NonFinite)?
+            .inverse();
         // dr/dtheta = [R Q_p]x, dr/dT = -I
         let mut j = Matrix3x6::<f64>::zeros();
         j.fixed_view_mut::<3, 3>(0, 0).copy_from(&rq.cross_matrix());
@@ -365,7 +365,7 @@ pub fn ml_iteration(
     if count < 3 {
         return Err(VoError::DegenerateGeometry);
     }
-    let cholesky = information.cholesky().ok_or(VoError::DegenerateGeometry)?;
+    let cholesky = crate::linalg::cholesky(information).ok_or(VoError::DegenerateGeometry)?;
     let delta = cholesky.solve(&(-gradient));
     if !delta.iter().all(|v| v.is_finite()) || !chi2.is_finite() {
         return Err(VoError::NonFinite);
@@ -492,9 +492,7 @@ pub fn finish_estimate(
 ) -> Result<MotionEstimate, VoError> {
     let dof = (3 * usize::from(last.count)).saturating_sub(6).max(1) as f64;
     let chi2_per_dof = last.chi2 / dof;
-    let inverse = last
-        .information
-        .cholesky()
+    let inverse = crate::linalg::cholesky(last.information)
         .ok_or(VoError::DegenerateGeometry)?
         .inverse();
     let robust = if robust_scale.is_finite() {
@@ -504,7 +502,7 @@ pub fn finish_estimate(
     };
     let covariance_scale = chi2_per_dof.max(robust).max(1.0);
     let covariance = inverse * covariance_scale;
-    let residual_rms_m = libm::sqrt(last.sum_sq_m2 / f64::from(last.count.max(1)));
+    let residual_rms_m = crate::linalg::sqrt(last.sum_sq_m2 / f64::from(last.count.max(1)));
     if !covariance.iter().all(|v| v.is_finite()) {
         return Err(VoError::NonFinite);
     }

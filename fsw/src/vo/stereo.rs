@@ -69,7 +69,7 @@ impl PinholeStereo {
             (y - self.cy_px) / self.fy_px,
             1.0,
         );
-        let norm = v.norm();
+        let norm = crate::linalg::norm(&v);
         let r = v / norm;
         // d(v/|v|) = (dv - r (r . dv)) / |v|
         let dvx = Vec3::new(1.0 / self.fx_px, 0.0, 0.0);
@@ -189,7 +189,7 @@ pub fn triangulate_model(
     let p1 = r1 * m1; // eq. 1, C1 = 0
     let p2 = b + r2 * m2; // eq. 1
     let position = (p1 + p2) * 0.5; // eq. 4
-    let gap = (p2 - p1).norm();
+    let gap = crate::linalg::norm(&(p2 - p1));
     // Jacobian P' with respect to (xl, yl, xr, yr), eq. 5-7.
     let zero = Vec3::zeros();
     let d_r1 = [dr1x, dr1y, zero, zero];
@@ -244,7 +244,7 @@ pub fn accept_point(
     point: &StereoPoint,
     config: &VoConfig,
 ) -> Result<(), StereoReject> {
-    let range = point.position_m.norm();
+    let range = crate::linalg::norm(&point.position_m);
     if !(range >= config.min_range_m && range <= config.max_range_m) {
         return Err(StereoReject::OutOfRange);
     }

@@ -121,7 +121,7 @@ impl Truth {
     /// The IMU sample at the current truth time (noise and biases from `rng`).
     pub fn imu(&self, rng: &mut ChaCha8Rng) -> ImuSample {
         let t = self.pose.t_us as f64 * 1e-6;
-        let sdt = libm::sqrt(self.dt_us as f64 * 1e-6);
+        let sdt = crate::linalg::sqrt(self.dt_us as f64 * 1e-6);
         let w = self.motion.omega_r(t)
             + self.gyro_bias
             + gauss3(rng) * (self.noise.gyro_rad_s_sqrt_hz / sdt);
@@ -145,7 +145,7 @@ impl Truth {
         self.pose.t_us += self.dt_us;
         self.pose.q_nr = m.q_nr(t0 + dt);
         self.pose.v_n = m.v_n(t0 + dt);
-        let sdt = libm::sqrt(dt);
+        let sdt = crate::linalg::sqrt(dt);
         self.gyro_bias += gauss3(rng) * (self.noise.gyro_bias_rad_s2_sqrt_hz * sdt);
         self.accel_bias += gauss3(rng) * (self.noise.accel_bias_m_s3_sqrt_hz * sdt);
     }

@@ -46,7 +46,7 @@ impl Alignment {
     /// Adds one sun reading in `R` (unit vector, finite; others are ignored).
     pub(super) fn add_sun(&mut self, reading: &SunReading) {
         let s = reading.sun_dir_rover;
-        let norm = libm::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+        let norm = crate::linalg::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
         let unit = libm::fabs(norm - 1.0) < 0.01;
         if !reading.sun_in_view || !unit {
             return;
@@ -74,8 +74,8 @@ fn sun_heading(
     n: u32,
 ) -> Option<(f64, f64)> {
     let v = Quat::from_euler_angles(roll, pitch, 0.0) * s_r.normalize();
-    let horizontal = libm::sqrt(v.x * v.x + v.y * v.y);
-    let horizontal_n = libm::sqrt(s_n.x * s_n.x + s_n.y * s_n.y);
+    let horizontal = crate::linalg::sqrt(v.x * v.x + v.y * v.y);
+    let horizontal_n = crate::linalg::sqrt(s_n.x * s_n.x + s_n.y * s_n.y);
     let min = libm::sin(5.0_f64.to_radians());
     if !(horizontal > min && horizontal_n > min) {
         return None;
@@ -84,7 +84,7 @@ fn sun_heading(
     let tan_el = libm::fabs(v.z) / horizontal;
     let var = sun_sigma_rad * sun_sigma_rad / f64::from(n.max(1)) / (horizontal * horizontal)
         + tilt_sigma * tilt_sigma * tan_el * tan_el;
-    let sigma = libm::sqrt(var).max(1.0e-3);
+    let sigma = crate::linalg::sqrt(var).max(1.0e-3);
     (yaw.is_finite() && sigma.is_finite()).then_some((yaw, sigma))
 }
 
@@ -112,7 +112,7 @@ impl Navigator {
         let std = |sum: &[f64; 3], sq: &[f64; 3]| {
             (0..3).fold(0.0_f64, |m, k| {
                 let mean = sum[k] / n;
-                m.max(libm::sqrt((sq[k] / n - mean * mean).max(0.0)))
+                m.max(crate::linalg::sqrt((sq[k] / n - mean * mean).max(0.0)))
             })
         };
         let (gyro_std, accel_std) = (std(&a.gyro, &a.gyro_sq), std(&a.accel, &a.accel_sq));
@@ -170,7 +170,8 @@ impl Navigator {
             b_a: Vec3::zeros(),
             p_n: Vec3::from(self.config.initial_position_n_m),
         };
-        let gyro_avg_sigma = c.ekf.imu_noise.gyro_rad_s_sqrt_hz * libm::sqrt(200.0 / n) + 1.0e-6;
+        let gyro_avg_sigma =
+            c.ekf.imu_noise.gyro_rad_s_sqrt_hz * crate::linalg::sqrt(200.0 / n) + 1.0e-6;
         let mut p0 = CoreCov::zeros();
         let diag = [
             tilt_sigma,

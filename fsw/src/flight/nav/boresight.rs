@@ -125,8 +125,8 @@ impl Default for Boresight {
 /// `min` or not finite.
 fn planar_angle(a: &Vec3, b: &Vec3, min: f64) -> Option<f64> {
     let (na, nb) = (
-        libm::sqrt(a.x * a.x + a.y * a.y),
-        libm::sqrt(b.x * b.x + b.y * b.y),
+        crate::linalg::sqrt(a.x * a.x + a.y * a.y),
+        crate::linalg::sqrt(b.x * b.x + b.y * b.y),
     );
     if !(na >= min && nb >= min && na.is_finite() && nb.is_finite()) {
         return None;
@@ -181,7 +181,7 @@ impl Boresight {
         let finite = rp.trans_0_1_m.iter().all(|v| v.is_finite())
             && rp.rot_0_1.coords.iter().all(|v| v.is_finite());
         let tilt = rp.rot_0_1.scaled_axis();
-        let smooth = libm::sqrt(tilt.x * tilt.x + tilt.y * tilt.y) <= c.max_tilt_step_rad;
+        let smooth = crate::linalg::sqrt(tilt.x * tilt.x + tilt.y * tilt.y) <= c.max_tilt_step_rad;
         if !(usable && level && finite && smooth) {
             t.clean = false;
             return;

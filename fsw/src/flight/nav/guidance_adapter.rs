@@ -270,7 +270,7 @@ impl Navigator {
             Some(e) => {
                 let p = e.covariance();
                 let i = crate::estimation::state::I_P;
-                libm::sqrt((p[(i, i)] + p[(i + 1, i + 1)]).max(0.0))
+                crate::linalg::sqrt((p[(i, i)] + p[(i + 1, i + 1)]).max(0.0))
             }
             None => 0.0,
         }

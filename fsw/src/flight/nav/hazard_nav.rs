@@ -150,7 +150,7 @@ pub(super) fn sweep_radius_of(
         None => 0.5,
     } + geometry.wheel_radius_m;
     let w = crate::perception::ROVER_HALF_WIDTH_M;
-    libm::sqrt(reach * reach + w * w)
+    crate::linalg::sqrt(reach * reach + w * w)
 }
 
 impl HazardNav {
@@ -270,7 +270,8 @@ impl Navigator {
         match h.last_map_xy {
             None => true,
             Some(q) => {
-                let d = libm::sqrt((p.x - q[0]) * (p.x - q[0]) + (p.y - q[1]) * (p.y - q[1]));
+                let d =
+                    crate::linalg::sqrt((p.x - q[0]) * (p.x - q[0]) + (p.y - q[1]) * (p.y - q[1]));
                 let interval = if h.planning {
                     self.config.map_interval_m
                 } else {
@@ -595,7 +596,8 @@ mod tests {
     #[test]
     fn turn_sweep_covers_the_footprint_corners() {
         let r = turn_sweep_radius(&ROCKY8);
-        let expected = libm::sqrt(0.493 * 0.493 + crate::perception::ROVER_HALF_WIDTH_M.powi(2));
+        let expected =
+            crate::linalg::sqrt(0.493 * 0.493 + crate::perception::ROVER_HALF_WIDTH_M.powi(2));
         assert!((r - expected).abs() < 0.01, "{r}");
         assert!(r > crate::perception::ROVER_HALF_WIDTH_M + 0.2);
     }

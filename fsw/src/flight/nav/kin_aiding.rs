@@ -225,7 +225,7 @@ impl Navigator {
                     dof: d.dof as u8,
                     residual: core::array::from_fn(|k| d.residual.get(k).copied().unwrap_or(0.0)),
                     sigma: core::array::from_fn(|k| {
-                        libm::sqrt(
+                        crate::linalg::sqrt(
                             d.residual_covariance
                                 .get((k, k))
                                 .copied()
@@ -269,14 +269,14 @@ impl Navigator {
                 // its ground travel is at most the wheels' (plus a skid margin); an EKF step
                 // longer than that is an IMU error (a shock, a dropped sample), and the
                 // kinematics is fused instead.
-                let kin_step = libm::sqrt(
+                let kin_step = crate::linalg::sqrt(
                     rp.trans_0_1_m.x * rp.trans_0_1_m.x + rp.trans_0_1_m.y * rp.trans_0_1_m.y,
                 );
                 let (ex, ey) = (
                     rp.trans_0_1_m.x - d.residual[3],
                     rp.trans_0_1_m.y - d.residual[4],
                 );
-                let ekf_step_h = libm::sqrt(ex * ex + ey * ey);
+                let ekf_step_h = crate::linalg::sqrt(ex * ex + ey * ey);
                 let plausible = ekf_step_h <= BLIND_SKID_FACTOR * kin_step + BLIND_SKID_FLOOR_M;
                 let anchored_by_zupt = self.config.blind_stop_interval_m > 0.0
                     && self.cycles_since_zupt <= self.config.blind_anchor_cycles
@@ -295,8 +295,9 @@ impl Navigator {
                     // The velocity error the last residual implies (translation residual over
                     // the interval's duration).
                     let dt_s = rp.t1_us.saturating_sub(rp.t0_us) as f64 * 1e-6;
-                    let r =
-                        libm::sqrt(d.residual[3] * d.residual[3] + d.residual[4] * d.residual[4]);
+                    let r = crate::linalg::sqrt(
+                        d.residual[3] * d.residual[3] + d.residual[4] * d.residual[4],
+                    );
                     let implied = if dt_s > 0.0 { r / dt_s } else { 0.0 };
                     self.recover_from_streak(implied);
                 }
@@ -405,8 +406,9 @@ impl Navigator {
             self.ekf_error(e);
             return;
         }
-        let horizontal =
-            libm::sqrt(rp.trans_0_1_m.x * rp.trans_0_1_m.x + rp.trans_0_1_m.y * rp.trans_0_1_m.y);
+        let horizontal = crate::linalg::sqrt(
+            rp.trans_0_1_m.x * rp.trans_0_1_m.x + rp.trans_0_1_m.y * rp.trans_0_1_m.y,
+        );
         let delta = if accepted {
             self.config.vo_loss_drift_fraction * horizontal
         } else {

@@ -294,7 +294,7 @@ impl LocNav {
         self.view_count = 1;
         let clear = match self.map.cell_of(pos) {
             Some((i, j)) => {
-                let d = libm::sqrt(f64::from(self.map.d2_at(i as i32, j as i32)))
+                let d = crate::linalg::sqrt(f64::from(self.map.d2_at(i as i32, j as i32)))
                     * crate::localization::MAP_CELL_M;
                 d - 0.5 * crate::localization::MAP_CELL_M >= sweep
             }
@@ -382,7 +382,7 @@ impl LocNav {
 fn cap_covariance(p: &[[f64; 3]; 3], caps: [f64; 3]) -> [[f64; 3]; 3] {
     let mut d = [1.0; 3];
     for (k, (dk, cap)) in d.iter_mut().zip(caps).enumerate() {
-        let sigma = libm::sqrt(p[k][k].max(0.0));
+        let sigma = crate::linalg::sqrt(p[k][k].max(0.0));
         if sigma > cap {
             *dk = cap / sigma;
         }
@@ -561,7 +561,7 @@ impl Navigator {
                 frame.origin_world_m[0] - a.origin_world_m[0],
                 frame.origin_world_m[1] - a.origin_world_m[1],
             );
-            let d = libm::sqrt(dx * dx + dy * dy);
+            let d = crate::linalg::sqrt(dx * dx + dy * dy);
             if d > span || !d.is_finite() {
                 l.restart_scan();
             }

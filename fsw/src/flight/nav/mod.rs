@@ -1072,8 +1072,9 @@ impl Navigator {
                 self.sun_rejections = self.sun_rejections.saturating_add(1);
                 if self.sun_rejections >= self.config.sun_streak {
                     self.sun_rejections = 0;
-                    let angle =
-                        libm::sqrt(u.residual[0] * u.residual[0] + u.residual[1] * u.residual[1]);
+                    let angle = crate::linalg::sqrt(
+                        u.residual[0] * u.residual[0] + u.residual[1] * u.residual[1],
+                    );
                     let sigma = if angle.is_finite() {
                         angle.clamp(0.01, 1.0)
                     } else {

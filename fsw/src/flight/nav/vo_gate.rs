@@ -124,7 +124,9 @@ pub fn vo_gate_test(
     let s_theta: Mat3 = s.fixed_view::<3, 3>(0, 0).into_owned();
     let r_theta = r.fixed_rows::<3>(0).into_owned();
     let dof_rot = m.observed.iter().take(3).filter(|o| **o).count();
-    let d2_rotation = s_theta.cholesky()?.solve(&r_theta).dot(&r_theta);
+    let d2_rotation = crate::linalg::cholesky(s_theta)?
+        .solve(&r_theta)
+        .dot(&r_theta);
     let threshold_rotation = chi2_999(dof_rot).unwrap_or(0.0);
     // Test 2: all components with the slip allowance on the observed translation.
     let z_p = m.trans_0_1_m - r.fixed_rows::<3>(3).into_owned();
@@ -134,7 +136,7 @@ pub fn vo_gate_test(
             s[(k, k)] += sigma * sigma;
         }
     }
-    let d2_pose = s.cholesky()?.solve(&r).dot(&r);
+    let d2_pose = crate::linalg::cholesky(s)?.solve(&r).dot(&r);
     let threshold_pose = chi2_999(d.dof)?;
     let finite = d2_rotation.is_finite() && d2_pose.is_finite();
     finite.then_some(VoGateTest {
