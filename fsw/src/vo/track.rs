@@ -97,13 +97,13 @@ pub fn refine_warp(
                 let system = affine_normal_equations(template, image, &warp, gain, bias)?;
                 let h = SMatrix::<f64, 8, 8>::from_fn(|r, c| system.h[r][c]);
                 let g = SVector::<f64, 8>::from(system.g);
-                (h.cholesky()?.solve(&(-g)), system.sum_sq)
+                (crate::linalg::cholesky(h)?.solve(&(-g)), system.sum_sq)
             }
             WarpModel::Translation => {
                 let system = translation_normal_equations(template, image, &warp, gain, bias)?;
                 let h = SMatrix::<f64, 4, 4>::from_fn(|r, c| system.h[r][c]);
                 let g = SVector::<f64, 4>::from(system.g);
-                let ds = h.cholesky()?.solve(&(-g));
+                let ds = crate::linalg::cholesky(h)?.solve(&(-g));
                 let delta =
                     SVector::<f64, 8>::from([0.0, 0.0, ds[0], 0.0, 0.0, ds[1], ds[2], ds[3]]);
                 (delta, system.sum_sq)
@@ -229,13 +229,15 @@ pub fn affine_normal_equations(
     );
     let (mut xr, mut yr) = (Moments::default(), Moments::default());
     let (mut ii, mut i1, mut ir, mut r1, mut rr) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    // The samples of one row, overwritten whole by every row (zeroed once per call: zeroing it
+    // per row was a 176-byte `memclr` per row on the rover CPU, issue 18).
+    let mut samples = [[0.0f32; 4]; TEMPLATE_SIDE];
     for (row, t_row) in template.chunks_exact(TEMPLATE_SIDE).enumerate() {
         let v = row as f32 - half;
         // Eq. 9 at (0, v); each column adds (a, d) times u.
         let (x_row, y_row) = (b * v + c, e * v + f);
         // Pass 1: the samples of the row, [I2, jx, jy, r] per pixel. Passes 2 and 3 accumulate
         // them in two groups, so each group's accumulators stay in registers.
-        let mut samples = [[0.0f32; 4]; TEMPLATE_SIDE];
         let mut u = -half;
         for (sample, &t) in samples.iter_mut().zip(t_row.iter()) {
             let (value, gx, gy) = image.bilinear_f32_inside(a * u + x_row, d * u + y_row)?;
