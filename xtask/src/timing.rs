@@ -774,7 +774,7 @@ const TASK_DOC: [(&str, &str, &str); 16] = [
     (
         "forward_kinematics",
         "`kinematics::forward_kinematics_from_joints`",
-        "RG2: body rates from a joint reading",
+        "not called by the flight software (the odometry integrates the joints itself); the body-rate solve of one joint reading, kept as a kinematics benchmark",
     ),
     (
         "kinematic_odometry",

@@ -609,6 +609,8 @@ fn scan_rows<const STEP: usize>(
     // about 1,400 instructions per call on the rover CPU, more than a short scan itself).
     if width <= SHORT_SPAN {
         scan_span::<STEP, { SHORT_SPAN + 1 }>(template, (c_first, c_lo, c_hi), block, out);
+    } else if width <= MEDIUM_SPAN {
+        scan_span::<STEP, { MEDIUM_SPAN + 1 }>(template, (c_first, c_lo, c_hi), block, out);
     } else {
         scan_span::<STEP, { SCAN_MAX_COLUMNS + 1 }>(template, (c_first, c_lo, c_hi), block, out);
     }
@@ -617,6 +619,11 @@ fn scan_rows<const STEP: usize>(
 /// Columns of a short scan span ([`scan_rows`]): the tracking search and the windowed stereo of
 /// a tracked feature scan 19-27 columns.
 const SHORT_SPAN: usize = 32;
+
+/// Columns of a medium scan span ([`scan_rows`]): the stereo scans of a disparity range up to
+/// about 100 px, whose prefix arrays are zeroed at this size, not at [`SCAN_MAX_COLUMNS`]
+/// (issue 18: 3 % of the hazard mapper's instructions).
+const MEDIUM_SPAN: usize = 112;
 
 /// The scan of [`scan_rows`] over the span `[c_lo, c_hi)` (window columns `c_first + k * STEP`)
 /// of `block` (pixel `(r, j)` of the span at `block[r * W + j]`), with prefix-sum arrays of
