@@ -251,9 +251,10 @@ fn have(program: &str, arg: &str) -> bool {
         .is_ok_and(|s| s.success())
 }
 
-/// Add the target and install QEMU when missing; say exactly what to do when that fails.
+/// Add the target and install QEMU and the LLVM tools when missing; say exactly what to do when
+/// that fails.
 fn setup() -> Result<()> {
-    let t = step("setup: rust target and QEMU");
+    let t = step("setup: rust target, QEMU and LLVM tools");
     let installed = Command::new("rustup")
         .args(["target", "list", "--installed"])
         .output();
@@ -278,20 +279,32 @@ fn setup() -> Result<()> {
                 .with_context(|| format!("run `rustup component add {tool}` by hand"))?;
         }
     }
-    if have("qemu-system-arm", "--version") {
-        println!("qemu-system-arm: present");
-    } else {
-        println!("qemu-system-arm missing: installing it with apt-get");
+    // QEMU for the rover-CPU runs; LLVM's `llvm-objdump` and `llvm-mca` (Debian package `llvm`)
+    // for the timing command's CPI model and panic-site count.
+    for (program, package, what) in [
+        (
+            "qemu-system-arm",
+            "qemu-system-arm",
+            "QEMU's ARM system emulator",
+        ),
+        ("llvm-mca", "llvm", "LLVM's llvm-mca and llvm-objdump"),
+        ("llvm-objdump", "llvm", "LLVM's llvm-mca and llvm-objdump"),
+    ] {
+        if have(program, "--version") {
+            println!("{program}: present");
+            continue;
+        }
+        println!("{program} missing: installing {package} with apt-get");
         let apt = run(Command::new("apt-get").args(["update", "-qq"])).and_then(|_| {
             run(Command::new("apt-get")
-                .args(["install", "-y", "-qq", "qemu-system-arm"])
+                .args(["install", "-y", "-qq", package])
                 .env("DEBIAN_FRONTEND", "noninteractive"))
         });
-        if apt.is_err() || !have("qemu-system-arm", "--version") {
+        if apt.is_err() || !have(program, "--version") {
             bail!(
-                "qemu-system-arm is required and could not be installed automatically: \
-                 install it with `sudo apt-get install -y qemu-system-arm` (Debian/Ubuntu) \
-                 or your system's package for QEMU's ARM system emulator, then run again"
+                "{program} is required and could not be installed automatically: install it \
+                 with `sudo apt-get install -y {package}` (Debian/Ubuntu) or your system's \
+                 package for {what}, then run again"
             );
         }
     }
