@@ -891,14 +891,14 @@ fn document(
          - **Instructions to time.** QEMU counts instructions, not cycles. Time = instructions x \
          CPI / clock, at the stated clock of **{:.0} MHz** and a CPI range of **{:.1} to {:.1}**. \
          The Cortex-M7 is a dual-issue, 6-stage in-order core: with code in ITCM and data in DTCM \
-         (zero wait states) integer and load/store code runs near or below 1 CPI, which offsets \
-         the multi-cycle double-precision operations of the filter (FP64 multiply-accumulate \
-         several cycles, divide and square root about 30); the upper bound 2.0 covers data-cache \
-         misses on the stereo images in external RAM (the VO's correlation and Forstner scans \
-         stream through them), branch mispredictions and FP64 dependency stalls. The range is \
-         checked against the Cortex-M7 pipeline model in \"Cycles per instruction\" below \
-         (per code group, memory stalls estimated apart); a \
-         measurement on the flight board would replace both.\n",
+         (zero wait states) integer and load/store code runs near or below 1 CPI; the \
+         double-precision code of the filter and the kinematics does not (FP64 multiply-accumulate \
+         several cycles, divide and square root about 30). The Cortex-M7 pipeline model in \
+         \"Cycles per instruction\" below gives each code group its CPI, weighted by what ran: \
+         about 1 for the image code that carries the background load, about 2.9 for the FP64 \
+         groups, so the utilisation is also given with each rate group at the higher of 2.0 and \
+         its model CPI (memory stalls are estimated apart). A measurement on the flight board \
+         would replace both.\n",
         calib("insns_per_count"),
         calib("overhead"),
         thousands(calib("loop2")),

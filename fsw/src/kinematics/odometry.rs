@@ -323,23 +323,26 @@ impl KinematicOdometry {
         // The contact-angle step (V99 sec. 6): the measurement with `contact_angles`, the
         // diagnostic translation with `contact_translation` (then a failure only skips it).
         let contact = if use_contacts {
-            let c = self.contact_solution(&frames, &increments, &drive, &valid, gyro_rad);
-            if self.config.contact_angles {
-                Some(c?)
-            } else {
-                c.ok()
+            match self.contact_solution(&frames, &increments, &drive, &valid, gyro_rad) {
+                Ok(c) => Some(c),
+                Err(e) if self.config.contact_angles => return Err(e),
+                Err(_) => None,
             }
         } else {
             None
         };
+        // Borrowed from the contact solution when it is the measurement (copying its Jacobians
+        // and least squares cost about 1,000 instructions per step on the rover CPU, issue 18).
+        let fallback;
         let (step, jacobians, lsq) = match (&contact, self.config.contact_angles) {
-            (Some((step, jacobians, lsq, _)), true) => (*step, *jacobians, *lsq),
+            (Some((step, jacobians, lsq, _)), true) => (*step, jacobians, lsq),
             _ => {
                 let jacobians = frames.map(|f| WheelJacobian::from_frames(&f, radius));
                 let points = frames.map(|f| f.contact_point_m);
                 let lsq = ContactLeastSquares::new(&points, &valid)?;
                 let step = lsq.solve(&contact_velocities(&jacobians, &increments, &drive));
-                (step, jacobians, lsq)
+                fallback = (jacobians, lsq);
+                (step, &fallback.0, &fallback.1)
             }
         };
         if step.iter().any(|x| !x.is_finite()) {
@@ -347,7 +350,7 @@ impl KinematicOdometry {
         }
         self.window.push(cur);
         let articulation = self.window.mean_increment().unwrap_or(increments);
-        let q = self.step_covariance(&lsq, &jacobians, &frames, &drive, &articulation, &valid);
+        let q = self.step_covariance(lsq, jacobians, &frames, &drive, &articulation, &valid);
         if let Some((c_step, _, _, _)) = &contact {
             if self.config.contact_translation && c_step.iter().all(|x| x.is_finite()) {
                 // The contact-angle translation in the interval's start frame, rotated like the
