@@ -46,6 +46,7 @@ impl Ekf {
         if self.fault {
             return Err(EstError::Faulted);
         }
+        self.touch();
         if let Some((slot, c)) = self.find_clone(t_us) {
             if let Some(Some(live)) = self.clones.get_mut(slot) {
                 live.refs = live.refs.saturating_add(1);
@@ -118,6 +119,7 @@ impl Ekf {
             _ => return Err(EstError::UnknownClone),
         };
         if free {
+            self.touch();
             if let Some(c) = self.clones.get_mut(slot) {
                 *c = None;
             }

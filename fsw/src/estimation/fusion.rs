@@ -80,30 +80,34 @@ impl<const M: usize, const C: usize> Innovation<M, C> {
 
     /// Eq. 46: `d_m^2 = r' S^-1 r`; `None` when `S` is not positive definite.
     pub fn mahalanobis2(&self) -> Option<f64> {
-        let chol = crate::linalg::cholesky(self.s)?;
-        let y = chol.solve(&self.r);
-        let d2 = self.r.dot(&y);
-        d2.is_finite().then_some(d2)
+        mahalanobis2(&self.s, &self.r)
     }
 
-    /// `U = P H'`, `DIM x M`.
-    fn u(&self, p: &Cov) -> SMatrix<f64, DIM, M> {
-        let mut u = SMatrix::<f64, DIM, M>::zeros();
+    /// `U = P H'` (`DIM x M`) written row by row into `rows` (row `i` of `U` is `rows[i]`,
+    /// the layout the forward substitution and the downdate read): one pass over a column of
+    /// `P` per non-zero entry of `H`. Rows of released clones come out zero (their rows of
+    /// `P` are). `false` when a column lies outside the state (a programming error the update
+    /// refuses).
+    fn u_rows(&self, p: &Cov, rows: &mut [[f64; M]; DIM]) -> bool {
         for (c, &ic) in self.cols.iter().enumerate() {
-            if ic >= DIM {
-                // Outside the state: a gain the update refuses (non-finite).
-                u.fill(f64::NAN);
-                return u;
-            }
-            let pcol = p.column(ic);
+            let Some(pcol) = ic
+                .checked_mul(DIM)
+                .and_then(|start| p.as_slice().get(start..start.saturating_add(DIM)))
+            else {
+                return false;
+            };
             for m in 0..M {
                 let hmc = self.h.get((m, c)).copied().unwrap_or(f64::NAN);
                 if hmc != 0.0 {
-                    u.column_mut(m).axpy(hmc, &pcol, 1.0);
+                    for (row, pv) in rows.iter_mut().zip(pcol.iter()) {
+                        if let Some(dst) = row.get_mut(m) {
+                            *dst += hmc * pv;
+                        }
+                    }
                 }
             }
         }
-        u
+        true
     }
 }
 
@@ -140,6 +144,7 @@ impl Ekf {
         inn: &Innovation<M, C>,
     ) -> Result<(), EstError> {
         let chol = crate::linalg::cholesky(inn.s).ok_or(EstError::ResidualCovarianceNotPositive)?;
+        self.touch();
         let l = chol.l_dirty();
         // Reciprocals of the factor's diagonal (positive: the factorisation succeeded).
         let mut inv_diag = [0.0; M];
@@ -149,38 +154,49 @@ impl Ekf {
         // Rows and columns of released clones are zero in P, hence in U and V: they are skipped.
         let (live, count) = self.live_indices();
         let live = live.get(..count).unwrap_or(&[]);
-        // V' = L^-1 U' (M x DIM), solved in place column by column (the live ones; the others
-        // stay zero): column i of V' is row i of V, contiguous.
-        let mut vt = inn.u(&self.p).transpose();
-        for &i in live {
-            if let Some(col) = vt
-                .as_mut_slice()
-                .get_mut(i * M..i * M + M)
-                .and_then(|c| <&mut [f64; M]>::try_from(c).ok())
-            {
-                forward_substitute(l, &inv_diag, col);
-            }
-        }
-        let mut y = inn.r;
-        if let Ok(col) = <&mut [f64; M]>::try_from(y.as_mut_slice()) {
-            forward_substitute(l, &inv_diag, col);
-        }
-        // `v * 0` is 0 for a finite entry and NaN otherwise: one multiplication and one
-        // addition per entry, no branch (the iterator chain this replaces took about 10 instructions
-        // per entry on the rover CPU).
-        let finite = |s: &[f64]| s.iter().fold(0.0, |acc, v| acc + v * 0.0) == 0.0;
-        if !(finite(vt.as_slice()) && finite(y.as_slice())) {
+        // Row i of V = U L'^-1 (`V' = L^-1 U'`), for the live rows only (the others stay
+        // zero): `U = P H'` straight into this layout, then a forward substitution per row. `v * 0` is 0 for a finite entry and NaN otherwise: one
+        // multiplication and one addition per entry, no branch.
+        let mut vt = [[0.0; M]; DIM];
+        if !inn.u_rows(&self.p, &mut vt) {
             return Err(EstError::ResidualCovarianceNotPositive);
         }
-        let dx: ErrorVec = vt.tr_mul(&y);
+        let mut probe = 0.0;
+        for &i in live {
+            let Some(row) = vt.get_mut(i) else {
+                return Err(EstError::ResidualCovarianceNotPositive);
+            };
+            forward_substitute(l, &inv_diag, row);
+            for v in row.iter() {
+                probe += v * 0.0;
+            }
+        }
+        let mut y = [0.0; M];
+        for (dst, v) in y.iter_mut().zip(inn.r.iter()) {
+            *dst = *v;
+        }
+        forward_substitute(l, &inv_diag, &mut y);
+        for v in y.iter() {
+            probe += v * 0.0;
+        }
+        if probe != 0.0 {
+            return Err(EstError::ResidualCovarianceNotPositive);
+        }
+        // `dx = K r = V (L^-1 r)`, live rows (the others zero).
+        let mut dx = ErrorVec::zeros();
+        for &i in live {
+            if let (Some(d), Some(vi)) = (dx.get_mut(i), vt.get(i)) {
+                let mut acc = 0.0;
+                for (a, b) in vi.iter().zip(y.iter()) {
+                    acc += a * b;
+                }
+                *d = acc;
+            }
+        }
         // The downdate two columns `j0`, `j1` at a time: each row `i` of `V` is loaded once for
         // both products (the two columns' rows of `V` stay in registers). Every entry is the
         // same sum in the same order as one column at a time, so the result is bit-identical.
-        let row = |k: usize| -> Option<[f64; M]> {
-            vt.as_slice()
-                .get(k * M..k * M + M)
-                .and_then(|s| <[f64; M]>::try_from(s).ok())
-        };
+        let row = |k: usize| -> Option<[f64; M]> { vt.get(k).copied() };
         let mut b = 0;
         while b < live.len() {
             let Some(&j0) = live.get(b) else {
@@ -238,6 +254,17 @@ impl Ekf {
         self.p[(i, j)] = v;
         self.p[(j, i)] = v;
     }
+}
+
+/// Eq. 46: `d_m^2 = r' S^-1 r`; `None` when `S` is not positive definite.
+pub(crate) fn mahalanobis2<const M: usize>(
+    s: &SMatrix<f64, M, M>,
+    r: &SVector<f64, M>,
+) -> Option<f64> {
+    let chol = crate::linalg::cholesky(*s)?;
+    let y = chol.solve(r);
+    let d2 = r.dot(&y);
+    d2.is_finite().then_some(d2)
 }
 
 /// `x <- L^-1 x` for the lower-triangular `L` (entries above the diagonal ignored) with the

@@ -53,6 +53,7 @@ mod tests;
 pub use clone::CloneHandle;
 pub use gate::{GateDecision, CHI2_95, CHI2_999};
 pub use propagate::PropagationStep;
+pub use relative_pose::KeptRelativePose;
 pub use replay::{Recorder, ReplayProgress};
 pub use state::{CoreCov, Cov, NominalState, CLONE_DIM, CORE_DIM, DIM, MAX_CLONES};
 pub use sun_sensor::SunUpdate;
@@ -202,7 +203,8 @@ pub enum EstError {
     InvalidMeasurement,
     /// The sun is not in the sensor's view, or no sun ephemeris is configured.
     SunUnavailable,
-    /// The measurement time is too far from the state time ([`EkfConfig::max_measurement_skew_us`]).
+    /// The measurement time is too far from the state time ([`EkfConfig::max_measurement_skew_us`]),
+    /// or a [`KeptRelativePose`] was offered after the filter changed.
     StaleMeasurement,
     /// The residual covariance `S` is not positive definite; nothing was applied.
     ResidualCovarianceNotPositive,
@@ -228,6 +230,10 @@ pub struct Ekf {
     pub(crate) next_serial: u32,
     pub(crate) hold: Option<ImuHold>,
     pub(crate) fault: bool,
+    /// Changes whenever the state or the covariance may have changed (propagation, update,
+    /// clone, release, inflation, reset, copy): a [`KeptRelativePose`] is fused only while
+    /// its generation is the filter's.
+    pub(crate) generation: u32,
 }
 
 impl Ekf {
@@ -243,6 +249,7 @@ impl Ekf {
             next_serial: 0,
             hold: None,
             fault: false,
+            generation: 0,
         };
         ekf.reset(x0, p0)?;
         Ok(ekf)
@@ -267,7 +274,13 @@ impl Ekf {
         self.clones = [None; MAX_CLONES];
         self.hold = None;
         self.fault = false;
+        self.touch();
         Ok(())
+    }
+
+    /// A new generation: the state or the covariance may change.
+    pub(crate) fn touch(&mut self) {
+        self.generation = self.generation.wrapping_add(1);
     }
 
     /// Make this filter a copy of `other`, in place (field by field: no 9 KB temporary on the
@@ -280,6 +293,7 @@ impl Ekf {
         self.next_serial = other.next_serial;
         self.hold = other.hold;
         self.fault = other.fault;
+        self.touch();
     }
 
     /// A placeholder filter (zero configuration, zero state and covariance, no clones): the
@@ -300,6 +314,7 @@ impl Ekf {
         next_serial: 0,
         hold: None,
         fault: false,
+        generation: 0,
     };
 
     /// [`Self::new`] in place: this filter becomes the one `Ekf::new(config, x0, p0)` returns

@@ -155,6 +155,7 @@ impl Ekf {
     /// One step from the state time to `t_us` with samples `prev` (at the state time) and
     /// `new` (at `t_us`). Returns `dt` in seconds.
     fn step(&mut self, t_us: u64, prev: &ImuHold, new: &ImuHold) -> f64 {
+        self.touch();
         let dt = t_us.saturating_sub(self.x.t_us) as f64 * 1.0e-6;
         let x = &mut self.x;
         let w = (prev.gyro_rad_s + new.gyro_rad_s) * 0.5 - x.b_g;

@@ -40,7 +40,63 @@ impl Ekf {
     /// estimate and clones.
     pub fn gate_relative_pose(&self, m: &RelativePose) -> Result<GateDecision, EstError> {
         let (inn, dof) = self.relative_pose_innovation(m)?;
-        decision(&inn, dof)
+        decision_inn(&inn, dof)
+    }
+
+    /// [`Self::gate_relative_pose`], keeping the innovation of every component (eq. 28-40, the
+    /// costly `H P H'`) so that the interval can then be fused with other observed components
+    /// or added variances by [`Self::fuse_kept_relative_pose`] without computing it again
+    /// (issue 18: the kinematic aiding without VO gates the interval at its own covariance,
+    /// then fuses it with a slip allowance).
+    pub fn gate_relative_pose_kept(
+        &self,
+        m: &RelativePose,
+    ) -> Result<(GateDecision, KeptRelativePose), EstError> {
+        let (full, dof) = self.relative_pose_full(m, &[true; 6])?;
+        // The gate's `S` and `r` only (the kept innovation stays whole).
+        let (mut s, mut r) = (full.s, full.r);
+        mask_sr(&mut s, &mut r, &m.observed);
+        let d = decision(&s, &r, dof)?;
+        Ok((
+            d,
+            KeptRelativePose {
+                full,
+                generation: self.generation,
+            },
+        ))
+    }
+
+    /// Eq. 28-45, ungated, on a relative pose kept by [`Self::gate_relative_pose_kept`] with
+    /// the components `observed` and `extra_variance[k]` (rad^2 or m^2, finite, non-negative)
+    /// added to the measurement variance of component `k`: exactly
+    /// [`Self::update_relative_pose`] (ungated) on the same measurement with those components
+    /// observed and that covariance, up to rounding. Refused with
+    /// [`EstError::StaleMeasurement`] when the filter changed since the gate (a propagation,
+    /// update, clone or release in between), and with [`EstError::InvalidMeasurement`] when
+    /// nothing is observed or a variance is invalid.
+    pub fn fuse_kept_relative_pose(
+        &mut self,
+        kept: &KeptRelativePose,
+        observed: [bool; 6],
+        extra_variance: [f64; 6],
+    ) -> Result<(), EstError> {
+        if self.fault {
+            return Err(EstError::Faulted);
+        }
+        if kept.generation != self.generation {
+            return Err(EstError::StaleMeasurement);
+        }
+        let bad = extra_variance.iter().any(|v| !v.is_finite() || *v < 0.0);
+        if bad || !observed.iter().any(|o| *o) {
+            return Err(EstError::InvalidMeasurement);
+        }
+        let mut inn = kept.full;
+        mask(&mut inn, &observed, &extra_variance);
+        let positive = (0..6).all(|k| !observed[k] || inn.s.get((k, k)).is_some_and(|v| *v > 0.0));
+        if !positive {
+            return Err(EstError::InvalidMeasurement);
+        }
+        self.fuse(&inn)
     }
 
     /// Eq. 28-45: gate the relative pose (eq. 46) and apply it when `gated` is false or the
@@ -55,7 +111,7 @@ impl Ekf {
             return Err(EstError::Faulted);
         }
         let (inn, dof) = self.relative_pose_innovation(m)?;
-        let mut d = decision(&inn, dof)?;
+        let mut d = decision_inn(&inn, dof)?;
         if d.accepted || !gated {
             self.fuse(&inn)?;
             d.applied = true;
@@ -82,7 +138,7 @@ impl Ekf {
             return Err(EstError::InvalidMeasurement);
         }
         let (mut inn, dof) = self.relative_pose_innovation(m)?;
-        let mut d = decision(&inn, dof)?;
+        let mut d = decision_inn(&inn, dof)?;
         if d.accepted {
             for (k, (observed, extra)) in m.observed.iter().zip(fuse_variance.iter()).enumerate() {
                 if !*observed || *extra == 0.0 {
@@ -131,9 +187,27 @@ impl Ekf {
         })
     }
 
+    /// The innovation of `m` on its observed components (the others: row of `H` and residual
+    /// zero, an identity in `S`), and their number.
     pub(crate) fn relative_pose_innovation(
         &self,
         m: &RelativePose,
+    ) -> Result<(Innovation<6, 12>, usize), EstError> {
+        // Rows of `H` that are masked anyway are not multiplied (`H P H'` skips zeros).
+        let (mut inn, dof) = self.relative_pose_full(m, &m.observed)?;
+        mask(&mut inn, &m.observed, &[0.0; 6]);
+        Ok((inn, dof))
+    }
+
+    /// The innovation of `m` on the six components (eq. 28-40) at the symmetric part of its
+    /// covariance, the rows of `H` of the components not in `rows` zeroed (their rows of `S`
+    /// are then meaningless: [`mask`] them), after the checks of a valid measurement (finite,
+    /// `t0 < t1`, at least one observed component, positive variances of the observed ones);
+    /// and the number of observed components.
+    fn relative_pose_full(
+        &self,
+        m: &RelativePose,
+        rows: &[bool; 6],
     ) -> Result<(Innovation<6, 12>, usize), EstError> {
         let finite = m.rot_0_1.coords.iter().all(|v| v.is_finite())
             && m.trans_0_1_m.iter().all(|v| v.is_finite())
@@ -166,19 +240,15 @@ impl Ekf {
         h.fixed_view_mut::<3, 3>(3, 0).copy_from(&skew(&z_p));
         h.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-c0t));
         h.fixed_view_mut::<3, 3>(3, 9).copy_from(&c0t);
+        for (k, keep) in rows.iter().enumerate() {
+            if !keep {
+                h.row_mut(k).fill(0.0);
+            }
+        }
         let mut r = Vec6::zeros();
         r.fixed_rows_mut::<3>(0).copy_from(&r_theta);
         r.fixed_rows_mut::<3>(3).copy_from(&r_p);
-        let mut cov: Mat6 = (m.covariance + m.covariance.transpose()) * 0.5;
-        for (k, observed) in m.observed.iter().enumerate() {
-            if !*observed {
-                h.row_mut(k).fill(0.0);
-                r[k] = 0.0;
-                cov.row_mut(k).fill(0.0);
-                cov.column_mut(k).fill(0.0);
-                cov[(k, k)] = 1.0;
-            }
-        }
+        let cov: Mat6 = (m.covariance + m.covariance.transpose()) * 0.5;
         let mut cols = [0usize; 12];
         for k in 0..3 {
             cols[k] = e0.i_theta + k;
@@ -190,19 +260,69 @@ impl Ekf {
     }
 }
 
+/// A relative pose gated by [`Ekf::gate_relative_pose_kept`]: its innovation on all six
+/// components (eq. 28-40) and the filter generation it belongs to, for
+/// [`Ekf::fuse_kept_relative_pose`].
+#[derive(Debug, Clone, Copy)]
+pub struct KeptRelativePose {
+    full: Innovation<6, 12>,
+    generation: u32,
+}
+
+/// `inn` (on all six components) restricted in place to the components `observed` (the
+/// others: row of `H` and residual zero, row and column of `S` zero with a 1 on the diagonal,
+/// so they change nothing), with `extra[k]` added to `S(k, k)` of each observed component
+/// (`H P H' + R` is linear in `R`). The observed entries are those of the innovation computed
+/// on the masked measurement, bit for bit: row `k` of `S` depends only on rows of `H` that are
+/// kept.
+fn mask(inn: &mut Innovation<6, 12>, observed: &[bool; 6], extra: &[f64; 6]) {
+    for (k, (o, e)) in observed.iter().zip(extra.iter()).enumerate() {
+        if *o {
+            if *e != 0.0 {
+                if let Some(s) = inn.s.get_mut((k, k)) {
+                    *s += *e;
+                }
+            }
+        } else {
+            inn.h.row_mut(k).fill(0.0);
+        }
+    }
+    mask_sr(&mut inn.s, &mut inn.r, observed);
+}
+
+/// The residual and its covariance of [`mask`] (without added variances).
+fn mask_sr(s: &mut Mat6, r: &mut Vec6, observed: &[bool; 6]) {
+    for (k, o) in observed.iter().enumerate() {
+        if *o {
+            continue;
+        }
+        if let Some(v) = r.get_mut(k) {
+            *v = 0.0;
+        }
+        s.row_mut(k).fill(0.0);
+        s.column_mut(k).fill(0.0);
+        if let Some(v) = s.get_mut((k, k)) {
+            *v = 1.0;
+        }
+    }
+}
+
 /// Eq. 46 on an innovation with `dof` observed components.
-fn decision(inn: &Innovation<6, 12>, dof: usize) -> Result<GateDecision, EstError> {
-    let d2 = inn
-        .mahalanobis2()
-        .ok_or(EstError::ResidualCovarianceNotPositive)?;
+fn decision_inn(inn: &Innovation<6, 12>, dof: usize) -> Result<GateDecision, EstError> {
+    decision(&inn.s, &inn.r, dof)
+}
+
+/// Eq. 46 on the residual `r` and its covariance `s` with `dof` observed components.
+fn decision(s: &Mat6, r: &Vec6, dof: usize) -> Result<GateDecision, EstError> {
+    let d2 = super::fusion::mahalanobis2(s, r).ok_or(EstError::ResidualCovarianceNotPositive)?;
     let threshold = chi2_95(dof).ok_or(EstError::InvalidMeasurement)?;
     Ok(GateDecision {
         accepted: d2 <= threshold,
         d2,
         dof,
         threshold,
-        residual: inn.r,
-        residual_covariance: inn.s,
+        residual: *r,
+        residual_covariance: *s,
         applied: false,
     })
 }

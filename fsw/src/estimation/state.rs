@@ -169,38 +169,35 @@ impl Ekf {
     /// Covariance health check: every live diagonal entry finite and non-negative, attitude and
     /// position variances below their configured limits. A failure latches [`Ekf::fault`].
     pub fn check_health(&mut self) -> Result<(), EstError> {
-        let mut bad = None;
-        for i in 0..DIM {
-            let live = i < CORE_DIM
-                || self
-                    .clones
-                    .get((i - CORE_DIM) / CLONE_DIM)
-                    .is_some_and(|c| c.is_some());
-            if !live {
-                continue;
-            }
-            let d = self.p[(i, i)];
-            let local = if i < CORE_DIM {
-                i
-            } else {
-                // Clone block [dtheta_i, dp_i]: map onto the core's attitude and position.
-                let k = (i - CORE_DIM) % CLONE_DIM;
-                if k < 3 {
-                    k
-                } else {
-                    I_P + k - 3
-                }
-            };
-            let limit = if local < 3 {
-                self.config.max_attitude_var_rad2
-            } else if (I_P..I_P + 3).contains(&local) {
-                self.config.max_position_var_m2
+        let att = self.config.max_attitude_var_rad2;
+        let pos = self.config.max_position_var_m2;
+        // Limit of each core component (attitude, position; the others unbounded), and of a
+        // clone block `[dtheta_i, dp_i]` (the core's attitude and position limits).
+        let core_limit = |i: usize| {
+            if i < 3 {
+                att
+            } else if (I_P..I_P + 3).contains(&i) {
+                pos
             } else {
                 f64::INFINITY
-            };
-            if !d.is_finite() || d < 0.0 || d > limit {
-                bad = Some(i);
-                break;
+            }
+        };
+        let unhealthy = |d: f64, limit: f64| !d.is_finite() || d < 0.0 || d > limit;
+        let diag = |i: usize| self.p.get((i, i)).copied().unwrap_or(f64::NAN);
+        let mut bad = (0..CORE_DIM).find(|&i| unhealthy(diag(i), core_limit(i)));
+        if bad.is_none() {
+            for (slot, c) in self.clones.iter().enumerate() {
+                if c.is_none() {
+                    continue;
+                }
+                let base = clone_index(slot);
+                bad = (0..CLONE_DIM).map(|k| base + k).find(|&i| {
+                    let limit = if i - base < 3 { att } else { pos };
+                    unhealthy(diag(i), limit)
+                });
+                if bad.is_some() {
+                    break;
+                }
             }
         }
         match bad {

@@ -31,6 +31,7 @@ impl Ekf {
         if !(sv.is_finite() && sb.is_finite() && sv >= 0.0 && sb >= 0.0) {
             return Err(EstError::NonFiniteInput);
         }
+        self.touch();
         for k in 0..3 {
             self.p[(I_V + k, I_V + k)] += sv * sv;
             self.p[(I_BA + k, I_BA + k)] += sb * sb;
@@ -50,6 +51,7 @@ impl Ekf {
         if !(sigma_rad.is_finite() && sigma_rad >= 0.0) {
             return Err(EstError::NonFiniteInput);
         }
+        self.touch();
         let e = super::state::rot(&self.x.q_nr).transpose() * Vec3::z();
         let add = e * e.transpose() * (sigma_rad * sigma_rad);
         for r in 0..3 {
@@ -71,6 +73,7 @@ impl Ekf {
         if !(delta_m.is_finite() && delta_m >= 0.0) {
             return Err(EstError::NonFiniteInput);
         }
+        self.touch();
         for k in 0..2 {
             let i = super::state::I_P + k;
             let sigma = crate::linalg::sqrt(self.p[(i, i)].max(0.0));

@@ -762,3 +762,73 @@ fn est_8_subset_update_gates_whole_and_fuses_part() {
     assert!(!d.accepted && !d.applied);
     assert_eq!(rejected.state(), base.state());
 }
+
+/// EST-8b (issue 18): a relative pose gated with its innovation kept
+/// (`gate_relative_pose_kept`) gives the gate's decision bit for bit, and fusing the kept
+/// innovation with another set of observed components and added variances
+/// (`fuse_kept_relative_pose`, the kinematic aiding without VO) equals the ungated update of
+/// the measurement so modified, up to rounding; once the filter has changed the kept
+/// innovation is refused as stale, and invalid variances are refused.
+#[test]
+fn est_8b_kept_innovation_fuses_like_the_modified_measurement() {
+    let (ekf, samples, truth_poses, mut rng) = late_vo_drive(8);
+    let mut base = ekf.clone();
+    for (k, s) in samples.iter().enumerate().take(201) {
+        base.propagate(s).unwrap();
+        if k == 100 {
+            base.clone_at(s.t_us).unwrap();
+        }
+    }
+    let m = relative_pose(
+        &truth_poses[100],
+        &truth_poses[200],
+        &[2e-3, 2e-3, 2e-3, 5e-3, 5e-3, 5e-3],
+        [true, true, true, true, true, false],
+        Vector3::new(0.0, 0.003, 0.0),
+        &mut rng,
+    );
+    let gate = base.gate_relative_pose(&m).unwrap();
+    let (kept_gate, kept) = base.gate_relative_pose_kept(&m).unwrap();
+    assert_eq!(kept_gate, gate);
+    // z observed with a variance added, the rotation dropped, slip allowances on x and y.
+    let extra = [0.0, 0.0, 1e-8, 4e-6, 4e-6, 2.5e-7];
+    let observed = [false, false, false, true, true, true];
+    let mut modified = m;
+    modified.observed = observed;
+    for (k, e) in extra.iter().enumerate() {
+        modified.covariance[(k, k)] += e;
+    }
+    let mut reference = base.clone();
+    reference.update_relative_pose(&modified, false).unwrap();
+    let mut fused = base.clone();
+    fused
+        .fuse_kept_relative_pose(&kept, observed, extra)
+        .unwrap();
+    let d = core_diff(fused.state(), reference.state());
+    assert!(d.norm() < 1e-12, "{:?}", d.as_slice());
+    let dp = (fused.covariance() - reference.covariance()).abs().max();
+    assert!(dp < 1e-15, "covariance differs by {dp}");
+    // The filter changed (the fusion itself, or a propagation): the kept innovation is stale.
+    assert_eq!(
+        fused.fuse_kept_relative_pose(&kept, observed, extra),
+        Err(EstError::StaleMeasurement)
+    );
+    let mut propagated = base.clone();
+    propagated.propagate(&samples[201]).unwrap();
+    assert_eq!(
+        propagated.fuse_kept_relative_pose(&kept, observed, extra),
+        Err(EstError::StaleMeasurement)
+    );
+    let mut refused = base.clone();
+    for (obs, ex) in [
+        ([false; 6], extra),
+        (observed, [0.0, 0.0, 0.0, f64::NAN, 0.0, 0.0]),
+        (observed, [0.0, 0.0, 0.0, -1.0, 0.0, 0.0]),
+    ] {
+        assert_eq!(
+            refused.fuse_kept_relative_pose(&kept, obs, ex),
+            Err(EstError::InvalidMeasurement)
+        );
+    }
+    assert_eq!(refused.state(), base.state());
+}
