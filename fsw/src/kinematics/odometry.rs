@@ -493,13 +493,37 @@ impl KinematicOdometry {
                     * (sigma * sigma);
             }
             let m = lsq.wheel_map(i);
-            q += m * s_i * m.transpose();
+            // `M_i S_i M_i'` is symmetric: its upper triangle only, mirrored.
+            let ms = m * s_i;
+            for r in 0..6 {
+                for c in r..6 {
+                    let mut v = 0.0;
+                    for k in 0..3 {
+                        v += ms[(r, k)] * m[(c, k)];
+                    }
+                    q[(r, c)] += v;
+                    if c != r {
+                        q[(c, r)] += v;
+                    }
+                }
+            }
         }
-        // Sensitivity column of the step for one contact-velocity pattern that perturbs several wheels.
+        // Sensitivity column of the step for one contact-velocity pattern that perturbs several
+        // wheels; the outer product's upper triangle, mirrored.
         let mut add = |b: &[Vec3; WHEEL_COUNT], sigma: f64| {
             let t = lsq.solve(b);
-            let col = Vec6::new(t[3], t[4], t[5], t[0], t[1], t[2]);
-            q += col * col.transpose() * (sigma * sigma);
+            let col = [t[3], t[4], t[5], t[0], t[1], t[2]];
+            let s2 = sigma * sigma;
+            for r in 0..6 {
+                let cr = col[r] * s2;
+                for c in r..6 {
+                    let v = cr * col[c];
+                    q[(r, c)] += v;
+                    if c != r {
+                        q[(c, r)] += v;
+                    }
+                }
+            }
         };
         // Common radius scale: all wheels' rolling travel together.
         add(&travels, c.radius_scale_sigma);
