@@ -73,6 +73,8 @@ fuzz_target!(|data: &[u8]| {
                     assert!(steer.is_finite() && steer.abs() <= limits.steer_rad + 1e-9);
                 }
             }
+            // RG2B, half an RG2 period later.
+            nav.zero_velocity_cycle();
         }
         if k % 100 == 0 {
             nav.sun(&SunReading {

@@ -7,8 +7,9 @@
 //! | group | rate (default) | tasks |
 //! |---|---|---|
 //! | RG1 | 200 Hz | `imu`: IMU read and checks; `propagate`: EKF propagation (eq. 26-27) |
-//! | RG2 | 20 Hz | `joints`: joint read and checks; `odometry`: kinematic interval, gate (eq. 46), EKF update or slip vector; `guidance`: carrot and slip loops (eq. 47-49), inverse kinematics, motor command; `telemetry`: status and navigation records |
+//! | RG2 | 20 Hz | `joints`: joint read and checks; `odometry`: kinematic interval, gate (eq. 46), EKF update or slip vector; `guidance`: carrot and slip loops (eq. 47-49), inverse kinematics, motor command |
 //! | RG3 | 5 Hz | `stereo`: capture policy (H04 sec. 2: every 0.25 m or 10 deg of EKF motion, at the latest every 10 s; [`nav::Navigator::capture_due`]), capture trigger and clone (eq. 41); a capture not completed within [`CAPTURE_TIMEOUT_FRAMES`] is timed out |
+//! | RG2B | 20 Hz, half a period after RG2 | `zupt`: the zero-velocity update of a stop the `odometry` task saw, while the command is still zero ([`nav::Navigator::zero_velocity_cycle`]); `telemetry`: status and navigation records |
 //! | RG4 | 0.2 Hz | `sun`: sun read and heading update (RB sec. 5.1); `power`: power-subsystem read and checks, the battery energy used handed to the navigator (V99 sec. 3) |
 //! | background | every frame | stereo polling, rectification of raw pairs, visual odometry work items, VO gate and fusion at the capture clones |
 //!
@@ -74,9 +75,9 @@ pub struct Devices<P: Platform> {
 }
 
 /// Number of rate groups in the flight schedule.
-pub const GROUP_COUNT: usize = 4;
+pub const GROUP_COUNT: usize = 5;
 /// Number of tasks in the flight schedule.
-pub const TASK_COUNT: usize = 9;
+pub const TASK_COUNT: usize = 10;
 
 /// Rate-group table (ARCHITECTURE.md sec. 4). Divisors are relative to the 200 Hz minor frame.
 pub const SCHEDULE_GROUPS: [GroupConfig; GROUP_COUNT] = [
@@ -104,6 +105,16 @@ pub const SCHEDULE_GROUPS: [GroupConfig; GROUP_COUNT] = [
         name: "RG4",
         divisor: 1000,
         offset: 3,
+        enabled: true,
+    },
+    // RG2's rate half a period later (offset 1 + 5): the zero-velocity update of a stop, apart
+    // from the kinematic update of the same stop, and the status telemetry (issue 18: the RG2
+    // release at most 100,000 instructions). Frames of phase 6 run no other
+    // group but RG1 (RG3's and RG4's phases are 2 and 3 modulo 10).
+    GroupConfig {
+        name: "RG2B",
+        divisor: 10,
+        offset: 6,
         enabled: true,
     },
 ];
@@ -141,11 +152,6 @@ pub const SCHEDULE_TASKS: [TaskConfig; TASK_COUNT] = [
         budget_us: 500,
     },
     TaskConfig {
-        name: "telemetry",
-        group: 1,
-        budget_us: 200,
-    },
-    TaskConfig {
         name: "stereo",
         group: 2,
         budget_us: 200,
@@ -159,6 +165,16 @@ pub const SCHEDULE_TASKS: [TaskConfig; TASK_COUNT] = [
         name: "power",
         group: 3,
         budget_us: 100,
+    },
+    TaskConfig {
+        name: "zupt",
+        group: 4,
+        budget_us: 300,
+    },
+    TaskConfig {
+        name: "telemetry",
+        group: 4,
+        budget_us: 200,
     },
 ];
 
@@ -1121,10 +1137,11 @@ impl<P: Platform> TaskSet for Work<'_, P> {
             2 => self.read_joints(tick),
             3 => self.nav.kinematic_cycle(self.fresh.joints.take().as_ref()),
             4 => self.command_motors(),
-            5 => self.send_status(tick),
-            6 => self.trigger_stereo(tick),
-            7 => self.read_sun(tick),
-            8 => self.read_power(tick),
+            5 => self.trigger_stereo(tick),
+            6 => self.read_sun(tick),
+            7 => self.read_power(tick),
+            8 => self.nav.zero_velocity_cycle(),
+            9 => self.send_status(tick),
             _ => {}
         }
     }

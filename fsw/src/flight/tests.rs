@@ -606,6 +606,10 @@ fn nav_3_stop_and_go_without_vo_measures_slip_with_the_imu() {
                 }));
                 driving = nav.guidance_cycle().is_some();
             }
+            // RG2B: half an RG2 period later.
+            if k % 10 == 5 {
+                nav.zero_velocity_cycle();
+            }
         }
         let c = *nav.counters();
         (

@@ -198,10 +198,16 @@ impl Navigator {
         } else if let Some(o) = fused.observed.get_mut(4) {
             *o = false;
         }
+        // Without fusion the gate keeps the interval's innovation, so that the fusion without
+        // VO below does not compute it again (issue 18).
+        let mut kept = None;
         let result = if fusing {
             ekf.update_relative_pose_allowance(&rp, allowance)
         } else {
-            ekf.gate_relative_pose(&rp)
+            ekf.gate_relative_pose_kept(&rp).map(|(d, k)| {
+                kept = Some(k);
+                d
+            })
         };
         // The recorder (late VO replay) keeps the interval only when the live filter fused it:
         // a replay on the VO-corrected filter gates it again, but never fuses an interval the
@@ -290,7 +296,7 @@ impl Navigator {
                     // into the whole segment.
                     self.counters.kin_imu_carried = self.counters.kin_imu_carried.saturating_add(1);
                 } else if vo_lost {
-                    self.fuse_without_vo(&mut rp, d.accepted);
+                    self.fuse_without_vo(&mut rp, kept.as_ref(), d.accepted);
                 } else if self.reject_streak >= self.config.reject_streak_cycles {
                     // The velocity error the last residual implies (translation residual over
                     // the interval's duration).
@@ -307,19 +313,13 @@ impl Navigator {
                 self.ekf_error(e);
             }
         }
+        // A stop's zero-velocity update is due; [`Self::zero_velocity_cycle`] applies it half an
+        // RG2 period later (group RG2B), so that the two EKF updates of a stop never share a
+        // release (issue 18: the RG2 release at most 100,000 instructions).
         if self.is_stopped(j) {
-            if let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) {
-                let result = ekf.update_zero_velocity(t_us);
-                self.recorder.zero_velocity(t_us);
-                match result {
-                    Ok(()) => {
-                        self.counters.zupts = self.counters.zupts.saturating_add(1);
-                        self.cycles_since_zupt = 0;
-                    }
-                    Err(e) => self.ekf_error(e),
-                }
-            }
+            self.zupt_due = true;
         } else {
+            self.zupt_due = false;
             self.cycles_since_zupt = self.cycles_since_zupt.saturating_add(1);
         }
         self.release(Some(start));
@@ -333,6 +333,39 @@ impl Navigator {
                     self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
                 }
             }
+        }
+    }
+
+    /// RG2B, half an RG2 period after [`Self::kinematic_cycle`]: the zero-velocity update
+    /// (`v_N = 0`, [`crate::estimation::Ekf::update_zero_velocity`], at the filter's current
+    /// time) of the stop the last kinematic cycle saw (its joint reading within
+    /// [`NavConfig::stopped_wheel_rate_rad_s`] with a zero command). It is applied only while
+    /// the command is still zero: guidance may have started a drive in the meantime, and then
+    /// the cycle counts as one without a stop. Nothing is due after a cycle without a joint
+    /// reading, an odometry error or a cycle that kept its interval open.
+    pub fn zero_velocity_cycle(&mut self) {
+        if !core::mem::take(&mut self.zupt_due) {
+            return;
+        }
+        let still = self.command.x_dot_m_s == 0.0
+            && self.command.y_dot_m_s == 0.0
+            && self.command.yaw_rate_rad_s == 0.0;
+        if !still {
+            self.cycles_since_zupt = self.cycles_since_zupt.saturating_add(1);
+            return;
+        }
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        let t_us = ekf.time_us();
+        let result = ekf.update_zero_velocity(t_us);
+        self.recorder.zero_velocity(t_us);
+        match result {
+            Ok(()) => {
+                self.counters.zupts = self.counters.zupts.saturating_add(1);
+                self.cycles_since_zupt = 0;
+            }
+            Err(e) => self.ekf_error(e),
         }
     }
 
@@ -379,7 +412,16 @@ impl Navigator {
     /// [`NavConfig::vo_loss_drift_fraction`] of it otherwise (`Ekf::inflate_position`), so that
     /// the position uncertainty honestly covers a rover that spins its wheels in place and
     /// fault protection can refuse an arrival it cannot support.
-    fn fuse_without_vo(&mut self, rp: &mut RelativePose, accepted: bool) {
+    ///
+    /// `kept`: the interval's innovation from the gate ([`Ekf::gate_relative_pose_kept`]),
+    /// fused with the allowance without computing `H P H'` again; without it (or when the
+    /// filter changed since) the interval is fused from scratch.
+    fn fuse_without_vo(
+        &mut self,
+        rp: &mut RelativePose,
+        kept: Option<&crate::estimation::KeptRelativePose>,
+        accepted: bool,
+    ) {
         let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
             return;
         };
@@ -388,20 +430,35 @@ impl Navigator {
         let yaw = libm::fabs(crate::estimation::state::log_quat(&rp.rot_0_1).z);
         let f = self.config.vo_loss_slip_fraction;
         let sigma_z = 0.2 * step + 5.0e-4;
+        // Added variances of [rx, ry, rz, x, y, z].
+        let extra = [
+            0.0,
+            0.0,
+            (f * yaw) * (f * yaw) + 1.0e-8,
+            (f * step) * (f * step),
+            (f * step) * (f * step),
+            sigma_z * sigma_z,
+        ];
         if let Some(o) = rp.observed.get_mut(5) {
             *o = true;
         }
-        rp.covariance[(5, 5)] += sigma_z * sigma_z;
-        rp.covariance[(3, 3)] += (f * step) * (f * step);
-        rp.covariance[(4, 4)] += (f * step) * (f * step);
-        rp.covariance[(2, 2)] += (f * yaw) * (f * yaw) + 1.0e-8;
+        for (k, e) in extra.iter().enumerate() {
+            rp.covariance[(k, k)] += e;
+        }
         if self.config.vo_loss_translation_only {
             for o in rp.observed.iter_mut().take(3) {
                 *o = false;
             }
         }
         self.recorder.relative_pose(rp, false);
-        if let Err(e) = ekf.update_relative_pose(rp, false) {
+        let result = match kept {
+            Some(k) => match ekf.fuse_kept_relative_pose(k, rp.observed, extra) {
+                Err(EstError::StaleMeasurement) => ekf.update_relative_pose(rp, false).map(|_| ()),
+                r => r,
+            },
+            None => ekf.update_relative_pose(rp, false).map(|_| ()),
+        };
+        if let Err(e) = result {
             self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
             self.ekf_error(e);
             return;

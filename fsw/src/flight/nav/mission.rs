@@ -235,6 +235,7 @@ impl Mission {
             detour_factor: 1.0,
             localization_s: 0.0,
             localization_energy_j: 0.0,
+            priority_margin: 0.0,
         },
         budget: MissionBudget {
             energy_j: 0.0,

@@ -12,6 +12,9 @@
 //!   residual). The interval starts at an EKF clone and ends at the current state.
 //!   [`Navigator::guidance_cycle`] then runs guidance (eq. 47-49) on the EKF pose and the slip
 //!   vector, and inverse kinematics (eq. 16-25) gives the motor command.
+//! - **RG2B** [`Navigator::zero_velocity_cycle`], half an RG2 period later: the zero-velocity
+//!   update of a stop the kinematic cycle saw (apart from RG2 so that a stop's two EKF updates
+//!   never share a release).
 //! - **RG3** [`Navigator::capture_due`], [`Navigator::capture_started`]: a stereo capture is
 //!   due every [`NavConfig::vo_capture_distance_m`] of EKF travel or
 //!   [`NavConfig::vo_capture_angle_rad`] of rotation, at the latest after
@@ -638,6 +641,8 @@ pub struct Navigator {
     blind_travel_m: f64,
     blind_hold_left: u32,
     cycles_since_zupt: u32,
+    /// The last kinematic cycle saw a stop: [`Self::zero_velocity_cycle`] applies its ZUPT.
+    zupt_due: bool,
     /// The last EKF error (telemetry: what the `ekf_errors` counter counted last).
     last_ekf_error: Option<EstError>,
     /// Goal-directed driving with hazard avoidance (built in place by [`Self::start_vo`]).
@@ -740,6 +745,7 @@ impl Navigator {
         blind_travel_m: 0.0,
         blind_hold_left: 0,
         cycles_since_zupt: u32::MAX,
+        zupt_due: false,
         last_ekf_error: None,
         hazard: InPlace::unbuilt(hazard_nav::HazardNav::EMPTY),
         loc: loc_nav::LocSlot::NONE,
@@ -828,6 +834,7 @@ impl Navigator {
         self.blind_travel_m = 0.0;
         self.blind_hold_left = 0;
         self.cycles_since_zupt = u32::MAX;
+        self.zupt_due = false;
         self.last_ekf_error = None;
         Ok(())
     }
