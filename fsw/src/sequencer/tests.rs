@@ -132,7 +132,7 @@ fn seq_1_repairs_keep_every_constraint_on_random_plans() {
                     TargetStatus::Dropped(_) => {
                         assert!(!planned);
                         assert!(
-                            seq.insert(&s, seq.plan(), i as u8).is_err(),
+                            seq.insert(&s, seq.plan(), i as u8, false).is_err(),
                             "case {case}: dropped {i} fits"
                         );
                         dropped_total += 1;
@@ -341,11 +341,13 @@ fn seq_6_a_penalised_high_priority_target_displaces_the_lowest() {
     seq.set_leg_penalty(0, 40.0).unwrap();
     // Energy of [1, 0] (no penalty: target 0 is not first) with a little to spare.
     let mut timeline = Vec::new();
-    seq.evaluate(&situation(1e9), &[1, 0], Some(&mut timeline))
+    seq.evaluate(&situation(1e9), &[1, 0], Some(&mut timeline), false)
         .unwrap();
     let need = timeline[1].energy_j;
     // Target 0 alone, first with its penalty, needs more than that.
-    assert!(seq.evaluate(&situation(need * 1.02), &[0], None).is_err());
+    assert!(seq
+        .evaluate(&situation(need * 1.02), &[0], None, false)
+        .is_err());
     let tight = situation(need * 1.02);
     seq.replan(&tight).unwrap();
     assert_eq!(seq.plan(), &[1, 0]);
@@ -355,4 +357,44 @@ fn seq_6_a_penalised_high_priority_target_displaces_the_lowest() {
     );
     assert_eq!(seq.check(&tight), Ok(()));
     independent_check(&seq, &tight).unwrap();
+}
+
+/// SEQ-7 (priority margin): a less important target on the way to a more important one is not
+/// put first when the important one then fits only without the margin (a detour longer than
+/// planned would cost it): with energy for both in that order but not for the margin, the less
+/// important target is dropped. Without the margin (`priority_margin` 0) both are planned, the
+/// less important first. The important target itself may still go behind a less important one
+/// when that is its only way (SEQ-6).
+#[test]
+fn seq_7_a_less_important_target_first_needs_the_priority_margin() {
+    let targets = [target(20.0, 0.0, 3), target(10.0, 0.5, 1)];
+    let mut bare = ResourceModel::rocky8();
+    bare.priority_margin = 0.0;
+    let mut seq = Sequencer::new(&targets, bare).unwrap();
+    let mut timeline = Vec::new();
+    seq.evaluate(&situation(1e9), &[1, 0], Some(&mut timeline), false)
+        .unwrap();
+    let need = timeline[1].energy_j;
+    let tight = situation(need * 1.1);
+    // The other order needs more (back from the far target), and more than there is.
+    assert!(seq.evaluate(&tight, &[0, 1], None, false).is_err());
+    seq.replan(&tight).unwrap();
+    assert_eq!(seq.plan(), &[1, 0]);
+    let mut seq = Sequencer::new(&targets, ResourceModel::rocky8()).unwrap();
+    assert!(need * 1.1 < need * (1.0 + ResourceModel::rocky8().priority_margin));
+    seq.replan(&tight).unwrap();
+    assert_eq!(seq.plan(), &[0]);
+    assert_eq!(
+        seq.status(1),
+        Some(TargetStatus::Dropped(DropReason::Energy))
+    );
+    assert_eq!(seq.check(&tight), Ok(()));
+    independent_check(&seq, &tight).unwrap();
+    // With energy for the margin, the way past the less important target is planned again.
+    let ample = situation(need * 1.6);
+    seq.replan(&ample).unwrap();
+    assert_eq!(seq.plan(), &[1, 0]);
+    let mut bad = ResourceModel::rocky8();
+    bad.priority_margin = f64::NAN;
+    assert!(seq.set_model(bad).is_err());
 }
