@@ -32,6 +32,8 @@ const GOAL_PROPAGATE: u64 = 15_000;
 /// Inverse kinematics per RG2 cycle (issue 18).
 const GOAL_IK: u64 = 10_000;
 const GOAL_RG2_FRAME: u64 = 100_000;
+/// The minor frame, s.
+const FRAME_S: f64 = 0.005;
 const GOAL_VO: u64 = 60_000_000;
 const GOAL_STACK: u64 = 32 * 1024;
 /// Least stack-region headroom every measured phase must leave (enforced): a peak that reaches
@@ -479,7 +481,15 @@ fn groups(m: &Measured) -> Vec<Group> {
             period_s: 0.05,
             insns: exec_group_insns(m, "RG2"),
             content: "joints; kinematic odometry, gate, EKF update or slip vector, clone and \
-                      release; guidance, inverse kinematics, motor command; telemetry"
+                      release; guidance, inverse kinematics, motor command"
+                .into(),
+        },
+        Group {
+            name: "RG2B",
+            period_s: 0.05,
+            insns: exec_group_insns(m, "RG2B"),
+            content: "half an RG2 period later: the zero-velocity update of a stop (apart from \
+                      the stop's kinematic update); status and navigation telemetry"
                 .into(),
         },
         Group {
@@ -750,7 +760,7 @@ fn path_table(d: &mut String, sr: &StackReport, p: &stack::DeepPath) -> Result<(
     Ok(())
 }
 
-const TASK_DOC: [(&str, &str, &str); 16] = [
+const TASK_DOC: [(&str, &str, &str); 17] = [
     (
         "ekf_propagate",
         "`Ekf::propagate`",
@@ -770,6 +780,11 @@ const TASK_DOC: [(&str, &str, &str); 16] = [
         "ekf_clone",
         "`Ekf::clone_at`",
         "RG2 interval start and RG3 capture",
+    ),
+    (
+        "ekf_gate_fuse_without_vo",
+        "`Ekf::gate_relative_pose_kept` then `Ekf::fuse_kept_relative_pose` (every other kinematic interval of the tape instead of the gate and the update)",
+        "RG2 without VO: the interval gated at its own covariance, then fused with z observed and the slip allowances from the kept innovation (`Navigator::fuse_without_vo`; a gate and a whole update before issue 18's third pass)",
     ),
     (
         "forward_kinematics",
@@ -1115,7 +1130,7 @@ fn document(
     )?;
     writeln!(
         d,
-        "Response-time analysis (rate-monotonic fixed priorities RG1 > RG2 > RG3 > RG4 > VO > HAZ, \
+        "Response-time analysis (rate-monotonic fixed priorities RG1 > RG2 > RG2B > RG3 > RG4 > VO > HAZ, \
          deadline = period, Joseph-Pandya iteration `R = C + sum over higher priorities of \
          ceil(R / T_j) C_j`). The cyclic executive runs the groups in order inside a 5 ms frame \
          and hands the background a quantum per frame, so this preemptive model is the \
@@ -1150,14 +1165,16 @@ fn document(
     writeln!(
         d,
         "\nWorst minor frame of the groups (RG1 + RG2): {} instructions, {} / {} of the 5 ms \
-         frame ({:.1} % / {:.1} %). The largest background slice (VO work items up to \
-         the cost quantum, or 16 operations of a late VO update's replay) adds {} instructions ({} / {}): with it the frame \
-         takes {:.1} % / {:.1} % of the period.\n",
+         frame ({:.1} % / {:.1} %). The largest background slice (work items until their \
+         costs reach the quantum of {} units, the last one past it by up to its own cost; or \
+         16 operations of a late VO update's replay) adds {} instructions ({} / {}): with it \
+         the frame takes {:.1} % / {:.1} % of the period.\n",
         thousands(worst_frame),
         fmt_time(secs(worst_frame, CPI[0])),
         fmt_time(secs(worst_frame, CPI[1])),
         100.0 * secs(worst_frame, CPI[0]) / 0.005,
         100.0 * secs(worst_frame, CPI[1]) / 0.005,
+        m.background_quantum,
         thousands(slice),
         fmt_time(secs(slice, CPI[0])),
         fmt_time(secs(slice, CPI[1])),
@@ -1380,21 +1397,30 @@ fn document(
         thousands(ik),
         pass(ik <= GOAL_IK)
     )?;
-    let rg2_groups = groups[0].insns + groups[1].insns;
+    let rg2 = groups[1].insns;
     writeln!(
         d,
-        "| whole RG2 frame <= {} instructions, the groups' tasks (RG1 + RG2) | {} | {} |",
+        "| RG2 release <= {} instructions (issue 18: the executive's largest RG2 time on the replay) | {} | {} |",
         thousands(GOAL_RG2_FRAME),
-        thousands(rg2_groups),
-        pass(rg2_groups <= GOAL_RG2_FRAME)
+        thousands(rg2),
+        pass(rg2 <= GOAL_RG2_FRAME)
     )?;
-    let rg2_now = m.frame("RG1+RG2").max;
+    // The largest frame measured on the replay (any groups, with its background slice) against
+    // the 5 ms minor frame at CPI 2: a frame over it is a cycle slip on a CPU at that CPI.
+    let (worst_name, worst) = m
+        .frames
+        .iter()
+        .map(|(name, s)| (name.as_str(), s.max))
+        .max_by_key(|(_, v)| *v)
+        .unwrap_or(("none", 0));
+    let worst_pct = 100.0 * secs(worst, CPI[1]) / FRAME_S;
     writeln!(
         d,
-        "| whole RG2 frame <= {} instructions, with its background slice (replay) | {} | {} |",
-        thousands(GOAL_RG2_FRAME),
-        thousands(rg2_now),
-        pass(rg2_now <= GOAL_RG2_FRAME)
+        "| largest minor frame with its background slice (replay, {worst_name}) within the 5 ms period at CPI {:.1} | {} ({:.1} %) | {} |",
+        CPI[1],
+        thousands(worst),
+        worst_pct,
+        pass(worst_pct <= 100.0)
     )?;
     let vo = m.task("vo_update").max;
     writeln!(
@@ -1479,6 +1505,7 @@ fn model_cpi(group: &str, loops: &[GroupCost]) -> f64 {
     let parts: &[usize] = match group {
         "RG1" => &[4, 6, 8],
         "RG2" => &[4, 5, 6, 7, 8],
+        "RG2B" => &[4, 6, 8],
         "RG3" | "SEQ" => &[4, 6, 8],
         "RG4" => &[4, 6, 7, 8],
         "VO" => &[0, 1, 8],

@@ -40,7 +40,7 @@ const MAX_VO_ITEMS: usize = 8192;
 pub const VO_FEATURES: usize = 150;
 
 /// Names of the measured tasks, in report order.
-const TASKS: [&str; 15] = [
+const TASKS: [&str; 16] = [
     "ekf_propagate",
     "ekf_gate_relative_pose",
     "ekf_update_relative_pose",
@@ -53,6 +53,7 @@ const TASKS: [&str; 15] = [
     "hazard_map",
     "roverbug_plan",
     "rectify_pair",
+    "ekf_gate_fuse_without_vo",
     "localization_map",
     "localize",
     "sequencer_replan",
@@ -69,6 +70,7 @@ const VO: usize = 8;
 const HAZARD_MAP: usize = 9;
 const PLAN: usize = 10;
 const RECTIFY: usize = 11;
+const FUSE_WITHOUT_VO: usize = 12;
 
 /// Largest number of work items of one hazard map (far above the mapper's bound).
 const MAX_MAP_ITEMS: usize = 4096;
@@ -173,6 +175,9 @@ pub struct Bench {
     started: bool,
     prev_joints: Option<JointState>,
     kin_clone: Option<CloneHandle>,
+    /// Kinematic intervals tested: every other one runs the fusion without VO instead of the
+    /// gate and the update.
+    kin_intervals: u32,
     capture: Option<CloneHandle>,
     prev_capture: Option<CloneHandle>,
     stats: [Stats; TASKS.len()],
@@ -269,6 +274,7 @@ impl Bench {
             started: false,
             prev_joints: None,
             kin_clone: None,
+            kin_intervals: 0,
             capture: None,
             prev_capture: None,
             stats: [Stats::new(); TASKS.len()],
@@ -411,7 +417,25 @@ impl Bench {
         }
         if let Some(c0) = self.kin_clone.take() {
             if let Ok(m) = self.kin.take() {
-                if m.t0_us == c0.t_us() {
+                self.kin_intervals = self.kin_intervals.wrapping_add(1);
+                if m.t0_us == c0.t_us() && self.kin_intervals % 2 == 0 {
+                    // The navigator without VO: the gate keeps the innovation, then the
+                    // interval is fused with z observed and slip allowances added
+                    // (`Navigator::fuse_without_vo`, `NavConfig::rocky8` fractions).
+                    let ekf = &mut *self.ekf;
+                    let step = m.trans_0_1_m.norm();
+                    let extra = [0.0, 0.0, 1.0e-8, 0.09 * step * step, 0.09 * step * step, {
+                        let s = 0.2 * step + 5.0e-4;
+                        s * s
+                    }];
+                    let mut observed = m.observed;
+                    observed[5] = true;
+                    let (r, n) = meter.measure(|| {
+                        ekf.gate_relative_pose_kept(&m)
+                            .and_then(|(_, k)| ekf.fuse_kept_relative_pose(&k, observed, extra))
+                    });
+                    self.add(FUSE_WITHOUT_VO, n, r.is_ok());
+                } else if m.t0_us == c0.t_us() {
                     let ekf = &*self.ekf;
                     let (r, n) = meter.measure(|| ekf.gate_relative_pose(&m));
                     self.add(GATE, n, r.is_ok());

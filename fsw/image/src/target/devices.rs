@@ -330,9 +330,18 @@ impl Clock for SystickClock {
             let pending = SCB::is_pendst_pending();
             let current = SYST::get_current();
             let after = self.ticks.load(Ordering::Relaxed);
+            let into_frame = u64::from(self.reload.saturating_sub(current));
+            if !pending && into_frame <= RELOAD_WINDOW_COUNTS && before == after {
+                // Just after a reload with no tick pending: either the handler already counted
+                // it or QEMU has not raised it yet (see below). Wait until the window has
+                // passed and read again (bounded; the wait is rare and deterministic).
+                for _ in 0..RELOAD_WINDOW_SPIN {
+                    cortex_m::asm::nop();
+                }
+                continue;
+            }
             if before == after && current <= first {
                 let ticks = u64::from(before) + u64::from(pending);
-                let into_frame = u64::from(self.reload.saturating_sub(current));
                 let mut value = ticks * u64::from(self.reload) + into_frame;
                 // QEMU raises the SysTick pending bit when its timer callback runs, a few
                 // instructions after the counter has reloaded: a read in that window sees the
@@ -352,6 +361,11 @@ impl Clock for SystickClock {
         u64::from(CORE_CLOCK_HZ)
     }
 }
+
+/// SysTick counts after a reload in which QEMU may not have raised the pending bit yet.
+const RELOAD_WINDOW_COUNTS: u64 = 2;
+/// Wait (no-operations) that takes a read past that window.
+const RELOAD_WINDOW_SPIN: u32 = 128;
 
 /// IMU of a rover at rest on level ground.
 pub struct StillImu {

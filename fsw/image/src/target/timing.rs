@@ -273,7 +273,8 @@ impl core::fmt::Display for FrameName {
                 if !first {
                     f.write_str("+")?;
                 }
-                write!(f, "RG{}", g + 1)?;
+                let name = fsw::flight::SCHEDULE_GROUPS.get(g).map_or("?", |c| c.name);
+                f.write_str(name)?;
                 first = false;
             }
         }
