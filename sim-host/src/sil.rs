@@ -1183,19 +1183,17 @@ them on every seed:
 - **SIL-SEQ-1** (the reorder of V99 Fig. 3) **and SIL-SEQ-2** (the least important target, T2,
   dropped for energy), **SIL-HAZ-3** (no truth-side collision): open since issue 18 (session
   12). They depend on which way RoverBug goes round an obstacle it learns on the way, and that
-  choice changes with the timing of the hazard maps, which every change of the background's
-  cost moves. Measured on seeds 1-3 with the code of issue 17 under a schedule change only (the
-  Forstner work cost, identical features) and with the code of issue 18:
-  SEQ-1 reorders on seed 1 only with the old code (seeds 2 and 3 go round the wall's near end and
-  reach T0 first: order 0, 2, 1, no reorder needed) and on none with the new one, all three
-  targets visited on every run (truth miss at most 0.24 m); SEQ-2 drops T2 on seed 1 only with the
-  old code (seed 2 drops T1 and visits T0 and T2, an equally valid choice on that route), and with
-  the new code drops T1 on seed 1 and both T1 and T2 on seeds 2 and 3 with about 24 kJ of the
-  54 kJ left (the empty-plan weakness noted in `docs/sequencer.md`: a target dropped on a
-  transient leg estimate is not reconsidered); `unreachable` (HAZ-3) touches a ring rock on seed
-  1 with both (1 contact old, 2 new) and ends `blocked` instead of `unreachable` on one of seeds
-  2 and 3 with both. The gaze turn's swept corners near the ring (`docs/hazard-navigation.md`)
-  and the planner's choice of wall end are the flight software to fix; the thresholds stay.
+  choice changes with the timing of the hazard maps and with rounding-level changes of the
+  estimate. With issue 18's third pass (the ZUPT in its own phase, RG2B) seed 1 goes round the
+  wall's east end: SEQ-1 reorders to T1, T2, T0 and visits all three; SEQ-2 first lost T0 there
+  (after T1 the calibrated detour factor of 2.19 priced it out, and T2 was visited instead), which
+  the sequencer's priority margin now prevents (`docs/sequencer.md`): T2 is dropped for energy,
+  T0 and T1 visited. Seeds 2 and 3 go round the west end to T0 first: SEQ-1 visits all three
+  without a reorder (none needed), SEQ-2 visits T0 and drops T1 and T2 with about 26 kJ of the
+  54 kJ left; `unreachable` (HAZ-3) has no contact on seeds 1 and 2 and ends `blocked` with 2
+  contacts on seed 3, as before. The gaze turn's swept corners near the ring
+  (`docs/hazard-navigation.md`) and the planner's choice of wall end are the flight software to
+  fix; these stay `open` until they hold on every seed.
 - **SIL-NAV-2**'s EKF goal on `dunes-long` flips with rounding-level changes: seed 1 gave 0.33 %
   with the expanded Joseph update and 20 % (24 VO failures) with the Cholesky downdate of issue
   18, but on seeds 2 and 3 both forms give the same (6.6 / 6.3 % and 10.0 / 11.3 %) and the code
