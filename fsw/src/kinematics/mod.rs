@@ -11,6 +11,8 @@
 //! - [`contact`]: contact-angle kinematic estimation (V99 sec. 6, Balaram 1999): body
 //!   displacement and the six wheel/terrain contact angles per step, optionally with the gyro.
 //! - [`planar`]: the common planar (2D) model for comparison (H04 Fig. 17).
+//! - [`track`]: track memory, the body heave from the front axles' remembered path (V99 sec. 6,
+//!   the common mode of the contact angles).
 //!
 //! Frames: rover frame `R` x forward, y right, z down (the base frame of the D-H table, no
 //! extra transform is needed). Body rates are ordered `[x_dot, y_dot, z_dot, roll, pitch, yaw]`:
@@ -27,6 +29,7 @@ pub mod inverse;
 pub mod jacobian;
 pub mod odometry;
 pub mod planar;
+pub mod track;
 
 #[cfg(test)]
 mod tests;

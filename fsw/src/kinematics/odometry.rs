@@ -173,6 +173,7 @@ pub struct KinematicOdometry {
     contact_rad: [f64; WHEEL_COUNT],
     window: SuspensionWindow,
     contact_trans_0_k_m: Vec3,
+    axles_m: [Vec3; WHEEL_COUNT],
 }
 
 fn skew(v: &Vec3) -> Mat3 {
@@ -204,6 +205,7 @@ impl KinematicOdometry {
             contact_rad: [0.0; WHEEL_COUNT],
             window: SuspensionWindow::new(),
             contact_trans_0_k_m: crate::types::VEC3_ZERO,
+            axles_m: [crate::types::VEC3_ZERO; WHEEL_COUNT],
         }
     }
 
@@ -213,6 +215,14 @@ impl KinematicOdometry {
     /// persist across intervals ([`Self::start`]).
     pub fn contact_angles_rad(&self) -> [f64; WHEEL_COUNT] {
         self.contact_rad
+    }
+
+    /// Axle centres (origins of the contact frames `C_i`, m, `R`, index `wheel - 1`) at the
+    /// suspension state of the last applied step (the mean of its two readings; H04 Table 1,
+    /// eq. 12). All zero before the first step. For the track memory of the 3D kinematic dead
+    /// reckoning ([`super::track`]).
+    pub fn axle_centres_m(&self) -> [Vec3; WHEEL_COUNT] {
+        self.axles_m
     }
 
     /// Reset the contact-angle estimates to 0 (contacts below the axles).
@@ -362,6 +372,7 @@ impl KinematicOdometry {
             }
         }
         self.compose(&step, &q);
+        self.axles_m = frames.map(|f| f.contact.pos);
         if let Some((_, _, _, angles)) = contact {
             self.contact_rad = angles;
         }

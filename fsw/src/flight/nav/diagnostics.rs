@@ -5,11 +5,12 @@
 //! | trajectory | translation | attitude |
 //! |---|---|---|
 //! | `kin2d` | planar wheel odometry | planar wheel odometry |
-//! | `kin3d` | rocker-bogie kinematics (eq. 15) | EKF attitude at each interval start |
+//! | `kin3d` | contact-angle kinematics (V99 sec. 6), its heave from the track memory | EKF attitude at each interval start |
 //! | `dr` | planar wheel odometry step in `R` | gyro integration from the aligned attitude, alignment bias (RB sec. 6 "dead reckoning") |
 //! | `vo` | VO relative poses chained | VO relative poses chained |
 
 use super::PoseEstimate;
+use crate::kinematics::track::{tilt_step, TrackConfig, TrackMemory};
 use crate::kinematics::{wheel_contact_points, RoverGeometry, SuspensionState};
 use crate::types::{Quat, RelativePose, Vec3};
 use rover_hal::{ImuSample, WHEEL_COUNT};
@@ -21,8 +22,11 @@ const DR_MAX_GAP_US: u64 = 50_000;
 /// The diagnostic trajectories of the navigator (all in `N`, m, rotations `R` to `N`).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Trajectories {
-    /// 3D kinematics: eq. 15 translation rotated by the EKF attitude at each interval start.
+    /// 3D kinematics: the contact-angle translation (eq. 15 without it) rotated by the EKF
+    /// attitude at each interval start, its vertical from the track memory.
     pub kin3d: PoseEstimate,
+    /// The front axles' remembered paths for `kin3d`'s heave ([`crate::kinematics::track`]).
+    pub track: TrackMemory,
     /// Planar wheel odometry `[north m, east m, yaw rad]`.
     pub kin2d: [f64; 3],
     /// Dead reckoning: gyro attitude with the wheel odometry step (RB's comparison baseline).
@@ -45,6 +49,13 @@ impl Trajectories {
     /// allocated navigator before its initialisation writes [`Self::new`]'s).
     pub const EMPTY: Self = Self {
         kin3d: PoseEstimate::EMPTY,
+        track: TrackMemory::new(TrackConfig {
+            enabled: false,
+            spacing_m: 0.0,
+            lateral_tolerance_m: 0.0,
+            gain: 0.0,
+            max_step_m: 0.0,
+        }),
         kin2d: [0.0; 3],
         dr: PoseEstimate::EMPTY,
         dr_bias: crate::types::VEC3_ZERO,
@@ -55,12 +66,13 @@ impl Trajectories {
     };
 
     /// All trajectories at `p0` (m, `N`) with heading `yaw0` (rad), the planar model on the
-    /// contact points of `geometry`.
-    pub fn new(p0: Vec3, yaw0: f64, geometry: &RoverGeometry) -> Self {
+    /// contact points of `geometry`, the 3D kinematics' track memory tuned by `track`.
+    pub fn new(p0: Vec3, yaw0: f64, geometry: &RoverGeometry, track: TrackConfig) -> Self {
         let q0 = Quat::from_euler_angles(0.0, 0.0, yaw0);
         let pose = PoseEstimate { p_n: p0, q_nr: q0 };
         Self {
             kin3d: pose,
+            track: TrackMemory::new(track),
             kin2d: [p0.x, p0.y, yaw0],
             dr: pose,
             dr_bias: Vec3::zeros(),
@@ -76,6 +88,7 @@ impl Trajectories {
     /// reckoning keeps the aligned gyro bias `b_g` (rad/s) for the rest of the drive.
     pub fn aligned(&mut self, pose: PoseEstimate, b_g: Vec3, t_us: u64) {
         self.kin3d = pose;
+        self.track.reset();
         self.dr = pose;
         self.dr_bias = b_g;
         self.dr_t_us = Some(t_us);
@@ -119,10 +132,31 @@ impl Trajectories {
 
     /// RG2: the kinematic interval's translation `trans_0_1_m` (m, `R` at its start: the
     /// contact-angle estimator's, V99 sec. 6, or eq. 15's) rotated by the EKF attitude `q0` of
-    /// the start; the attitude becomes the EKF's current `q_now`.
-    pub fn kinematic_step(&mut self, q0: &Quat, trans_0_1_m: &Vec3, q_now: &Quat) {
-        self.kin3d.p_n += q0.to_rotation_matrix() * trans_0_1_m;
+    /// the start; the attitude becomes the EKF's current `q_now`. With the track memory on
+    /// ([`TrackConfig::enabled`]) and `axles_r_m` (the axle centres of the interval's last
+    /// step, m, `R`), the step's vertical moves towards the height of the ground the front
+    /// wheels already rolled over, at the step's 3D length ([`tilt_step`]); the front axles
+    /// then extend the remembered paths.
+    pub fn kinematic_step(
+        &mut self,
+        q0: &Quat,
+        trans_0_1_m: &Vec3,
+        q_now: &Quat,
+        axles_r_m: Option<&[Vec3; WHEEL_COUNT]>,
+    ) {
+        let mut t = q0.to_rotation_matrix() * trans_0_1_m;
+        let r_now = q_now.to_rotation_matrix().into_inner();
+        if let Some(axles) = axles_r_m {
+            let predicted = self.kin3d.p_n + t;
+            if let Some(dz) = self.track.correction(&predicted, &r_now, axles) {
+                t = tilt_step(&t, dz);
+            }
+        }
+        self.kin3d.p_n += t;
         self.kin3d.q_nr = *q_now;
+        if let Some(axles) = axles_r_m {
+            self.track.record(&self.kin3d.p_n, &r_now, axles);
+        }
     }
 
     /// Background: a VO relative pose between two keyframes; `anchor` is the EKF pose of its

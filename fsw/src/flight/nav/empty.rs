@@ -43,6 +43,13 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
             zero_mean: false,
         },
     },
+    track: TrackConfig {
+        enabled: false,
+        spacing_m: 0.0,
+        lateral_tolerance_m: 0.0,
+        gain: 0.0,
+        max_step_m: 0.0,
+    },
     vo: VoConfig::DEFAULT,
     vo_enabled: false,
     vo_warn_d2: 0.0,

@@ -139,8 +139,15 @@ impl Navigator {
             }
         }
         if let Ok((q0, _)) = ekf.clone_pose(start) {
+            // The track memory needs the contact-angle translation (eq. 15's has no heave of
+            // its own to correct, and the EKF's is not this trajectory's).
+            let axles = self
+                .config
+                .odometry
+                .contact_translation
+                .then(|| self.odometry.axle_centres_m());
             self.traj
-                .kinematic_step(&q0, &contact_translation, &ekf.state().q_nr);
+                .kinematic_step(&q0, &contact_translation, &ekf.state().q_nr, axles.as_ref());
             if let Ok((_, p0)) = ekf.clone_pose(start) {
                 let ekf_step = (ekf.state().p_n - p0).norm();
                 let vo_fused = core::mem::take(&mut self.vo_fused_since_interval);

@@ -73,6 +73,7 @@ use crate::guidance::{
     Guidance, GuidanceCommand, GuidanceConfig, GuidanceError, Path, Point2, Pose2, SlipVector,
 };
 use crate::kinematics::inverse::inverse_kinematics_scaled;
+use crate::kinematics::track::TrackConfig;
 use crate::kinematics::{
     planar_pose_increment, wheel_contact_points, ContactAngles, KinematicOdometry, KinematicsError,
     OdometryConfig, RoverGeometry, SuspensionState, VehicleCommand, ROCKY8,
@@ -121,6 +122,10 @@ pub struct NavConfig {
     pub accel_bias_sigma_m_s2: f64,
     /// Kinematic odometry noise model.
     pub odometry: OdometryConfig,
+    /// Track memory of the 3D kinematic dead reckoning ([`Navigator::kin3d`]): the body's
+    /// heave from the path of the front axles ([`crate::kinematics::track`]). Used only with
+    /// the contact-angle translation ([`OdometryConfig::contact_translation`]).
+    pub track: TrackConfig,
     /// Visual odometry tuning.
     pub vo: VoConfig,
     /// Run visual odometry on stereo captures.
@@ -317,6 +322,7 @@ impl NavConfig {
                 contact_translation: true,
                 ..OdometryConfig::default()
             },
+            track: TrackConfig::DEFAULT,
             // The EKF prior predicts each feature within a few pixels over a 1 s step, so the
             // tracking window is 8 px, not the stand-alone default of 24 px (9x less work), and
             // the stereo search of a tracked feature covers +-8 px around the disparity of the
@@ -810,7 +816,7 @@ impl Navigator {
         self.gate = GateStatus::default();
         self.command = VehicleCommand::default();
         self.last_guidance = None;
-        self.traj = Trajectories::new(p0, config.initial_yaw_rad, &config.geometry);
+        self.traj = Trajectories::new(p0, config.initial_yaw_rad, &config.geometry, config.track);
         self.vo_quality = None;
         self.last_vo_error = None;
         self.vo_gate = VoGateStatus::default();
