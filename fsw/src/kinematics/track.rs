@@ -129,11 +129,12 @@ impl SidePath {
         if self.count < 2 {
             return None;
         }
-        let (first, last) = (self.oldest(), self.count - 2);
-        let mut k = self.cursor.get(w).copied()?.clamp(first, last);
+        let (first, last) = (self.oldest(), self.count.saturating_sub(2));
+        // `max` then `min`, not `clamp` (its bound assertion is a panic path).
+        let mut k = self.cursor.get(w).copied()?.max(first).min(last);
         for _ in 0..=TRACK_SEARCH {
             let a = self.sample(k)?;
-            let b = self.sample(k + 1)?;
+            let b = self.sample(k.saturating_add(1))?;
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
             let len2 = dx * dx + dy * dy;
             if len2 <= 0.0 {
@@ -142,9 +143,9 @@ impl SidePath {
             let (qx, qy) = (q.x - a[0], q.y - a[1]);
             let u = (qx * dx + qy * dy) / len2;
             let step = if u < 0.0 && k > first {
-                Some(k - 1)
+                Some(k.saturating_sub(1))
             } else if u > 1.0 && k < last {
-                Some(k + 1)
+                Some(k.saturating_add(1))
             } else {
                 None
             };
