@@ -82,7 +82,7 @@ pub struct LensRig {
     /// has no inverse).
     maps: [Vec<[f32; 2]>; 2],
     images: [Vec<u8>; 2],
-    gauss: Vec<f32>,
+    gauss: Box<super::noise::GaussTable>,
 }
 
 impl LensRig {

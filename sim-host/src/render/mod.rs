@@ -55,8 +55,8 @@ pub trait FilteredAlbedo: TerrainSurface {
 
     /// [`Self::albedo_filtered`] of many points at once: `out[k]` for `(x_m[k], y_m[k],
     /// footprint_m[k])`, over the shortest of the four slices. The renderer calls this once per
-    /// run of ground pixels; override it where batching is faster (as [`TexturedSurface`]
-    /// does). The default calls [`Self::albedo_filtered`] per point.
+    /// image row (with the row's ground pixels); override it where batching is faster (as
+    /// [`TexturedSurface`] does). The default calls [`Self::albedo_filtered`] per point.
     fn albedo_filtered_batch(
         &self,
         x_m: &[f64],
@@ -218,7 +218,7 @@ pub struct StereoRenderer {
     frames: [Frame; 2],
     /// Mesh vertices projected into the left and right cameras.
     proj: [Vec<[f64; 3]>; 2],
-    gauss: Vec<f32>,
+    gauss: Box<noise::GaussTable>,
 }
 
 impl StereoRenderer {

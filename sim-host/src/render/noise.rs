@@ -137,14 +137,19 @@ impl GradientLattice {
     }
 }
 
-/// Number of entries of the Gaussian quantile table (a power of two).
+/// Number of entries of the Gaussian quantile table (a power of two, at most 2^16: indices are
+/// 16-bit fields of a hash).
 pub(crate) const GAUSS_TABLE_LEN: usize = 1 << 14;
+const _: () = assert!(GAUSS_TABLE_LEN.is_power_of_two() && GAUSS_TABLE_LEN <= 1 << 16);
+
+/// The Gaussian quantile table (fixed size, so that masked indices need no bounds check).
+pub(crate) type GaussTable = [f32; GAUSS_TABLE_LEN];
 
 /// Table of standard-normal quantiles `Phi^-1((k + 1/2) / N)`, rescaled to unit variance.
 ///
 /// Indexing it with a uniform hash draws from a discrete distribution with the Gaussian's
 /// quantiles (tails cut at about 3.9 sigma), at the cost of one hash and one load per pixel.
-pub(crate) fn gaussian_table() -> Vec<f32> {
+pub(crate) fn gaussian_table() -> Box<GaussTable> {
     let n = GAUSS_TABLE_LEN;
     let mut t: Vec<f64> = (0..n)
         .map(|k| inverse_normal_cdf((k as f64 + 0.5) / n as f64))
@@ -152,7 +157,11 @@ pub(crate) fn gaussian_table() -> Vec<f32> {
     let var = t.iter().map(|v| v * v).sum::<f64>() / n as f64;
     let s = 1.0 / var.sqrt();
     t.iter_mut().for_each(|v| *v *= s);
-    t.into_iter().map(|v| v as f32).collect()
+    let mut table = Box::new([0.0f32; GAUSS_TABLE_LEN]);
+    for (out, v) in table.iter_mut().zip(t) {
+        *out = v as f32;
+    }
+    table
 }
 
 /// Inverse of the standard normal CDF (Acklam's rational approximation, relative error

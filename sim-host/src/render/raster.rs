@@ -10,7 +10,7 @@
 //! the pinhole model puts it. Pixel `(i, j)` has its centre at `u = i, v = j`.
 
 use super::mesh::Mesh;
-use super::noise::{floor_i64, hash3, mix64};
+use super::noise::{floor_i64, hash3, mix64, GaussTable, GAUSS_TABLE_LEN};
 use super::RenderSettings;
 use rayon::prelude::*;
 
@@ -89,10 +89,6 @@ const EDGE_TOL: f64 = 1e-7;
 /// each row (it varies slowly; it only selects mip levels).
 const STRETCH_KNOT_PX: usize = 16;
 
-/// Pixels per run handed to the albedo function at once (a multiple of [`STRETCH_KNOT_PX`]).
-const BATCH: usize = 64;
-const _: () = assert!(BATCH % STRETCH_KNOT_PX == 0);
-
 /// Pixels that share one 64-bit noise hash (16 bits each).
 const NOISE_GROUP: usize = 4;
 
@@ -167,28 +163,30 @@ impl Frame {
         // Each edge function bounds u on a row: l + l_u (u - a_u) >= -tol gives
         // u >= (or <=, as l_u > 0 or < 0) a_u + (-tol - l) / l_u, with l = l_v (v - a_v) + l(a):
         // an affine bound bound0 + bound_dv * (v - a_v). Lower bounds go in `lo`, upper ones in
-        // `hi` (the other slot gets an infinite, inactive bound); an edge along u (l_u = 0)
-        // only bounds v, which the bounding box does.
+        // `hi`, the active ones first (the other slots keep an infinite, inactive bound); an
+        // edge along u (l_u = 0) only bounds v, which the bounding box does. The l_u sum to 0,
+        // so a triangle has at most two bounds on each side (a third only with NaN slopes).
         let mut lo = [(f64::NEG_INFINITY, 0.0); 3];
         let mut hi = [(f64::INFINITY, 0.0); 3];
-        for (k, (l_a, l_du, l_dv)) in [
+        let (mut n_lo, mut n_hi) = (0, 0);
+        for (l_a, l_du, l_dv) in [
             (0.0, l1_du, l1_dv),
             (0.0, l2_du, l2_dv),
             (1.0, -(l1_du + l2_du), -(l1_dv + l2_dv)),
-        ]
-        .into_iter()
-        .enumerate()
-        {
+        ] {
             if l_du != 0.0 {
                 let r = 1.0 / l_du;
                 let bound = (a[0] + (-EDGE_TOL - l_a) * r, -l_dv * r);
                 if l_du > 0.0 {
-                    lo[k] = bound;
+                    lo[n_lo] = bound;
+                    n_lo += 1;
                 } else {
-                    hi[k] = bound;
+                    hi[n_hi] = bound;
+                    n_hi += 1;
                 }
             }
         }
+        let third = n_lo > 2 || n_hi > 2;
         // 1/z and shade are affine too: value(u, v) = value(a) + d_u (u - a_u) + d_v (v - a_v).
         let (dzb, dzc) = (b[2] - a[2], c[2] - a[2]);
         let (sa, sb, sc) = (f64::from(s[0]), f64::from(s[1]), f64::from(s[2]));
@@ -201,9 +199,22 @@ impl Frame {
         for v in vmin..=vmax {
             let dv = v as f64 - a[1];
             let at = |(b0, b1): (f64, f64)| b0 + b1 * dv;
-            let first_u = umin.max(at(lo[0])).max(at(lo[1])).max(at(lo[2]));
-            let last_u = umax.min(at(hi[0])).min(at(hi[1])).min(at(hi[2]));
-            // (f64::max and min ignore a NaN bound, so both stay within the bounding box.)
+            // The largest lower and smallest upper bound (a NaN bound is ignored, an inactive
+            // one is infinite, so both stay within the bounding box).
+            let (mut first_u, mut last_u) = (umin, umax);
+            let (l, h) = if third { (3, 3) } else { (2, 2) };
+            for &b in &lo[..l] {
+                let b = at(b);
+                if b > first_u {
+                    first_u = b;
+                }
+            }
+            for &b in &hi[..h] {
+                let b = at(b);
+                if b < last_u {
+                    last_u = b;
+                }
+            }
             if first_u > last_u {
                 continue;
             }
@@ -222,7 +233,7 @@ impl Frame {
             let shade = &mut self.shade[start..end];
             // Branch-free depth test (pixels on shared edges make it unpredictable).
             for (k, (d, sh)) in depth.iter_mut().zip(shade.iter_mut()).enumerate() {
-                let t = k as u32 as f64;
+                let t = f64::from(k as i32);
                 let iz = (iz0 + t * iz_du) as f32;
                 let s = (sh0 + t * sh_du) as f32;
                 // All ones where this triangle is nearer (bit select, so that the compiler
@@ -243,12 +254,12 @@ impl Frame {
         settings: &RenderSettings,
         albedo: &A,
         noise_key: (u64, u64),
-        gauss: &[f32],
+        gauss: &GaussTable,
         out: &mut [u8],
     ) -> usize {
         let width = self.width;
         // Table indices are 16-bit fields of the hash (the table has at most 2^16 entries).
-        let table_mask = (gauss.len().min(1 << 16) - 1) as u64;
+        let table_mask = (GAUSS_TABLE_LEN - 1) as u64;
         let sigma = settings.noise_sigma_dn;
         let exposure = settings.exposure_dn;
         let sky_dn = settings.sky_dn;
@@ -276,73 +287,106 @@ impl Frame {
             .zip(self.shade.par_chunks(width))
             .zip(knot_table.par_chunks(knots))
             .enumerate()
-            .map(|(j, (((row, inv_z), shade), knot))| {
-                let base = view.ray_w(0.0, j as f64);
-                let mut sky = 0usize;
-                // Runs of BATCH pixels: world points and footprints of the ground pixels, their
-                // albedo in one call, then the pixel values.
-                let mut xs = [0.0f64; BATCH];
-                let mut ys = [0.0f64; BATCH];
-                let mut fs = [0.0f64; BATCH];
-                let mut albedos = [0.0f64; BATCH];
-                // Per pixel of a run: the ray's x and y per unit depth and the footprint
-                // stretch (tight loops over the whole run, then used by its ground pixels).
-                let mut ray_x = [0.0f64; BATCH];
-                let mut ray_y = [0.0f64; BATCH];
-                let mut stretch = [0.0f64; BATCH];
-                for run in (0..width).step_by(BATCH) {
-                    let end = (run + BATCH).min(width);
-                    for (q, i) in (run..end).enumerate() {
-                        let fi = i as u32 as f64;
-                        ray_x[q] = base[0] + fi * step[0];
-                        ray_y[q] = base[1] + fi * step[1];
-                    }
-                    // Runs start on a knot (BATCH is a multiple of STRETCH_KNOT_PX).
-                    for (segment, out) in
-                        stretch[..end - run].chunks_mut(STRETCH_KNOT_PX).enumerate()
-                    {
-                        let k = run / STRETCH_KNOT_PX + segment;
+            .map_init(
+                || RowScratch::new(width),
+                |s, (j, (((row, inv_z), shade), knot))| {
+                    let base = view.ray_w(0.0, j as f64);
+                    // Footprint stretch per pixel, linear between the knots.
+                    let stretch = &mut s.stretch[..width];
+                    for (k, out) in stretch.chunks_mut(STRETCH_KNOT_PX).enumerate() {
                         let (k0, k1) = (knot[k], knot[k + 1]);
                         for (t, o) in out.iter_mut().enumerate() {
                             let t = t as u32 as f64 * (1.0 / STRETCH_KNOT_PX as f64);
                             *o = k0 + t * (k1 - k0);
                         }
                     }
+                    // World points and footprints of the row's ground pixels, their albedo in
+                    // one call, then the pixel values.
                     let mut n = 0;
-                    for (q, &iz) in inv_z[run..end].iter().enumerate() {
+                    for (i, (&iz, &st)) in inv_z.iter().zip(stretch.iter()).enumerate() {
                         if iz > 0.0 {
+                            let fi = i as u32 as f64;
                             let z = f64::from(1.0 / iz);
-                            xs[n] = cx + z * ray_x[q];
-                            ys[n] = cy + z * ray_y[q];
-                            fs[n] = z * stretch[q];
+                            s.xs[n] = cx + z * (base[0] + fi * step[0]);
+                            s.ys[n] = cy + z * (base[1] + fi * step[1]);
+                            s.fs[n] = z * st;
                             n += 1;
                         }
                     }
-                    albedo(&xs[..n], &ys[..n], &fs[..n], &mut albedos[..n]);
-                    let mut m = 0;
-                    // Noise: one hash per group of four pixels, 16 bits of it per pixel.
-                    for group in (run..end).step_by(NOISE_GROUP) {
-                        let id = ((j * width + group) / NOISE_GROUP) as u64;
-                        let h = mix64(key ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15));
-                        for (q, i) in (group..end.min(group + NOISE_GROUP)).enumerate() {
-                            let clean = if inv_z[i] > 0.0 {
-                                let a = albedos[m];
-                                m += 1;
-                                exposure * a * f64::from(shade[i])
+                    let albedos = &mut s.albedos[..n];
+                    albedo(&s.xs[..n], &s.ys[..n], &s.fs[..n], albedos);
+                    // Noise-free value per pixel (a plain loop where the whole row is ground).
+                    let clean = &mut s.clean[..width];
+                    let mut sky = 0usize;
+                    if n == width {
+                        for ((c, &a), &sh) in clean.iter_mut().zip(albedos.iter()).zip(shade) {
+                            *c = exposure * a * f64::from(sh);
+                        }
+                    } else {
+                        let mut albedos = albedos.iter();
+                        for ((c, &iz), &sh) in clean.iter_mut().zip(inv_z).zip(shade) {
+                            *c = if iz > 0.0 {
+                                let a = albedos.next().copied().unwrap_or(0.0);
+                                exposure * a * f64::from(sh)
                             } else {
                                 sky += 1;
                                 sky_dn
                             };
+                        }
+                    }
+                    // Noise: one hash per group of four pixels, 16 bits of it per pixel.
+                    let first_id = ((j * width) / NOISE_GROUP) as u64;
+                    let quantize = |out: &mut [u8], clean: &[f64], g: usize| {
+                        let id = first_id + g as u64;
+                        let h = mix64(key ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+                        for (q, (o, &c)) in out.iter_mut().zip(clean).enumerate() {
                             let g = gauss[((h >> (16 * q)) & table_mask) as usize];
                             let noise = sigma * f64::from(g);
                             // Round half up; NaN gives 0 (through i32: the clamped value fits,
                             // and the conversion is cheaper than the saturating one to u8).
-                            row[i] = ((clean + noise).clamp(0.0, 255.0) + 0.5) as i32 as u8;
+                            *o = ((c + noise).clamp(0.0, 255.0) + 0.5) as i32 as u8;
                         }
+                    };
+                    let full = width / NOISE_GROUP * NOISE_GROUP;
+                    let (row_full, row_tail) = row.split_at_mut(full);
+                    let (clean_full, clean_tail) = clean.split_at(full);
+                    for (g, (out, clean)) in row_full
+                        .chunks_exact_mut(NOISE_GROUP)
+                        .zip(clean_full.chunks_exact(NOISE_GROUP))
+                        .enumerate()
+                    {
+                        quantize(out, clean, g);
                     }
-                }
-                sky
-            })
+                    if !row_tail.is_empty() {
+                        quantize(row_tail, clean_tail, full / NOISE_GROUP);
+                    }
+                    sky
+                },
+            )
             .sum()
+    }
+}
+
+/// Per-row working arrays of [`Frame::shade_into`] (one set per parallel job, reused for its
+/// rows; every entry read is written first for the same row).
+struct RowScratch {
+    stretch: Vec<f64>,
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+    fs: Vec<f64>,
+    albedos: Vec<f64>,
+    clean: Vec<f64>,
+}
+
+impl RowScratch {
+    fn new(width: usize) -> Self {
+        Self {
+            stretch: vec![0.0; width],
+            xs: vec![0.0; width],
+            ys: vec![0.0; width],
+            fs: vec![0.0; width],
+            albedos: vec![0.0; width],
+            clean: vec![0.0; width],
+        }
     }
 }

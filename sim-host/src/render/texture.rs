@@ -23,6 +23,7 @@ use super::noise::{hash3, unit_f64, GradientLattice};
 use super::FilteredAlbedo;
 use crate::surface::TerrainSurface;
 use rayon::prelude::*;
+use std::cell::RefCell;
 use std::sync::Arc;
 
 /// Parameters of the procedural albedo.
@@ -147,11 +148,13 @@ impl Tile {
     }
 
     /// [`Self::bilinear`] at `(x[k] * scale - 0.5, y[k] * scale - 0.5)` for up to [`BATCH`]
-    /// points into `out[k]` (bit-identical to the one-point form). The coordinate pass runs over
-    /// whole arrays (which the compiler vectorises), then the texel loads and the interpolation
-    /// one point at a time; `scratch` holds the per-point coordinates (reused between calls,
-    /// so that no per-call buffer is zeroed).
-    #[inline(always)]
+    /// points into `out[k]` (bit-identical to the one-point form). Three passes over the
+    /// points: the coordinates (texel fractions and integer parts; plain arithmetic over whole
+    /// arrays, which the compiler vectorises), the texel loads, the interpolation (vectorised
+    /// too); `scratch` holds the per-point values between the passes (reused between calls,
+    /// so that no per-call buffer is zeroed). Not inlined: as a function of its own its slices
+    /// are known not to overlap, which the vectorised passes need.
+    #[inline(never)]
     fn bilinear_batch(
         &self,
         x: &[f64],
@@ -164,11 +167,16 @@ impl Tile {
         let n = out.len().min(x.len()).min(y.len()).min(BATCH);
         let (x, y, out) = (&x[..n], &y[..n], &mut out[..n]);
         let mask = self.size - 1;
-        let (fu, fv, base) = (
-            &mut scratch.fu[..n],
-            &mut scratch.fv[..n],
-            &mut scratch.base[..n],
-        );
+        let BilinearScratch {
+            fu,
+            fv,
+            base,
+            ta,
+            tb,
+            tc,
+            td,
+        } = scratch;
+        let (fu, fv, base) = (&mut fu[..n], &mut fv[..n], &mut base[..n]);
         for k in 0..n {
             let (u, v) = (x[k] * scale - 0.5, y[k] * scale - 0.5);
             let tu = (u - 0.5) + MAGIC;
@@ -177,18 +185,22 @@ impl Tile {
             fv[k] = v - (tv - MAGIC);
             base[k] = self.index(tu.to_bits() as usize & mask, tv.to_bits() as usize & mask);
         }
-        let taps = &mut scratch.taps[..n];
-        for (t, &b) in taps.iter_mut().zip(base.iter()) {
-            let q = &self.data[b..b + STRIDE + 2];
-            *t = [
-                f64::from(q[0]),
-                f64::from(q[1]),
-                f64::from(q[STRIDE]),
-                f64::from(q[STRIDE + 1]),
-            ];
+        let (ta, tb, tc, td) = (&mut ta[..n], &mut tb[..n], &mut tc[..n], &mut td[..n]);
+        for k in 0..n {
+            // Taps (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1): offsets 0, 1, 9, 10.
+            let q = &self.data[base[k]..base[k] + STRIDE + 2];
+            ta[k] = i32::from(q[0]);
+            tb[k] = i32::from(q[1]);
+            tc[k] = i32::from(q[STRIDE]);
+            td[k] = i32::from(q[STRIDE + 1]);
         }
         for k in 0..n {
-            let [a, b, c, d] = taps[k];
+            let (a, b, c, d) = (
+                f64::from(ta[k]),
+                f64::from(tb[k]),
+                f64::from(tc[k]),
+                f64::from(td[k]),
+            );
             let top = a + fu[k] * (b - a);
             let bottom = c + fu[k] * (d - c);
             out[k] = (top + fv[k] * (bottom - top)) * (1.0 / 65535.0);
@@ -305,12 +317,76 @@ impl Pyramid {
 /// Points per batch of [`AlbedoTexture::albedo_filtered_batch`].
 const BATCH: usize = 64;
 
-/// Per-point coordinates of [`Tile::bilinear_batch`]: texel fractions and storage indices.
+/// Per-point values of [`Tile::bilinear_batch`]: texel fractions, storage indices and the four
+/// taps.
 struct BilinearScratch {
     fu: [f64; BATCH],
     fv: [f64; BATCH],
     base: [usize; BATCH],
-    taps: [[f64; 4]; BATCH],
+    ta: [i32; BATCH],
+    tb: [i32; BATCH],
+    tc: [i32; BATCH],
+    td: [i32; BATCH],
+}
+
+/// Working arrays of [`AlbedoTexture::albedo_filtered_batch`] for one batch: fine level per
+/// point and the first points of the runs of equal level (fine, blend, detail); the points blending with the next fine level (batch index, level, weight, world
+/// coordinates); the points with a detail layer (batch index, level, weight, rotated
+/// coordinates); the looked-up values and the lookups' scratch.
+struct BatchScratch {
+    level: [u8; BATCH],
+    fine_runs: [u8; BATCH],
+    blend_runs: [u8; BATCH],
+    detail_runs: [u8; BATCH],
+    bk: [u8; BATCH],
+    bl: [u8; BATCH],
+    bt: [f64; BATCH],
+    bx: [f64; BATCH],
+    by: [f64; BATCH],
+    dk: [u8; BATCH],
+    dl: [u8; BATCH],
+    dw: [f64; BATCH],
+    dx: [f64; BATCH],
+    dy: [f64; BATCH],
+    values: [f64; BATCH],
+    bilinear: BilinearScratch,
+}
+
+impl BatchScratch {
+    const fn new() -> Self {
+        Self {
+            level: [0; BATCH],
+            fine_runs: [0; BATCH],
+            blend_runs: [0; BATCH],
+            detail_runs: [0; BATCH],
+            bk: [0; BATCH],
+            bl: [0; BATCH],
+            bt: [0.0; BATCH],
+            bx: [0.0; BATCH],
+            by: [0.0; BATCH],
+            dk: [0; BATCH],
+            dl: [0; BATCH],
+            dw: [0.0; BATCH],
+            dx: [0.0; BATCH],
+            dy: [0.0; BATCH],
+            values: [0.0; BATCH],
+            bilinear: BilinearScratch {
+                fu: [0.0; BATCH],
+                fv: [0.0; BATCH],
+                base: [0; BATCH],
+                ta: [0; BATCH],
+                tb: [0; BATCH],
+                tc: [0; BATCH],
+                td: [0; BATCH],
+            },
+        }
+    }
+}
+
+thread_local! {
+    /// The working arrays of this thread's batches (set up once per thread, not zeroed per
+    /// call).
+    static BATCH_SCRATCH: RefCell<BatchScratch> = const { RefCell::new(BatchScratch::new()) };
 }
 
 /// Procedural albedo texture of sandy ground with pebbles (see the module documentation).
@@ -405,13 +481,39 @@ impl AlbedoTexture {
     /// [`Self::albedo_filtered`] of many points: `out[k]` for `(x_m[k], y_m[k],
     /// footprint_m[k])` (bit-identical to the one-point form). The lookups of each layer run
     /// as separate tight loops over up to 64 points, which lets the processor overlap their
-    /// memory accesses; the renderer calls this once per run of ground pixels.
+    /// memory accesses; the renderer calls this once per row of ground pixels. The working
+    /// arrays are kept per thread (every entry read is written first in the same call, so the
+    /// values never depend on earlier calls).
     pub fn albedo_filtered_batch(
         &self,
         x_m: &[f64],
         y_m: &[f64],
         footprint_m: &[f64],
         out: &mut [f64],
+    ) {
+        let done = BATCH_SCRATCH
+            .try_with(|cell| match cell.try_borrow_mut() {
+                Ok(mut scratch) => {
+                    self.batch_with(x_m, y_m, footprint_m, out, &mut scratch);
+                    true
+                }
+                Err(_) => false,
+            })
+            .unwrap_or(false);
+        if !done {
+            let mut scratch = Box::new(BatchScratch::new());
+            self.batch_with(x_m, y_m, footprint_m, out, &mut scratch);
+        }
+    }
+
+    /// [`Self::albedo_filtered_batch`] with the working arrays `s`.
+    fn batch_with(
+        &self,
+        x_m: &[f64],
+        y_m: &[f64],
+        footprint_m: &[f64],
+        out: &mut [f64],
+        s: &mut BatchScratch,
     ) {
         let n = out
             .len()
@@ -422,50 +524,60 @@ impl AlbedoTexture {
         let detail_top = self.detail.levels.len() - 1;
         let detail_on = self.params.detail_contrast > 0.0;
         let (sin, cos) = self.detail_rotation;
-        let mut level = [0u8; BATCH];
-        let mut blend = [0.0f64; BATCH];
-        // Detail points: index into the batch, level, weight.
-        let mut detail = [(0u8, 0u8, 0.0f64); BATCH];
-        // Gathered coordinates, batch indices and values of the blend and detail passes, and
-        // the lookups' scratch: set up once per call (every entry read was written first).
-        let mut bx = [0.0f64; BATCH];
-        let mut by = [0.0f64; BATCH];
-        let mut bk = [0u8; BATCH];
-        let mut values = [0.0f64; BATCH];
-        let mut scratch = BilinearScratch {
-            fu: [0.0; BATCH],
-            fv: [0.0; BATCH],
-            base: [0; BATCH],
-            taps: [[0.0; 4]; BATCH],
-        };
+        let inv_texel = self.fine.inv_texel;
         for start in (0..n).step_by(BATCH) {
             let end = (start + BATCH).min(n);
             let x = &x_m[start..end];
             let y = &y_m[start..end];
             let f = &footprint_m[start..end];
             let out = &mut out[start..end];
+            let count = out.len();
+            let level = &mut s.level[..count];
             // Levels from one fast_log2 per point: its integer part is the exponent of the
             // ratio footprint / texel and its fraction the mantissa (the same values as
             // Pyramid::level_blend and Pyramid::nearest_level with a four times finer texel).
-            let mut details = 0;
-            for k in 0..out.len() {
-                let ratio = f[k] * self.fine.inv_texel;
+            // The points that blend with the next fine level and those with a detail layer
+            // are gathered on the way (batch index, level, weight, coordinates).
+            // Runs of equal level (the level changes slowly along a row) are noted on the way:
+            // the first point of each run of the fine lookups, the blends and the details.
+            let (mut blends, mut details) = (0, 0);
+            let (mut fine_runs, mut blend_runs, mut detail_runs) = (0, 0, 0);
+            let (mut fine_prev, mut blend_prev, mut detail_prev) = (u8::MAX, u8::MAX, u8::MAX);
+            for k in 0..count {
+                let ratio = f[k] * inv_texel;
                 let bits = ratio.to_bits();
                 let exponent = ((bits >> 52) & 0x7ff) as i64 - 1023;
                 let fraction =
                     f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000) - 1.0;
-                let (i0, t) = if ratio <= 1.0 || exponent < 0 {
-                    (0, 0.0)
+                let i0 = if ratio <= 1.0 || exponent < 0 {
+                    0
                 } else if exponent as usize >= fine_top {
-                    (fine_top, 0.0)
+                    fine_top
                 } else {
-                    (
-                        exponent as usize,
-                        ((fraction - 0.375) * 4.0).clamp(0.0, 1.0),
-                    )
+                    let t = ((fraction - 0.375) * 4.0).clamp(0.0, 1.0);
+                    if t > 0.0 {
+                        let lv = exponent as u8 + 1;
+                        if lv != blend_prev {
+                            s.blend_runs[blend_runs] = blends as u8;
+                            blend_runs += 1;
+                            blend_prev = lv;
+                        }
+                        s.bk[blends] = k as u8;
+                        s.bl[blends] = lv;
+                        s.bt[blends] = t;
+                        s.bx[blends] = x[k];
+                        s.by[blends] = y[k];
+                        blends += 1;
+                    }
+                    exponent as usize
                 };
-                level[k] = i0 as u8;
-                blend[k] = t;
+                let lv = i0 as u8;
+                if lv != fine_prev {
+                    s.fine_runs[fine_runs] = k as u8;
+                    fine_runs += 1;
+                    fine_prev = lv;
+                }
+                level[k] = lv;
                 let weight = (3.0 - 2.0 * ratio).min(1.0);
                 if detail_on && weight > 0.0 {
                     // Detail texel = fine texel / 4: log2 of its ratio is exponent + 2 +
@@ -476,77 +588,73 @@ impl AlbedoTexture {
                     } else {
                         0
                     };
-                    detail[details] = (k as u8, d as u8, weight);
+                    let d = d as u8;
+                    if d != detail_prev {
+                        s.detail_runs[detail_runs] = details as u8;
+                        detail_runs += 1;
+                        detail_prev = d;
+                    }
+                    s.dk[details] = k as u8;
+                    s.dl[details] = d;
+                    s.dw[details] = weight;
+                    s.dx[details] = cos * x[k] - sin * y[k];
+                    s.dy[details] = sin * x[k] + cos * y[k];
                     details += 1;
                 }
             }
-            // Lookups in runs of equal level (the level changes slowly along a row), each run
-            // through the tile's batch lookup.
-            let count = out.len();
-            let mut k = 0;
-            while k < count {
+            // Lookups run by run, each through the tile's batch lookup.
+            for r in 0..fine_runs {
+                let k = usize::from(s.fine_runs[r]);
+                let e = run_end(&s.fine_runs[..fine_runs], r, count);
                 let lv = usize::from(level[k]);
-                let mut e = k;
-                while e < count && usize::from(level[e]) == lv {
-                    e += 1;
-                }
                 let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
-                tile.bilinear_batch(&x[k..e], &y[k..e], scale, &mut out[k..e], &mut scratch);
-                k = e;
+                tile.bilinear_batch(&x[k..e], &y[k..e], scale, &mut out[k..e], &mut s.bilinear);
             }
-            // The blend with the next level, for the points with t > 0, gathered.
-            let mut blends = 0;
-            for k in 0..count {
-                if blend[k] > 0.0 {
-                    bx[blends] = x[k];
-                    by[blends] = y[k];
-                    bk[blends] = k as u8;
-                    blends += 1;
-                }
-            }
-            let mut j = 0;
-            while j < blends {
-                let lv = usize::from(level[usize::from(bk[j])]) + 1;
-                let mut e = j;
-                while e < blends && usize::from(level[usize::from(bk[e])]) + 1 == lv {
-                    e += 1;
-                }
+            // The blend with the next level, for the points with t > 0.
+            let values = &mut s.values;
+            for r in 0..blend_runs {
+                let j = usize::from(s.blend_runs[r]);
+                let e = run_end(&s.blend_runs[..blend_runs], r, blends);
+                let lv = usize::from(s.bl[j]);
                 let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
-                tile.bilinear_batch(&bx[j..e], &by[j..e], scale, &mut values[j..e], &mut scratch);
-                j = e;
+                let (bx, by) = (&s.bx[j..e], &s.by[j..e]);
+                tile.bilinear_batch(bx, by, scale, &mut values[j..e], &mut s.bilinear);
             }
-            for (&k, &value) in bk[..blends].iter().zip(&values[..blends]) {
-                let k = usize::from(k);
-                let (o, t) = (out[k], blend[k]);
-                out[k] = o + t * (value - o);
+            for ((&k, &t), &value) in s.bk[..blends]
+                .iter()
+                .zip(&s.bt[..blends])
+                .zip(&values[..blends])
+            {
+                let o = &mut out[usize::from(k)];
+                *o += t * (value - *o);
             }
             // The detail layer, in its rotated coordinates.
-            let detail = &detail[..details];
-            for (j, &(k, _, _)) in detail.iter().enumerate() {
-                let k = usize::from(k);
-                bx[j] = cos * x[k] - sin * y[k];
-                by[j] = sin * x[k] + cos * y[k];
-            }
-            let mut j = 0;
-            while j < detail.len() {
-                let d = usize::from(detail[j].1);
-                let mut e = j;
-                while e < detail.len() && usize::from(detail[e].1) == d {
-                    e += 1;
-                }
+            for r in 0..detail_runs {
+                let j = usize::from(s.detail_runs[r]);
+                let e = run_end(&s.detail_runs[..detail_runs], r, details);
+                let d = usize::from(s.dl[j]);
                 let (tile, scale) = (&self.detail.levels[d], self.detail.scales[d]);
-                tile.bilinear_batch(&bx[j..e], &by[j..e], scale, &mut values[j..e], &mut scratch);
-                j = e;
+                let (dx, dy) = (&s.dx[j..e], &s.dy[j..e]);
+                tile.bilinear_batch(dx, dy, scale, &mut values[j..e], &mut s.bilinear);
             }
-            for (&(k, _, weight), &value) in detail.iter().zip(&values[..detail.len()]) {
-                let k = usize::from(k);
-                out[k] *= 1.0 + weight * (2.0 * value - 1.0);
+            for ((&k, &weight), &value) in s.dk[..details]
+                .iter()
+                .zip(&s.dw[..details])
+                .zip(&values[..details])
+            {
+                out[usize::from(k)] *= 1.0 + weight * (2.0 * value - 1.0);
             }
             for o in out.iter_mut() {
                 *o = o.clamp(0.0, 1.0);
             }
         }
     }
+}
+
+/// End of run `r` whose first points are `starts` (the last run ends at `count`).
+#[inline(always)]
+fn run_end(starts: &[u8], r: usize, count: usize) -> usize {
+    starts.get(r + 1).map_or(count, |&e| usize::from(e))
 }
 
 /// `log2(x)` for `x >= 1` to within 0.09 (exponent plus linear mantissa), enough to choose
