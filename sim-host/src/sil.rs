@@ -713,6 +713,13 @@ pub const CASES: [Case; 30] = [
                 odometry (V99 sec. 6)",
         checks: &[
             GOAL_REACHED,
+            req(
+                "3D kinematics distance error (track memory, KIN-13; 1.07 % without)",
+                |s| s.distance_error_pct.kin3d,
+                Compare::AtMost,
+                0.5,
+                "%",
+            ),
             goal(
                 "3D kinematics distance error (V99 estimator: 0.3 %)",
                 |s| s.distance_error_pct.kin3d,
