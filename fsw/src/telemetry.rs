@@ -9,7 +9,7 @@ use crate::flight::nav::{NavCounters, NavMode, Navigator};
 use serde::{Deserialize, Serialize};
 
 /// Largest encoded record, bytes. Every record type is checked against it in the tests.
-pub const MAX_RECORD_BYTES: usize = 304;
+pub const MAX_RECORD_BYTES: usize = 320;
 
 /// Tag byte that starts every record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -262,6 +262,8 @@ mod tests {
     fn tlm_2_nav_status_worst_case_fits() {
         let c = u32::MAX;
         let counters = NavCounters {
+            track_matched: c,
+            track_unmatched: c,
             kin_tested: c,
             kin_rejected: c,
             kin_held: c,

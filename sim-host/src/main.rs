@@ -520,6 +520,17 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
             ),
         ),
         (
+            "kin3d track memory",
+            format!(
+                "heave corrected on {} of {} kinematic steps",
+                summary.nav.track_matched,
+                summary
+                    .nav
+                    .track_matched
+                    .saturating_add(summary.nav.track_unmatched)
+            ),
+        ),
+        (
             "VO",
             format!(
                 "{} updates, {} failures, {} fused, {} rejected ({} rotation, {} forced), mean inliers {}",

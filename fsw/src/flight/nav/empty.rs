@@ -135,6 +135,8 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
 
 /// All counters zero (as [`NavCounters::default`], usable in a `const`).
 pub(super) const NO_COUNTERS: NavCounters = NavCounters {
+    track_matched: 0,
+    track_unmatched: 0,
     kin_tested: 0,
     kin_rejected: 0,
     kin_held: 0,

@@ -148,6 +148,8 @@ impl Navigator {
                 .then(|| self.odometry.axle_centres_m());
             self.traj
                 .kinematic_step(&q0, &contact_translation, &ekf.state().q_nr, axles.as_ref());
+            self.counters.track_matched = self.traj.track.matched_steps;
+            self.counters.track_unmatched = self.traj.track.unmatched_steps;
             if let Ok((_, p0)) = ekf.clone_pose(start) {
                 let ekf_step = (ekf.state().p_n - p0).norm();
                 let vo_fused = core::mem::take(&mut self.vo_fused_since_interval);

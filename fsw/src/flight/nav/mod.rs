@@ -557,6 +557,13 @@ pub struct NavCounters {
     /// IMU shocks: accelerometer samples saturated at or refused beyond the sensor's range
     /// ([`Navigator::imu_shock`]); the velocity variance was inflated.
     pub imu_shocks: u32,
+    /// Kinematic steps of the 3D dead reckoning whose vertical the track memory corrected
+    /// (a middle or rear axle over its front axle's remembered path; V99 sec. 6,
+    /// [`crate::kinematics::track`]).
+    pub track_matched: u32,
+    /// Kinematic steps without a match (memory still filling after a start, turns, side
+    /// steps): the dead reckoning took the zero-mean contact-angle step as it is.
+    pub track_unmatched: u32,
 }
 
 /// Result of the last kinematic interval.
