@@ -19,7 +19,7 @@
 //! point sample would give on distant, foreshortened ground. The whole texture repeats every
 //! 8.19 m (default), more than a hazcam sees.
 
-use super::noise::{hash3, unit_f64, GradientLattice};
+use super::noise::{hash3, unit_f64, GradientLattice, LatticeColumns};
 use super::FilteredAlbedo;
 use crate::surface::TerrainSurface;
 use rayon::prelude::*;
@@ -682,16 +682,8 @@ fn fine_tile(p: &TextureParams, size: usize) -> Tile {
     let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
     let layers = octave_layers(&octaves, size, |k| seed.wrapping_add(k * 0x1000));
     let mut field = vec![0f32; size * size];
-    field.par_chunks_mut(size).enumerate().for_each(|(j, row)| {
-        for (i, out) in row.iter_mut().enumerate() {
-            let mut s = 0.0;
-            for (wavelength, amp, lattice) in &layers {
-                s += amp * lattice.noise(i as f64 / wavelength, j as f64 / wavelength);
-            }
-            // Gradient noise has a standard deviation near 0.2 per octave.
-            *out = (s * norm * 5.0) as f32;
-        }
-    });
+    // Gradient noise has a standard deviation near 0.2 per octave.
+    layered_noise(&layers, size, &mut field, |s| (s * norm * 5.0) as f32);
     // Coarse layer: a quarter-resolution tile of the same period, bilinear.
     let coarse = coarse_tile(p, size / 4);
     let mut albedo: Vec<f32> = field
@@ -779,19 +771,39 @@ fn coarse_tile(p: &TextureParams, size: usize) -> Tile {
             )
         })
         .collect();
-    let rows: Vec<u16> = (0..size * size)
-        .into_par_iter()
-        .map(|idx| {
-            let (i, j) = (idx % size, idx / size);
-            let mut s = 0.0;
-            for (wavelength, amp, lattice) in &layers {
-                s += amp * lattice.noise(i as f64 / wavelength, j as f64 / wavelength);
-            }
-            let factor = (1.0 + p.coarse_contrast * s * norm * 5.0).clamp(0.2, 1.99);
-            (0.5 * factor * 65535.0).round() as u16
-        })
-        .collect();
+    let mut rows = vec![0u16; size * size];
+    layered_noise(&layers, size, &mut rows, |s| {
+        let factor = (1.0 + p.coarse_contrast * s * norm * 5.0).clamp(0.2, 1.99);
+        (0.5 * factor * 65535.0).round() as u16
+    });
     Tile::from_row_major(size, &rows)
+}
+
+/// `out[j * size + i] = finish(sum over layers of amp * lattice.noise(i / wavelength,
+/// j / wavelength))`, the sum taken in layer order from 0 (as a per-texel loop would), one row
+/// at a time with each lattice's column terms computed once.
+fn layered_noise<T: Send>(
+    layers: &[(f64, f64, GradientLattice)],
+    size: usize,
+    out: &mut [T],
+    finish: impl Fn(f64) -> T + Sync,
+) {
+    let columns: Vec<LatticeColumns> = layers
+        .iter()
+        .map(|(wavelength, _, lattice)| lattice.columns(size, *wavelength))
+        .collect();
+    out.par_chunks_mut(size).enumerate().for_each_init(
+        || vec![0.0f64; size],
+        |acc, (j, row)| {
+            acc.fill(0.0);
+            for ((wavelength, amp, lattice), cols) in layers.iter().zip(&columns) {
+                lattice.add_row(cols, j as f64 / wavelength, *amp, acc);
+            }
+            for (o, &s) in row.iter_mut().zip(acc.iter()) {
+                *o = finish(s);
+            }
+        },
+    );
 }
 
 /// Per octave of `octaves` (`(wavelength, amplitude)`, texels): the wavelength (small tiles:
@@ -824,18 +836,11 @@ fn detail_tile(p: &TextureParams, size: usize) -> Tile {
     let norm: f64 = 1.0 / octaves.iter().map(|o| o.1 * o.1).sum::<f64>().sqrt();
     let seed = p.seed ^ 0xde7a_11ed;
     let layers = octave_layers(&octaves, size, |k| seed.wrapping_add(k));
-    let rows: Vec<u16> = (0..size * size)
-        .into_par_iter()
-        .map(|idx| {
-            let (i, j) = (idx % size, idx / size);
-            let mut s = 0.0;
-            for (wavelength, amp, lattice) in &layers {
-                s += amp * lattice.noise(i as f64 / wavelength, j as f64 / wavelength);
-            }
-            let factor = (1.0 + p.detail_contrast * s * norm * 5.0).clamp(0.2, 1.99);
-            (0.5 * factor * 65535.0).round() as u16
-        })
-        .collect();
+    let mut rows = vec![0u16; size * size];
+    layered_noise(&layers, size, &mut rows, |s| {
+        let factor = (1.0 + p.detail_contrast * s * norm * 5.0).clamp(0.2, 1.99);
+        (0.5 * factor * 65535.0).round() as u16
+    });
     Tile::from_row_major(size, &rows)
 }
 
