@@ -482,6 +482,13 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
             ),
         ),
         (
+            "true scrub",
+            format!(
+                "{:.2} % of the wheels' ground travel ({:+.2} % net): contacts sliding",
+                summary.truth_scrub_pct, summary.truth_scrub_net_pct
+            ),
+        ),
+        (
             "driver",
             format!(
                 "{}, slip compensation {}, final mode {}",

@@ -1274,6 +1274,9 @@ pub fn markdown(results: &[CaseResult]) -> String {
     s += "\n## Runs\n\n";
     s += "Distance errors (V99 sec. 6): path length of the estimate against the true horizontal path\n";
     s += "length; `wheel avg` is averaged wheel odometry with the true pitch (simulator-side baseline).\n";
+    s += "`scrub` is the truth's sliding of the wheels' contacts along their rolling tangents against the\n";
+    s += "ground speed each wheel drives, % of that ground travel, absolute / net (`truth_scrub_pct`,\n";
+    s += "`truth_scrub_net_pct`): wheel rates that do not fit the terrain; no odometry sees it.\n";
     let fallbacks: u64 = results
         .iter()
         .map(|r| r.summary.truth_force_fallbacks)
@@ -1282,13 +1285,13 @@ pub fn markdown(results: &[CaseResult]) -> String {
         "Truth steps that fell back from the quasi-static force model to the kinematic solve, over \
          all runs: {fallbacks} (`truth_force_fallbacks` in `summary.json`).\n\n"
     );
-    s += "| id | distance m | sim time s | EKF % | VO % | kin3d % | kin2d % | kin3d dist % | wheel avg dist % | gate rejects | VO updates/failures | cross-track rms/max m | goal miss m |\n";
-    s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    s += "| id | distance m | sim time s | EKF % | VO % | kin3d % | kin2d % | kin3d dist % | wheel avg dist % | scrub % | gate rejects | VO updates/failures | cross-track rms/max m | goal miss m |\n";
+    s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.2}"));
     for r in results {
         let m = &r.summary;
         s += &format!(
-            "| {} | {:.2} | {:.1} | {} | {} | {} | {} | {} | {:.2} | {} | {}/{} | {:.3}/{:.3} | {:.3} |\n",
+            "| {} | {:.2} | {:.1} | {} | {} | {} | {} | {} | {:.2} | {:.1}/{:+.1} | {} | {}/{} | {:.3}/{:.3} | {:.3} |\n",
             r.case.id,
             m.distance_m,
             m.sim_time_s,
@@ -1298,6 +1301,8 @@ pub fn markdown(results: &[CaseResult]) -> String {
             f(m.error_pct.kin2d),
             f(m.distance_error_pct.kin3d),
             m.distance_error_pct.wheel_average,
+            m.truth_scrub_pct,
+            m.truth_scrub_net_pct,
             m.slip
                 .gate_reject_fraction
                 .map_or("-".to_string(), |x| format!("{:.0} %", 100.0 * x)),

@@ -214,6 +214,11 @@ pub struct RunResult {
     /// Truth steps whose twist exceeded the quasi-static bounds and was scaled down
     /// ([`crate::world::World::twist_caps`]).
     pub truth_twist_caps: u64,
+    /// Scrub of the wheels on the ground over the run, % of the ground travel they drove
+    /// ([`crate::world::World::scrub_m`]).
+    pub truth_scrub_pct: f64,
+    /// The same with sign ([`crate::world::World::scrub_net_m`]), %.
+    pub truth_scrub_net_pct: f64,
     /// Per-device health counters of the flight software: IMU, joints, camera, sun, power.
     pub device_health: [fsw::telemetry::DeviceHealth; fsw::flight::DEVICE_COUNT],
     /// Battery energy used over the run by the truth energy model, J ([`crate::energy`]).
@@ -705,6 +710,8 @@ pub fn run_with<H: RunHooks>(
         truth_force_fallbacks: w.force_fallbacks,
         truth_inertia_limits: w.inertia_limits,
         truth_twist_caps: w.twist_caps,
+        truth_scrub_pct: 100.0 * w.scrub_m / w.driven_m.max(1e-9),
+        truth_scrub_net_pct: 100.0 * w.scrub_net_m / w.driven_m.max(1e-9),
         device_health: state.health,
         energy_used_j: w.energy.energy_j(),
         mean_power_w: w.energy.mean_power_w(),

@@ -205,6 +205,19 @@ pub struct World {
     /// Steps whose twist (after the kinematic fallback) exceeded the plausible bounds of a
     /// quasi-static rover and was scaled down to them.
     pub twist_caps: u64,
+    /// Scrub of the wheels on the ground, m, summed over wheels and steps: the difference
+    /// between the ground speed each wheel drives (its rim speed after its own slip) and the
+    /// speed at which its contact point actually moved along its rolling tangent over the step
+    /// (body, suspension and link rotation after the placement), times the step. Where the
+    /// commanded wheel rates do not fit the terrain, the quasi-static contacts slide: motion
+    /// that no odometry can see. Diagnostics (`truth_scrub` in `summary.json`).
+    pub scrub_m: f64,
+    /// The same with sign, m: ground travel driven less the travel the contact points made
+    /// (positive: the wheels turned more than the rover moved, so odometry runs long).
+    pub scrub_net_m: f64,
+    /// Ground travel the wheels on the ground drove, m (the sum of `|ground speed| dt`): the
+    /// reference of [`Self::scrub_m`].
+    pub driven_m: f64,
     /// Averaged wheel odometry, m: the mean increment of the six drive encoders (as read)
     /// times the nominal wheel radius (0.10 m, published: what the flight software knows, not
     /// the wheels' true radii) times the cosine of the true pitch;
@@ -383,6 +396,9 @@ impl World {
             force_fallbacks: 0,
             inertia_limits: 0,
             twist_caps: 0,
+            scrub_m: 0.0,
+            scrub_net_m: 0.0,
+            driven_m: 0.0,
             prev_twist_w: None,
             wheel_average_m: 0.0,
         };
@@ -742,6 +758,15 @@ impl World {
         t.velocity_r_m_s = [twist.v.x, twist.v.y];
         t.t_us = t.t_us.saturating_add(FRAME_US);
         self.steps += 1;
+        self.account_scrub(
+            &wheels,
+            &contacts,
+            &s0,
+            &pose0,
+            &ground_speed,
+            &slip_factor,
+            dt,
+        );
         self.update_wheels();
         // Energy: the power of this step's truth state (motor rates, pitch, motion) over it.
         let (theta_up, rim_speed) =
@@ -765,6 +790,55 @@ impl World {
         }
         if self.steps % self.sun_every == 0 {
             self.sample_sun();
+        }
+    }
+
+    /// Adds the step's scrub to [`Self::scrub_m`] and its driven travel to
+    /// [`Self::driven_m`]: for each wheel on the ground at the step's start, the rolling row of
+    /// its contact (`contact_rows`, at the start configuration) applied to the motion the step
+    /// actually made, less the ground speed it drove.
+    #[allow(clippy::too_many_arguments)]
+    fn account_scrub(
+        &mut self,
+        wheels: &[WheelPose; WHEELS],
+        contacts: &[RollingContact; WHEELS],
+        s0: &Suspension,
+        pose0: &BodyPose,
+        ground_speed: &[f64; WHEELS],
+        slip_factor: &[f64; WHEELS],
+        dt: f64,
+    ) {
+        let rot0 = pose0.rot_w_from_r();
+        let rot1 = self.truth.pose.rot_w_from_r();
+        let v = rot0.inverse()
+            * (Vector3::from(self.truth.pose.pos_m) - Vector3::from(pose0.pos_m))
+            / dt;
+        let w = nalgebra::UnitQuaternion::from_rotation_matrix(&(rot0.inverse() * rot1))
+            .scaled_axis()
+            / dt;
+        let q = self.truth.suspension_rate_rad_s;
+        let x = crate::vehicle::rolling::Row::from_column_slice(&[
+            v.x, v.y, v.z, w.x, w.y, w.z, q[0], q[1], q[2],
+        ]);
+        for i in 0..WHEELS {
+            if !contacts[i].touching {
+                continue;
+            }
+            let rows = crate::vehicle::rolling::contact_rows(
+                &self.geometry,
+                wheels,
+                s0.rocker_rad,
+                s0.bogie_rad,
+                i,
+                &contacts[i],
+                slip_factor[i],
+            );
+            let moved = rows[1].dot(&x);
+            if moved.is_finite() {
+                self.scrub_m += (moved - ground_speed[i]).abs() * dt;
+                self.scrub_net_m += (ground_speed[i] - moved) * dt;
+                self.driven_m += ground_speed[i].abs() * dt;
+            }
         }
     }
 
@@ -964,5 +1038,37 @@ mod tests {
             (yaw - expected).abs() < 0.01 * expected.abs(),
             "{yaw} vs {expected}"
         );
+    }
+
+    /// SIM-31: the truth's scrub diagnostic. Six equal wheel rates on flat ground without slip
+    /// roll without sliding (scrub below 0.2 % of the driven travel); one wheel driven 30 %
+    /// faster than the other five cannot roll with them: whatever the body does, the six
+    /// contacts together slide at least `0.3 r theta_dot` per `6.3 r theta_dot` of drive, 4.8 %.
+    #[test]
+    fn sim_31_scrub_of_mismatched_wheel_rates() {
+        let scrub = |rates: [f64; WHEELS]| {
+            let mut w = World::new(&flat(0.0, 0.0), 1).unwrap();
+            w.command.wheel_rate_rad_s = rates;
+            for _ in 0..300 {
+                w.step();
+            }
+            let (s0, n0, d0) = (w.scrub_m, w.scrub_net_m, w.driven_m);
+            for _ in 0..400 {
+                w.step();
+            }
+            let driven = w.driven_m - d0;
+            assert!((driven - 6.0 * 0.2).abs() < 0.3, "{driven}");
+            (
+                100.0 * (w.scrub_m - s0) / driven,
+                100.0 * (w.scrub_net_m - n0) / driven,
+            )
+        };
+        let (equal, equal_net) = scrub([1.0; WHEELS]);
+        assert!(equal < 0.2 && equal_net.abs() < 0.2, "{equal} {equal_net}");
+        let mut one_fast = [1.0; WHEELS];
+        one_fast[2] = 1.3;
+        let (fast, fast_net) = scrub(one_fast);
+        assert!((4.5..15.0).contains(&fast), "{fast}");
+        assert!(fast_net.abs() <= fast, "{fast_net}");
     }
 }

@@ -154,6 +154,14 @@ pub struct Summary {
     pub truth_inertia_limits: u64,
     /// Truth steps whose twist was scaled down to the quasi-static bounds.
     pub truth_twist_caps: u64,
+    /// Truth-side scrub: how far the contact points of the wheels on the ground slid along
+    /// their rolling tangents against the ground speed the wheels drove, % of that ground
+    /// travel (`World::scrub_m`): wheel rates that do not fit the terrain show here, and no
+    /// odometry can see this motion.
+    pub truth_scrub_pct: f64,
+    /// The same with sign: ground travel driven less the travel made, % of the ground travel
+    /// (positive: the wheels turned more than the rover moved, so odometry runs long).
+    pub truth_scrub_net_pct: f64,
     /// Truth-side hazard contacts: new overlaps of the rover footprint with a hazard
     /// footprint (`sim_host::hazards`).
     pub collisions: u32,
@@ -477,6 +485,8 @@ pub fn summarise(run: &RunResult) -> Summary {
         truth_force_fallbacks: run.truth_force_fallbacks,
         truth_inertia_limits: run.truth_inertia_limits,
         truth_twist_caps: run.truth_twist_caps,
+        truth_scrub_pct: run.truth_scrub_pct,
+        truth_scrub_net_pct: run.truth_scrub_net_pct,
         collisions: u32::try_from(run.collisions.len()).unwrap_or(u32::MAX),
         hazards: HazardSummary {
             count: run.hazards,
