@@ -35,6 +35,7 @@ Usage:
   taskset -c 0 python3 tools/vo_speed.py /tmp/vo_speed              # export, build, compare
   python3 tools/vo_speed.py /tmp/vo_speed --export-only
   python3 tools/vo_speed.py /tmp/vo_speed --passes 9 --cpu 0
+  python3 tools/vo_speed.py /tmp/vo_speed --native    # also the flight VO built for this CPU
 Needs `pip install opencv-python-headless` and `apt-get install opencv-doc` (or its .deb unpacked
 and OPENCV_SAMPLES_DATA=.../usr/share/doc/opencv-doc/examples/data).
 """
@@ -267,11 +268,20 @@ def opencv_pass(cv2, pairs, cal):
     return out, stages.ms
 
 
-def build_rust():
+def build_rust(native=False):
+    """The benchmark binary. `native`: built for this machine's CPU (`-C target-cpu=native`, in
+    its own target directory), as OpenCV's wheels dispatch their kernels to the CPU's SSE4/AVX2
+    at run time; the flight code has no fast-math, so the results must stay bit-identical
+    (checked by `compare_sequence`)."""
     cmd = ["cargo", "build", "--release", "-j", "1", "-p", "sim-host", "--example", "vo_speed"]
-    print("building:", " ".join(cmd), flush=True)
-    subprocess.run(cmd, cwd=ROOT, check=True)
+    env = dict(os.environ)
     target = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
+    if native:
+        target = os.path.join(target, "vo-speed-native")
+        env["CARGO_TARGET_DIR"] = target
+        env["RUSTFLAGS"] = (env.get("RUSTFLAGS", "") + " -C target-cpu=native").strip()
+    print("building:", " ".join(cmd), "(target-cpu=native)" if native else "", flush=True)
+    subprocess.run(cmd, cwd=ROOT, check=True, env=env)
     return os.path.join(target, "release", "examples", "vo_speed")
 
 
@@ -293,7 +303,7 @@ def mean(rows, key):
     return float(np.mean([r[key] for r in rows if r["ok"]] or [0.0]))
 
 
-def compare_sequence(cv2, binary, name, seq_dir, passes):
+def compare_sequence(cv2, binary, name, seq_dir, passes, native=None):
     """Alternating passes of both pipelines on one sequence; prints its tables."""
     names = [n.strip() for n in open(os.path.join(seq_dir, "pairs.txt")) if n.strip()]
     pairs = [(read_pgm(os.path.join(seq_dir, f"{n}_left.pgm")),
@@ -302,8 +312,13 @@ def compare_sequence(cv2, binary, name, seq_dir, passes):
     print(f"\n== {name}: {passes} alternating passes of {len(pairs) - 1} updates each", flush=True)
     opencv_pass(cv2, pairs, cal)  # warm-up (the Rust binary warms up in each call)
     flight, peer, per_pass, stage_ms = [], [], [], {}
+    flight_native, per_pass_native = [], []
     for p in range(passes):
         f_rows, _ = rust_pass(binary, seq_dir)
+        if native:
+            n_rows, _ = rust_pass(native, seq_dir)
+            flight_native += n_rows
+            per_pass_native.append(median_p90(n_rows)[0])
         o_rows, o_stages = opencv_pass(cv2, pairs, cal)
         flight += f_rows
         peer += o_rows
@@ -333,21 +348,36 @@ def compare_sequence(cv2, binary, name, seq_dir, passes):
           f"successful updates):")
     print(f"  {'pipeline':44s} {'median ms':>9s} {'p90 ms':>7s} {'success':>8s} "
           f"{'stereo':>6s} {'tracked':>7s} {'inliers':>7s}")
-    for label, rows, m, p90 in [("flight VO (fsw::vo <150>, flight config)", flight, fm, f90),
-                                ("OpenCV GFTT+LK+solvePnPRansac (1 thread)", peer, om, o90)]:
+    pipelines = [("flight VO (fsw::vo <150>, flight config)", flight, fm, f90)]
+    nm = None
+    if native:
+        nm, n90 = median_p90(flight_native)
+        pipelines.append(("flight VO, built target-cpu=native", flight_native, nm, n90))
+    pipelines.append(("OpenCV GFTT+LK+solvePnPRansac (1 thread)", peer, om, o90))
+    for label, rows, m, p90 in pipelines:
         print(f"  {label:44s} {m:9.2f} {p90:7.2f} {sum(r['ok'] for r in rows):4d}/{len(rows):<3d} "
               f"{mean(rows, 'stereo_matches'):6.1f} {mean(rows, 'tracked'):7.1f} "
               f"{mean(rows, 'inliers'):7.1f}")
     print(f"  ratio OpenCV / flight (median): {om / fm:.2f}x (per pass {min(ratios):.2f}-"
           f"{max(ratios):.2f}x); issue-18 goals: flight median <= 10 ms "
           f"{'met' if fm <= 10.0 else 'NOT met'}, >= 2x OpenCV {'met' if om / fm >= 2.0 else 'NOT met'}")
+    if native:
+        strip = [{k: v for k, v in r.items() if k != "ms"} for r in flight]
+        same = strip == [{k: v for k, v in r.items() if k != "ms"} for r in flight_native]
+        ratios_n = [o / f for f, (_, o) in zip(per_pass_native, per_pass)]
+        print(f"  ratio OpenCV / flight built for this CPU (median): {om / nm:.2f}x (per pass "
+              f"{min(ratios_n):.2f}-{max(ratios_n):.2f}x), >= 2x OpenCV "
+              f"{'met' if om / nm >= 2.0 else 'NOT met'}; results of the two builds "
+              f"{'bit-identical' if same else 'DIFFERENT'} (every field but the time)")
+        if not same:
+            raise SystemExit("the native build changed the flight VO's results")
     if profile:
         print("  flight host time per update by work kind (extra pass, one item per step): " +
               ", ".join(f"{k} {v['ms_per_update']:.2f} ms ({v['items_per_update']:.0f})"
                         for k, v in profile.items()))
     print("  OpenCV host time per update by stage: " +
           ", ".join(f"{k} {v:.2f} ms" for k, v in stage_ms.items()))
-    return fm, f90, om, o90
+    return fm, f90, om, o90, nm
 
 
 def main():
@@ -365,17 +395,20 @@ def main():
     if "--export-only" in args:
         return
     binary = build_rust()
+    native = build_rust(native=True) if "--native" in args else None
     os.sched_setaffinity(0, {cpu})
     import cv2
     cv2.setNumThreads(1)
     print(f"pinned to CPU {cpu} (children inherit); OpenCV {cv2.__version__}, "
           f"{cv2.getNumThreads()} thread(s)", flush=True)
-    results = [(name,) + compare_sequence(cv2, binary, name, seq_dir, passes)
+    results = [(name,) + compare_sequence(cv2, binary, name, seq_dir, passes, native)
                for name, seq_dir, _ in sequences]
     print("\n== summary: time per update, one core")
-    print(f"  {'sequence':52s} {'flight med/p90 ms':>17s} {'OpenCV med/p90 ms':>17s} {'ratio':>6s}")
-    for name, fm, f90, om, o90 in results:
-        print(f"  {name:52s} {fm:8.2f}/{f90:<8.2f} {om:8.2f}/{o90:<8.2f} {om / fm:5.2f}x")
+    print(f"  {'sequence':52s} {'flight med/p90 ms':>17s} {'OpenCV med/p90 ms':>17s} {'ratio':>6s}"
+          + (f" {'native med ms':>13s} {'ratio':>6s}" if native else ""))
+    for name, fm, f90, om, o90, nm in results:
+        print(f"  {name:52s} {fm:8.2f}/{f90:<8.2f} {om:8.2f}/{o90:<8.2f} {om / fm:5.2f}x"
+              + (f" {nm:13.2f} {om / nm:5.2f}x" if nm else ""))
 
 
 if __name__ == "__main__":
