@@ -78,9 +78,9 @@ pub struct LensRig {
     cover: CoverImage,
     settings: RenderSettings,
     pinhole: super::StereoRenderer,
-    /// Pinhole-image coordinates of each raw pixel, left and right (NaN where the lens model
-    /// has no inverse).
-    maps: [Vec<[f32; 2]>; 2],
+    /// Where each raw pixel reads the pinhole image, left and right (from its pinhole-image
+    /// coordinates; sky where the lens model has no inverse).
+    taps: [Vec<Tap>; 2],
     images: [Vec<u8>; 2],
     gauss: Box<super::noise::GaussTable>,
 }
@@ -121,12 +121,16 @@ impl LensRig {
                 })
                 .collect()
         };
+        let taps = [map(&lens.left), map(&lens.right)]
+            .map(|m| m.iter().map(|&p| Tap::new(w, h, p)).collect::<Vec<_>>());
+        let mut pinhole = super::StereoRenderer::with_size(calib, quiet, w, h);
+        pinhole.set_used_pixels([0, 1].map(|c| Some(used_pixels(&taps[c], w, h))));
         Ok(Self {
             lens,
             cover,
             settings,
-            pinhole: super::StereoRenderer::with_size(calib, quiet, w, h),
-            maps: [map(&lens.left), map(&lens.right)],
+            pinhole,
+            taps,
             images: [vec![0; w * h], vec![0; w * h]],
             gauss: super::noise::gaussian_table(),
         })
@@ -176,23 +180,22 @@ impl LensRig {
         let stats = self
             .pinhole
             .render(surface, left_pose, sun, noise_seed, pl, pr)?;
-        let (w, h) = self.cover.size;
         let sigma = self.settings.noise_sigma_dn;
         let sky = self.settings.sky_dn;
         let gauss = &self.gauss;
-        let resample = |image: &[u8], map: &[[f32; 2]], out: &mut [u8], camera: u64| {
+        let resample = |image: &[u8], taps: &[Tap], out: &mut [u8], camera: u64| {
             let table_mask = (gauss.len().min(1 << 16) - 1) as u64;
             let key = hash3(noise_seed, camera, 0x006c_656e_7300);
             out.par_chunks_mut(IMAGE_WIDTH_PX)
-                .zip(map.par_chunks(IMAGE_WIDTH_PX))
+                .zip(taps.par_chunks(IMAGE_WIDTH_PX))
                 .enumerate()
-                .for_each(|(j, (row, map_row))| {
+                .for_each(|(j, (row, taps_row))| {
                     for group in (0..IMAGE_WIDTH_PX).step_by(NOISE_GROUP) {
                         let id = ((j * IMAGE_WIDTH_PX + group) / NOISE_GROUP) as u64;
                         let hash = mix64(key ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15));
                         let end = (group + NOISE_GROUP).min(IMAGE_WIDTH_PX);
                         for (q, i) in (group..end).enumerate() {
-                            let clean = bilinear(image, w, h, map_row[i]).unwrap_or(sky as f32);
+                            let clean = taps_row[i].sample(image).unwrap_or(sky as f32);
                             let g = gauss[((hash >> (16 * q)) & table_mask) as usize];
                             let v = f64::from(clean) + sigma * f64::from(g);
                             row[i] = (v.clamp(0.0, 255.0) + 0.5) as i32 as u8;
@@ -200,24 +203,109 @@ impl LensRig {
                     }
                 });
         };
-        let [ml, mr] = &self.maps;
+        let [ml, mr] = &self.taps;
         rayon::join(|| resample(pl, ml, left, 0), || resample(pr, mr, right, 1));
         Ok(stats)
     }
 }
 
-/// Bilinear interpolation of the `w x h` image at `p` (pixel centres at integers); `None`
-/// outside the image or for NaN.
-fn bilinear(image: &[u8], w: usize, h: usize, p: [f32; 2]) -> Option<f32> {
+#[cfg(test)]
+impl LensRig {
+    /// Shade every pinhole pixel from now on (drops the used-pixel masks): the reference of
+    /// SIM-LENS-5.
+    pub(crate) fn shade_every_pixel(&mut self) {
+        self.pinhole.set_used_pixels([None, None]);
+    }
+}
+
+/// The pixels of a `w x h` pinhole image that `taps` read (`w * h` flags, row-major): the raw
+/// images depend on no other pixel.
+fn used_pixels(taps: &[Tap], w: usize, h: usize) -> Vec<bool> {
+    let mut used = vec![false; w * h];
+    for t in taps.iter().filter(|t| t.base != Tap::SKY) {
+        let k = t.base as usize;
+        let (dx, dy) = (t.dx as usize, t.dy as usize);
+        for n in [k, k + dx, k + dy, k + dy + dx] {
+            if let Some(u) = used.get_mut(n) {
+                *u = true;
+            }
+        }
+    }
+    used
+}
+
+/// Where a raw pixel reads the pinhole image: the bilinear interpolation of the `w x h` image
+/// at a point `p` (pixel centres at integers), with the storage index of its upper left tap,
+/// the offsets of the others and the weights computed once (the same values as a lookup at `p`
+/// computes them).
+#[derive(Debug, Clone, Copy)]
+struct Tap {
+    /// Index of the upper left tap `(x0, y0)`, or [`Tap::SKY`] outside the image or for NaN.
+    base: u32,
+    /// `x1 - x0` (0 on the last column).
+    dx: u32,
+    /// `(y1 - y0) * w` (0 on the last row).
+    dy: u32,
+    /// Weight of the right taps, `x - x0`.
+    a: f32,
+    /// Weight of the lower taps, `y - y0`.
+    b: f32,
+}
+
+impl Tap {
+    /// [`Tap::base`] of a point outside the image.
+    const SKY: u32 = u32::MAX;
+
+    /// The lookup at `p` in a `w x h` image (`w * h` below `u32::MAX`: the cover image has at
+    /// most 4096 px on a side).
+    fn new(w: usize, h: usize, p: [f32; 2]) -> Self {
+        match bilinear_taps(w, h, p) {
+            Some([x0, y0, x1, y1]) => {
+                let [x, y] = p;
+                Self {
+                    base: (y0 * w + x0) as u32,
+                    dx: (x1 - x0) as u32,
+                    dy: ((y1 - y0) * w) as u32,
+                    a: x - x0 as f32,
+                    b: y - y0 as f32,
+                }
+            }
+            None => Self {
+                base: Self::SKY,
+                dx: 0,
+                dy: 0,
+                a: 0.0,
+                b: 0.0,
+            },
+        }
+    }
+
+    /// The interpolated value in `image`; `None` for a point outside the image.
+    #[inline(always)]
+    fn sample(&self, image: &[u8]) -> Option<f32> {
+        if self.base == Self::SKY {
+            return None;
+        }
+        let k = self.base as usize;
+        let (dx, dy) = (self.dx as usize, self.dy as usize);
+        let px = |n: usize| image.get(n).copied().map_or(0.0, f32::from);
+        let (a, b) = (self.a, self.b);
+        let top = px(k) + a * (px(k + dx) - px(k));
+        let bottom = px(k + dy) + a * (px(k + dy + dx) - px(k + dy));
+        Some(top + b * (bottom - top))
+    }
+}
+
+/// Columns and rows `[x0, y0, x1, y1]` of the four pixels of a bilinear lookup at `p` in a
+/// `w x h` image; `None` outside the image or for NaN.
+#[inline(always)]
+fn bilinear_taps(w: usize, h: usize, p: [f32; 2]) -> Option<[usize; 4]> {
     let [x, y] = p;
     if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f32 && y <= (h - 1) as f32) {
         return None;
     }
-    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    // floor(x) for x >= 0 is the truncation (no libm call; `floorf` was 4 % of a run).
+    let (x0, y0) = (x as usize, y as usize);
     let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (a, b) = (x - x0 as f32, y - y0 as f32);
-    let px = |i: usize, j: usize| f32::from(image[j * w + i]);
-    let top = px(x0, y0) + a * (px(x1, y0) - px(x0, y0));
-    let bottom = px(x0, y1) + a * (px(x1, y1) - px(x0, y1));
-    Some(top + b * (bottom - top))
+    Some([x0, y0, x1, y1])
 }

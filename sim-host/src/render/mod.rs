@@ -273,6 +273,16 @@ impl StereoRenderer {
         (self.width, self.height)
     }
 
+    /// Shade only the pixels whose value is used, per camera (left, right: `width * height`
+    /// flags, row-major; `None` or a mask of another size: every pixel). The used pixels get
+    /// the same values as without the masks, the others arbitrary ones; the statistics still
+    /// count every pixel.
+    pub(crate) fn set_used_pixels(&mut self, masks: [Option<Vec<bool>>; 2]) {
+        for (frame, mask) in self.frames.iter_mut().zip(masks) {
+            frame.set_used(mask);
+        }
+    }
+
     /// Render the pair seen from `left_pose` into `left` and `right` (`width * height` bytes
     /// each, row-major; `IMAGE_PIXELS` for [`Self::new`]), with the albedo filtered to each pixel's footprint. `noise_seed` selects
     /// the image noise (use a different seed per frame).

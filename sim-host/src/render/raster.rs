@@ -77,6 +77,9 @@ pub(crate) struct Frame {
     inv_z: Vec<f32>,
     /// Interpolated shade per pixel.
     shade: Vec<f32>,
+    /// Pixels whose value is used (`width * height`, row-major), or `None` for all: the
+    /// shading pass looks up the albedo only for these (the others get an arbitrary value).
+    used: Option<Vec<bool>>,
     /// Triangles that reached the pixel loop in the last frame.
     pub triangles_drawn: usize,
 }
@@ -100,8 +103,16 @@ impl Frame {
             height,
             inv_z: vec![0.0; width * height],
             shade: vec![0.0; width * height],
+            used: None,
             triangles_drawn: 0,
         }
+    }
+
+    /// Shade only the pixels where `used` is true (`width * height` values, row-major; the
+    /// others get an arbitrary value), or every pixel for `None` or a slice of another size.
+    /// The used pixels get the same values as without the mask.
+    pub(crate) fn set_used(&mut self, used: Option<Vec<bool>>) {
+        self.used = used.filter(|u| u.len() == self.width * self.height);
     }
 
     /// Rasterize `mesh` with its vertices projected into this camera (`proj`: `(u, v, 1/z)` per
@@ -245,9 +256,10 @@ impl Frame {
         }
     }
 
-    /// Shade every pixel into `out` (8-bit, row-major). `albedo(x, y, footprint, out)` gives the
-    /// ground reflectance of a run of points; `noise_key` selects this image's noise; `gauss`
-    /// is the quantile table. Returns the number of sky pixels.
+    /// Shade every pixel into `out` (8-bit, row-major; only the used ones, [`Self::set_used`]).
+    /// `albedo(x, y, footprint, out)` gives the ground reflectance of a run of points;
+    /// `noise_key` selects this image's noise; `gauss` is the quantile table. Returns the number
+    /// of sky pixels (of the whole image, used or not).
     pub(crate) fn shade_into<A: Fn(&[f64], &[f64], &[f64], &mut [f64]) + Sync>(
         &self,
         view: &View,
@@ -282,6 +294,7 @@ impl Frame {
                 inv_fx * (len / ray[2].abs().max(0.05 * len)).sqrt()
             })
             .collect();
+        let used = self.used.as_deref();
         out.par_chunks_mut(width)
             .zip(self.inv_z.par_chunks(width))
             .zip(self.shade.par_chunks(width))
@@ -290,6 +303,14 @@ impl Frame {
             .map_init(
                 || RowScratch::new(width),
                 |s, (j, (((row, inv_z), shade), knot))| {
+                    let used = used.map(|u| &u[j * width..(j + 1) * width]);
+                    if let Some(u) = used {
+                        if !u.iter().any(|&b| b) {
+                            // No pixel of this row is used: only the sky count.
+                            row.fill(0);
+                            return inv_z.len() - inv_z.iter().filter(|&&iz| iz > 0.0).count();
+                        }
+                    }
                     let base = view.ray_w(0.0, j as f64);
                     // Footprint stretch per pixel, linear between the knots.
                     let stretch = &mut s.stretch[..width];
@@ -303,14 +324,30 @@ impl Frame {
                     // World points and footprints of the row's ground pixels, their albedo in
                     // one call, then the pixel values.
                     let mut n = 0;
-                    for (i, (&iz, &st)) in inv_z.iter().zip(stretch.iter()).enumerate() {
-                        if iz > 0.0 {
-                            let fi = i as u32 as f64;
-                            let z = f64::from(1.0 / iz);
-                            s.xs[n] = cx + z * (base[0] + fi * step[0]);
-                            s.ys[n] = cy + z * (base[1] + fi * step[1]);
-                            s.fs[n] = z * st;
-                            n += 1;
+                    let mut point = |i: usize, iz: f32, st: f64| {
+                        let fi = i as u32 as f64;
+                        let z = f64::from(1.0 / iz);
+                        s.xs[n] = cx + z * (base[0] + fi * step[0]);
+                        s.ys[n] = cy + z * (base[1] + fi * step[1]);
+                        s.fs[n] = z * st;
+                        n += 1;
+                    };
+                    match used {
+                        None => {
+                            for (i, (&iz, &st)) in inv_z.iter().zip(stretch.iter()).enumerate() {
+                                if iz > 0.0 {
+                                    point(i, iz, st);
+                                }
+                            }
+                        }
+                        Some(u) => {
+                            for (i, ((&iz, &st), &u)) in
+                                inv_z.iter().zip(stretch.iter()).zip(u).enumerate()
+                            {
+                                if iz > 0.0 && u {
+                                    point(i, iz, st);
+                                }
+                            }
                         }
                     }
                     let albedos = &mut s.albedos[..n];
@@ -324,15 +361,29 @@ impl Frame {
                         }
                     } else {
                         let mut albedos = albedos.iter();
-                        for ((c, &iz), &sh) in clean.iter_mut().zip(inv_z).zip(shade) {
+                        for (i, ((c, &iz), &sh)) in
+                            clean.iter_mut().zip(inv_z).zip(shade).enumerate()
+                        {
                             *c = if iz > 0.0 {
-                                let a = albedos.next().copied().unwrap_or(0.0);
-                                exposure * a * f64::from(sh)
+                                if used.is_none_or(|u| u[i]) {
+                                    let a = albedos.next().copied().unwrap_or(0.0);
+                                    exposure * a * f64::from(sh)
+                                } else {
+                                    0.0
+                                }
                             } else {
                                 sky += 1;
                                 sky_dn
                             };
                         }
+                    }
+                    if sigma == 0.0 {
+                        // No noise: the noise term below would be +-0 (the table is finite),
+                        // which leaves every sum as it is, NaN included.
+                        for (o, &c) in row.iter_mut().zip(clean.iter()) {
+                            *o = (c.clamp(0.0, 255.0) + 0.5) as i32 as u8;
+                        }
+                        return sky;
                     }
                     // Noise: one hash per group of four pixels, 16 bits of it per pixel.
                     let first_id = ((j * width) / NOISE_GROUP) as u64;
