@@ -527,6 +527,15 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
             ),
         ),
         (
+            "radius scale",
+            format!(
+                "kin3d {:.4} (from VO, {} windows), EKF {:.4}",
+                summary.radius_scale.kin3d,
+                summary.radius_scale.kin3d_windows,
+                summary.radius_scale.ekf
+            ),
+        ),
+        (
             "kin3d track memory",
             format!(
                 "heave corrected on {} of {} kinematic steps",

@@ -249,6 +249,10 @@ pub struct RunResult {
     /// VO yaw boresight learnt by the flight software at the end (rad, positive: VO's
     /// translation turned towards `+y` of `R`) and the samples it learnt from.
     pub vo_boresight: (f64, u32),
+    /// Effective wheel-radius scales learnt by the flight software at the end: the EKF's
+    /// kinematic measurement's (eq. 15) and the 3D dead reckoning's with its windows
+    /// (`fsw::flight::nav::CaptureScale`).
+    pub radius_scales: (f64, f64, u32),
     /// The error of the flight software's last failed VO update, if any.
     pub vo_last_error: Option<String>,
     /// Every VO relative pose checked against the truth.
@@ -729,6 +733,10 @@ pub fn run_with<H: RunHooks>(
         vo_mean_features: (vo_seen > 0).then(|| vo_features / f64::from(vo_seen)),
         vo_mean_inliers: (vo_seen > 0).then(|| vo_inliers / f64::from(vo_seen)),
         vo_boresight: fsw.nav().vo_boresight(),
+        radius_scales: {
+            let (k, n) = fsw.nav().kin3d_radius_scale();
+            (fsw.nav().radius_scale(), k, n)
+        },
         vo_last_error: fsw.nav().last_vo_error().map(|e| format!("{e:?}")),
         vo_checks,
         rocks: w

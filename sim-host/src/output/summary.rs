@@ -41,6 +41,19 @@ pub struct DistanceErrors {
     pub wheel_average: f64,
 }
 
+/// Effective wheel-radius scales the flight software learnt (effective over nominal radius, at
+/// the end of the run).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RadiusScales {
+    /// Applied to the EKF's kinematic measurement (eq. 15), learnt from the EKF's travel.
+    pub ekf: f64,
+    /// Applied to the 3D kinematic dead reckoning (`kin3d`), learnt from VO over clean capture
+    /// intervals (`fsw::flight::nav::CaptureScale`, KIN-14).
+    pub kin3d: f64,
+    /// 1 m windows the `kin3d` scale was learnt from (0: nominal).
+    pub kin3d_windows: u32,
+}
+
 /// Cross-track error of the true path, m.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct CrossTrack {
@@ -136,6 +149,8 @@ pub struct Summary {
     pub error_pct: PerEstimate,
     /// Distance-travelled error of the kinematic estimates, %.
     pub distance_error_pct: DistanceErrors,
+    /// Wheel-radius scales the flight software learnt.
+    pub radius_scale: RadiusScales,
     /// Largest attitude error, deg.
     pub max_attitude_error_deg: AttitudeErrors,
     /// Cross-track error of the truth against the path.
@@ -474,6 +489,11 @@ pub fn summarise(run: &RunResult) -> Summary {
             final_error(run, w).map(|e| 100.0 * e / run.distance_m.max(1e-9))
         }),
         distance_error_pct: distance_errors(run),
+        radius_scale: RadiusScales {
+            ekf: run.radius_scales.0,
+            kin3d: run.radius_scales.1,
+            kin3d_windows: run.radius_scales.2,
+        },
         max_attitude_error_deg: AttitudeErrors {
             ekf: max_attitude_error(run, Trajectory::Ekf),
             vo: max_attitude_error(run, Trajectory::Vo),

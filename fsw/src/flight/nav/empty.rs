@@ -131,6 +131,7 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
     ik_contact_angles: false,
     ik_contact_max_angle_rad: 0.0,
     ik_contact_min_angle_rad: 0.0,
+    kin3d_radius_scale: false,
 };
 
 /// All counters zero (as [`NavCounters::default`], usable in a `const`).

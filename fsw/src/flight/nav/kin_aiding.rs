@@ -105,6 +105,7 @@ impl Navigator {
             Err(_) => {
                 self.counters.kin_errors = self.counters.kin_errors.saturating_add(1);
                 self.boresight.interrupt();
+                self.kin3d_scale.interrupt();
                 self.release(Some(start));
                 self.interval = None;
                 self.restart_interval(j, t_us);
@@ -122,6 +123,11 @@ impl Navigator {
         // The wheel travel as the EKF measured it (before the radius scale is applied), for the
         // scale's own estimate below.
         let wheel_step = rp.trans_0_1_m.norm();
+        // The contact-angle step of the 3D dead reckoning in `N` (unscaled), for its own scale.
+        let kin_step_n = ekf
+            .clone_pose(start)
+            .ok()
+            .map(|(q0, _)| q0.transform_vector(&contact_translation));
         let ekf_step = ekf
             .clone_pose(start)
             .map(|(_, p0)| (ekf.state().p_n - p0).norm())
@@ -146,8 +152,18 @@ impl Navigator {
                 .odometry
                 .contact_translation
                 .then(|| self.odometry.axle_centres_m());
-            self.traj
-                .kinematic_step(&q0, &contact_translation, &ekf.state().q_nr, axles.as_ref());
+            // As `Navigator::kin3d_radius_scale` (field by field: the filter is borrowed).
+            let k3 = if self.config.kin3d_radius_scale {
+                self.kin3d_scale.scale.scale
+            } else {
+                1.0
+            };
+            self.traj.kinematic_step(
+                &q0,
+                &(contact_translation * k3),
+                &ekf.state().q_nr,
+                axles.as_ref(),
+            );
             self.counters.track_matched = self.traj.track.matched_steps;
             self.counters.track_unmatched = self.traj.track.unmatched_steps;
             if let Ok((_, p0)) = ekf.clone_pose(start) {
@@ -231,6 +247,10 @@ impl Navigator {
         let usable = fusing && result.as_ref().is_ok_and(|d| d.accepted);
         self.boresight
             .kinematic(&self.config.vo_boresight, &rp, usable, cross);
+        match kin_step_n {
+            Some(k) => self.kin3d_scale.kinematic(&[k.x, k.y, k.z], usable),
+            None => self.kin3d_scale.interrupt(),
+        }
         match result {
             Ok(d) => {
                 self.counters.kin_tested = self.counters.kin_tested.saturating_add(1);
@@ -388,6 +408,7 @@ impl Navigator {
         }
         self.gyro_since_joints = Some(crate::types::Quat::identity());
         self.boresight.interrupt();
+        self.kin3d_scale.interrupt();
         let result = ekf.clone_at(t_us);
         self.recorder.clone_at(t_us);
         match result {

@@ -62,7 +62,7 @@ use diagnostics::Trajectories;
 pub use loc_nav::{LocCounters, LocFixReport, LocNav, LocalizationSettings};
 pub use mission::{MissionBudget, MissionCounters, MissionError, MissionPhase, TargetOutcome};
 use protection::{FaultResponse, Protection, ProtectionConfig};
-pub use radius::{RadiusScale, RadiusScaleConfig};
+pub use radius::{CaptureScale, RadiusScale, RadiusScaleConfig};
 use vo_gate::{CaptureMark, VoGateStatus};
 use vo_sched::StereoStage;
 
@@ -282,6 +282,18 @@ pub struct NavConfig {
     /// of `GoalUnreachable`; SIL-HAZ-2 one collision). With 0.1 rad and level turns: no
     /// collision, `rough-kinematics` 2.86 % (0.91 % without slip and with exact dimensions).
     pub ik_contact_min_angle_rad: f64,
+    /// The 3D kinematic dead reckoning (`kin3d`, V99 sec. 6: the contact-angle step with the
+    /// track memory) scaled by its own effective wheel-radius scale: the ratio of VO's
+    /// translation to the dead reckoning's over capture intervals the slip gate accepted
+    /// throughout ([`CaptureScale`]; settings [`Self::radius_scale`]: 1 m windows, within 4 %).
+    /// It calibrates
+    /// the wheels' true radius (and the small slip the gate lets through) into the dead
+    /// reckoning, which is the navigation pose when VO is lost. A scale of its own because the
+    /// EKF's (eq. 15's) ratio also absorbs eq. 15's contact model error on rough ground, which
+    /// the contact-angle step does not have (that scale on `kin3d` made `undulating` 0.77 ->
+    /// 1.53 %, `docs/kinematics.md`), and the EKF's travel over an interval mostly repeats the
+    /// kinematics it fused before. Without VO the scale stays 1.
+    pub kin3d_radius_scale: bool,
 }
 
 impl NavConfig {
@@ -392,6 +404,7 @@ impl NavConfig {
             ik_contact_angles: true,
             ik_contact_max_angle_rad: 1.0,
             ik_contact_min_angle_rad: 0.1,
+            kin3d_radius_scale: true,
         }
     }
 }
@@ -638,6 +651,8 @@ pub struct Navigator {
     protection: Protection,
     /// Effective wheel-radius scale estimate.
     radius_scale: RadiusScale,
+    /// The 3D kinematic dead reckoning's own radius scale ([`NavConfig::kin3d_radius_scale`]).
+    kin3d_scale: CaptureScale,
     /// VO translation boresight estimate.
     boresight: Boresight,
     /// Why fault protection stopped the drive.
@@ -749,6 +764,7 @@ impl Navigator {
         vo_started: false,
         protection: Protection::EMPTY,
         radius_scale: RadiusScale::new(),
+        kin3d_scale: CaptureScale::new(),
         boresight: Boresight::new(),
         fault_response: FaultResponse::None,
         vo_fused_since_interval: false,
@@ -838,6 +854,7 @@ impl Navigator {
         self.vo_started = false;
         self.protection = Protection::default();
         self.radius_scale = RadiusScale::new();
+        self.kin3d_scale = CaptureScale::new();
         self.boresight = Boresight::new();
         self.fault_response = FaultResponse::None;
         self.vo_fused_since_interval = false;
@@ -866,6 +883,17 @@ impl Navigator {
     /// The effective wheel-radius scale applied to the kinematic translation (1 = nominal).
     pub fn radius_scale(&self) -> f64 {
         self.radius_scale.scale
+    }
+
+    /// The effective wheel-radius scale applied to the 3D kinematic dead reckoning's steps
+    /// ([`NavConfig::kin3d_radius_scale`]; 1 = nominal or off) and the 1 m windows it was
+    /// learnt from.
+    pub fn kin3d_radius_scale(&self) -> (f64, u32) {
+        if self.config.kin3d_radius_scale {
+            (self.kin3d_scale.scale.scale, self.kin3d_scale.scale.updates)
+        } else {
+            (1.0, 0)
+        }
     }
 
     /// The VO translation boresight removed from each VO pose (rad about `z_R`, positive from

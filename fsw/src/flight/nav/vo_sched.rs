@@ -114,6 +114,7 @@ impl Navigator {
                 // exactly (replay) however late it arrives.
                 self.recorder.begin(&self.ekf);
                 self.boresight.capture(t_us);
+                self.kin3d_scale.capture(t_us);
                 self.mark_capture(reason);
                 true
             }
@@ -357,6 +358,14 @@ impl Navigator {
         // An accepted pose teaches the boresight (from its raw translation) when the wheels'
         // motion over the same capture interval is clean.
         self.boresight.learn(&self.config.vo_boresight, raw);
+        // And the dead reckoning's radius scale, from the same clean capture interval.
+        let t = rp.trans_0_1_m;
+        self.kin3d_scale.learn(
+            &self.config.radius_scale,
+            rp.t0_us,
+            rp.t1_us,
+            &[t.x, t.y, t.z],
+        );
         let result = if self.recorder.active() {
             self.counters.vo_replayed = self.counters.vo_replayed.saturating_add(1);
             self.recorder.start_late(&fused, false)
