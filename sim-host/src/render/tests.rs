@@ -531,17 +531,13 @@ fn sim_r8_bad_input_is_refused() {
     );
 }
 
-/// SIM-LENS-4: through the wide-angle lenses (true lenses with drawn errors), a dark dot at a
-/// known ground point lands on the raw pixel the lens model predicts (projection computed here
-/// with `sensors::lens::project`, independently of the rig's inverse map), in both cameras,
-/// within 0.5 px, including dots far off axis where the distortion moves them by tens of
-/// pixels.
-#[test]
-fn sim_lens_4_marker_lands_on_predicted_raw_pixel() {
+/// The hazcam calibration and true lenses drawn from the lens tolerances with `seed` (the focal
+/// and principal-point arguments of `draw_truth` as SIM-LENS-4 has always used them).
+fn drawn_lenses(seed: u64) -> (StereoCalibration, rover_hal::LensCalibration) {
     use crate::sensors::lens;
     use rand::SeedableRng;
     let calib = hazcam_calibration();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let truth = lens::draw_truth(
         &lens::nominal_lens(),
         &calib,
@@ -550,6 +546,18 @@ fn sim_lens_4_marker_lands_on_predicted_raw_pixel() {
         &lens::LensTolerances::default(),
         &mut rng,
     );
+    (calib, truth)
+}
+
+/// SIM-LENS-4: through the wide-angle lenses (true lenses with drawn errors), a dark dot at a
+/// known ground point lands on the raw pixel the lens model predicts (projection computed here
+/// with `sensors::lens::project`, independently of the rig's inverse map), in both cameras,
+/// within 0.5 px, including dots far off axis where the distortion moves them by tens of
+/// pixels.
+#[test]
+fn sim_lens_4_marker_lands_on_predicted_raw_pixel() {
+    use crate::sensors::lens;
+    let (calib, truth) = drawn_lenses(9);
     let r_wr = rot_zyx(0.2, 0.03, -0.02);
     let p_r = [1.0, 2.0, -0.2];
     let r_wk = mat_mul(r_wr, calib.rot_rover_from_camera);
@@ -619,18 +627,7 @@ fn sim_lens_4_marker_lands_on_predicted_raw_pixel() {
 /// yard with true lenses, image noise on, seen from a tilted pose.
 #[test]
 fn sim_lens_5_used_pixel_masks_change_no_raw_byte() {
-    use crate::sensors::lens;
-    use rand::SeedableRng;
-    let calib = hazcam_calibration();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-    let truth = lens::draw_truth(
-        &lens::nominal_lens(),
-        &calib,
-        [0.002, -0.001],
-        [0.3, -0.4],
-        &lens::LensTolerances::default(),
-        &mut rng,
-    );
+    let (calib, truth) = drawn_lenses(5);
     let surface = TexturedSurface::new(HeightFn(|x: f64, y: f64| 0.05 * (x + 0.5 * y)), texture());
     let pose = CameraPose::from_rover(rot_zyx(0.3, -0.35, 0.05), [0.4, -0.2, -0.3], &calib);
     let settings = RenderSettings::default();
