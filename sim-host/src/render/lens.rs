@@ -18,6 +18,39 @@ use rover_hal::{LensCalibration, RawCamera, StereoCalibration, IMAGE_HEIGHT_PX, 
 /// Pixels sharing one noise hash (as the pinhole renderer).
 const NOISE_GROUP: usize = 4;
 
+/// Mask of a 16-bit field of a noise hash that indexes the Gaussian table (the table has at
+/// most 2^16 entries, so the masked index is always in it).
+const GAUSS_MASK: u64 = (super::noise::GAUSS_TABLE_LEN - 1) as u64;
+
+/// `v` rounded half up to a byte, clamped to `[0, 255]`; NaN gives 0. The same byte as
+/// `(v.clamp(0.0, 255.0) + 0.5) as i32 as u8` for every `v` (a NaN there also ends as 0; `-0.0`
+/// and `0.0` both end as 0), with two fewer instructions per pixel pair in the vectorised loops
+/// (`maxpd`/`minpd` without a NaN fix-up; the conversion itself stays per pixel on SSE2).
+#[inline(always)]
+#[allow(clippy::manual_clamp)] // `clamp` keeps NaN, which is the point here.
+pub(super) fn quantize(v: f64) -> u8 {
+    (v.max(0.0).min(255.0) + 0.5) as i32 as u8
+}
+
+/// Per-row working arrays of the resampling (one set per parallel job, reused for its rows;
+/// every entry read is written first for the same row).
+struct RowScratch {
+    /// Noise-free value per raw pixel.
+    clean: Vec<f32>,
+    /// Gaussian quantile per raw pixel.
+    noise: Vec<f32>,
+}
+
+impl RowScratch {
+    /// Arrays for rows of `width` pixels.
+    fn new(width: usize) -> Self {
+        Self {
+            clean: vec![0.0; width],
+            noise: vec![0.0; width],
+        }
+    }
+}
+
 /// The pinhole image that covers both raw fields: intrinsics and size.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CoverImage {
@@ -158,7 +191,9 @@ impl LensRig {
     }
 
     /// Render the raw pair seen from `left_pose` into `left` and `right` (`IMAGE_PIXELS`
-    /// bytes each); as [`super::StereoRenderer::render`] otherwise.
+    /// bytes each); as [`super::StereoRenderer::render`] otherwise. (Never inlined: one call
+    /// per pair, and a symbol of its own for profiles.)
+    #[inline(never)]
     pub fn render<S: FilteredAlbedo + ?Sized>(
         &mut self,
         surface: &S,
@@ -184,24 +219,36 @@ impl LensRig {
         let sky = self.settings.sky_dn;
         let gauss = &self.gauss;
         let resample = |image: &[u8], taps: &[Tap], out: &mut [u8], camera: u64| {
-            let table_mask = (gauss.len().min(1 << 16) - 1) as u64;
             let key = hash3(noise_seed, camera, 0x006c_656e_7300);
+            // Per row, three passes: the noise-free values (the taps), the noise quantiles
+            // (one hash per group of pixels), and the sums, rounded (plain arithmetic over
+            // whole arrays, which the compiler vectorises); the same operations per pixel as a
+            // single pass, so the same bytes.
             out.par_chunks_mut(IMAGE_WIDTH_PX)
                 .zip(taps.par_chunks(IMAGE_WIDTH_PX))
                 .enumerate()
-                .for_each(|(j, (row, taps_row))| {
-                    for group in (0..IMAGE_WIDTH_PX).step_by(NOISE_GROUP) {
-                        let id = ((j * IMAGE_WIDTH_PX + group) / NOISE_GROUP) as u64;
-                        let hash = mix64(key ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15));
-                        let end = (group + NOISE_GROUP).min(IMAGE_WIDTH_PX);
-                        for (q, i) in (group..end).enumerate() {
-                            let clean = taps_row[i].sample(image).unwrap_or(sky as f32);
-                            let g = gauss[((hash >> (16 * q)) & table_mask) as usize];
-                            let v = f64::from(clean) + sigma * f64::from(g);
-                            row[i] = (v.clamp(0.0, 255.0) + 0.5) as i32 as u8;
+                .for_each_init(
+                    || RowScratch::new(IMAGE_WIDTH_PX),
+                    |s, (j, (row, taps_row))| {
+                        let n = row.len().min(taps_row.len());
+                        let (clean, noise) = (&mut s.clean[..n], &mut s.noise[..n]);
+                        for (c, t) in clean.iter_mut().zip(taps_row) {
+                            *c = t.sample(image).unwrap_or(sky as f32);
                         }
-                    }
-                });
+                        for (g, quantiles) in noise.chunks_mut(NOISE_GROUP).enumerate() {
+                            let group = g * NOISE_GROUP;
+                            let id = ((j * IMAGE_WIDTH_PX + group) / NOISE_GROUP) as u64;
+                            let hash = mix64(key ^ id.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+                            for (q, o) in quantiles.iter_mut().enumerate() {
+                                *o = gauss[((hash >> (16 * q)) & GAUSS_MASK) as usize];
+                            }
+                        }
+                        for ((o, &c), &g) in row.iter_mut().zip(clean.iter()).zip(noise.iter()) {
+                            let v = f64::from(c) + sigma * f64::from(g);
+                            *o = quantize(v);
+                        }
+                    },
+                );
         };
         let [ml, mr] = &self.taps;
         rayon::join(|| resample(pl, ml, left, 0), || resample(pr, mr, right, 1));
@@ -288,10 +335,23 @@ impl Tap {
         }
         let k = self.base as usize;
         let (dx, dy) = (self.dx as usize, self.dy as usize);
-        let px = |n: usize| image.get(n).copied().map_or(0.0, f32::from);
         let (a, b) = (self.a, self.b);
-        let top = px(k) + a * (px(k + dx) - px(k));
-        let bottom = px(k + dy) + a * (px(k + dy + dx) - px(k + dy));
+        // The four taps from one bounds check (the offsets are at most `dy + dx`; the sums
+        // of three `u32` cannot overflow); a tap outside the image reads 0.
+        let (p00, p01, p10, p11) = match image.get(k..k + dy + dx + 1) {
+            Some(q) => (
+                f32::from(q[0]),
+                f32::from(q[dx]),
+                f32::from(q[dy]),
+                f32::from(q[dy + dx]),
+            ),
+            None => {
+                let px = |n: usize| image.get(n).copied().map_or(0.0, f32::from);
+                (px(k), px(k + dx), px(k + dy), px(k + dy + dx))
+            }
+        };
+        let top = p00 + a * (p01 - p00);
+        let bottom = p10 + a * (p11 - p10);
         Some(top + b * (bottom - top))
     }
 }

@@ -9,6 +9,7 @@
 //! markers) is evaluated per pixel, independently of the mesh resolution, and lands exactly where
 //! the pinhole model puts it. Pixel `(i, j)` has its centre at `u = i, v = j`.
 
+use super::lens::quantize;
 use super::mesh::Mesh;
 use super::noise::{floor_i64, hash3, mix64, GaussTable, GAUSS_TABLE_LEN};
 use super::RenderSettings;
@@ -352,9 +353,37 @@ impl Frame {
                     }
                     let albedos = &mut s.albedos[..n];
                     albedo(&s.xs[..n], &s.ys[..n], &s.fs[..n], albedos);
+                    let mut sky = 0usize;
+                    if sigma == 0.0 {
+                        // No noise (the noise term would be +-0, the table is finite, which
+                        // leaves every sum as it is, NaN included): each byte straight from
+                        // the noise-free value below.
+                        if n == width {
+                            for ((o, &a), &sh) in row.iter_mut().zip(albedos.iter()).zip(shade) {
+                                *o = quantize(exposure * a * f64::from(sh));
+                            }
+                            return sky;
+                        }
+                        let mut albedos = albedos.iter();
+                        for (i, ((o, &iz), &sh)) in row.iter_mut().zip(inv_z).zip(shade).enumerate()
+                        {
+                            let c = if iz > 0.0 {
+                                if used.is_none_or(|u| u[i]) {
+                                    let a = albedos.next().copied().unwrap_or(0.0);
+                                    exposure * a * f64::from(sh)
+                                } else {
+                                    0.0
+                                }
+                            } else {
+                                sky += 1;
+                                sky_dn
+                            };
+                            *o = quantize(c);
+                        }
+                        return sky;
+                    }
                     // Noise-free value per pixel (a plain loop where the whole row is ground).
                     let clean = &mut s.clean[..width];
-                    let mut sky = 0usize;
                     if n == width {
                         for ((c, &a), &sh) in clean.iter_mut().zip(albedos.iter()).zip(shade) {
                             *c = exposure * a * f64::from(sh);
@@ -376,14 +405,6 @@ impl Frame {
                                 sky_dn
                             };
                         }
-                    }
-                    if sigma == 0.0 {
-                        // No noise: the noise term below would be +-0 (the table is finite),
-                        // which leaves every sum as it is, NaN included.
-                        for (o, &c) in row.iter_mut().zip(clean.iter()) {
-                            *o = (c.clamp(0.0, 255.0) + 0.5) as i32 as u8;
-                        }
-                        return sky;
                     }
                     // Noise: one hash per group of four pixels, 16 bits of it per pixel.
                     let first_id = ((j * width) / NOISE_GROUP) as u64;
