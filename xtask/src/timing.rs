@@ -818,7 +818,7 @@ const TASK_DOC: [(&str, &str, &str); 17] = [
     ),
     (
         "roverbug_plan",
-        "`Planner::plan`",
+        "`Planner::plan_each` with the map's polygons built as it takes them (as `hazard_nav` flies it)",
         "background, after a hazard map: one RoverBug step (the tape's scene: few obstacles)",
     ),
     (
