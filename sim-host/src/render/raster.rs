@@ -354,6 +354,24 @@ impl Frame {
                     let albedos = &mut s.albedos[..n];
                     albedo(&s.xs[..n], &s.ys[..n], &s.fs[..n], albedos);
                     let mut sky = 0usize;
+                    // Noise-free value of pixel `i` (sky counted), the albedos taken in order.
+                    let value = |i: usize,
+                                 iz: f32,
+                                 sh: f32,
+                                 albedos: &mut core::slice::Iter<f64>,
+                                 sky: &mut usize| {
+                        if iz > 0.0 {
+                            if used.is_none_or(|u| u[i]) {
+                                let a = albedos.next().copied().unwrap_or(0.0);
+                                exposure * a * f64::from(sh)
+                            } else {
+                                0.0
+                            }
+                        } else {
+                            *sky += 1;
+                            sky_dn
+                        }
+                    };
                     if sigma == 0.0 {
                         // No noise (the noise term would be +-0, the table is finite, which
                         // leaves every sum as it is, NaN included): each byte straight from
@@ -367,18 +385,7 @@ impl Frame {
                         let mut albedos = albedos.iter();
                         for (i, ((o, &iz), &sh)) in row.iter_mut().zip(inv_z).zip(shade).enumerate()
                         {
-                            let c = if iz > 0.0 {
-                                if used.is_none_or(|u| u[i]) {
-                                    let a = albedos.next().copied().unwrap_or(0.0);
-                                    exposure * a * f64::from(sh)
-                                } else {
-                                    0.0
-                                }
-                            } else {
-                                sky += 1;
-                                sky_dn
-                            };
-                            *o = quantize(c);
+                            *o = quantize(value(i, iz, sh, &mut albedos, &mut sky));
                         }
                         return sky;
                     }
@@ -393,17 +400,7 @@ impl Frame {
                         for (i, ((c, &iz), &sh)) in
                             clean.iter_mut().zip(inv_z).zip(shade).enumerate()
                         {
-                            *c = if iz > 0.0 {
-                                if used.is_none_or(|u| u[i]) {
-                                    let a = albedos.next().copied().unwrap_or(0.0);
-                                    exposure * a * f64::from(sh)
-                                } else {
-                                    0.0
-                                }
-                            } else {
-                                sky += 1;
-                                sky_dn
-                            };
+                            *c = value(i, iz, sh, &mut albedos, &mut sky);
                         }
                     }
                     // Noise: one hash per group of four pixels, 16 bits of it per pixel.
