@@ -256,6 +256,9 @@ pub struct PlannerSummary {
     pub gazes: u32,
     /// Gaze turns given up: a remembered obstacle inside the turning sweep.
     pub gazes_skipped: u32,
+    /// Short forward drives made to gain room for a gaze turn next to a remembered obstacle
+    /// (`HazardCounters::room_moves`, docs/hazard-navigation.md).
+    pub room_moves: u32,
     /// RG2 cycles held still waiting for a map.
     pub hold_cycles: u32,
 }
@@ -576,6 +579,7 @@ pub fn summarise(run: &RunResult) -> Summary {
             map_errors: p.hazard.map_errors,
             gazes: p.hazard.gazes,
             gazes_skipped: p.hazard.gazes_skipped,
+            room_moves: p.hazard.room_moves,
             hold_cycles: p.hazard.holds,
         }),
         slip: SlipSummary {

@@ -17,6 +17,7 @@
 //!   few points) is counted and retried at the next capture.
 
 use super::*;
+use crate::guidance::Point2;
 use crate::perception::{CameraPose, HazardMap, HazardMapper, MapProgress};
 use crate::planning::{ConvexPolygon, PlanStatus, Planner, PlannerOutput, Wedge};
 
@@ -47,6 +48,9 @@ pub struct HazardCounters {
     /// Gaze turns given up because a remembered obstacle was inside the circle the rover's
     /// corners sweep when it turns in place; the rover maps where it stands instead.
     pub gazes_skipped: u32,
+    /// Gaze requests answered first by a short forward drive along the rover's heading to gain
+    /// room for the turn ([`room_move`]); the rover maps and plans again at its end.
+    pub room_moves: u32,
 }
 
 /// The planner's verdict as the ground sees it.
@@ -109,6 +113,7 @@ impl HazardNav {
             gazes: 0,
             holds: 0,
             gazes_skipped: 0,
+            room_moves: 0,
         },
     };
 }
@@ -127,6 +132,68 @@ pub(super) const GAZE_RATE_RAD_S: f64 = 0.1;
 /// rover's centre hit during a gaze, with the hull about 0.2 m in radius and a 0.61 m sweep)
 /// the margin must exceed 0.15 m.
 pub const GAZE_TURN_MARGIN_M: f64 = 0.2;
+
+/// Distance beyond the turn's room (the sweep plus [`GAZE_TURN_MARGIN_M`] from a remembered
+/// outline) that a forward room move aims for, m; a gaze asked for with less spare room than
+/// this starts with the room move. Without it a turn begun at the limit is given up part way
+/// (the EKF's reference point shifts by millimetres while the rover turns): `multi-target`
+/// with 54 kJ, riding the wall 0.804 m from its outline against the 0.805 m needed, turned a
+/// few degrees per map at best and hit the planner's gaze limit twice (T0 and T1 dropped).
+pub const ROOM_MOVE_EXTRA_M: f64 = 0.05;
+/// Longest forward room move, m (the ground ahead within the hazcam wedge's near range).
+pub const ROOM_MOVE_MAX_M: f64 = 0.4;
+/// Step of the room move's search along the heading and of its clearance samples, m (a grown
+/// outline is at least twice the growth, 1.3 m, across: none fits between two samples).
+const ROOM_MOVE_STEP_M: f64 = 0.05;
+
+/// A forward move giving a gaze turn its room: the nearest point `position + s u(heading_rad)`
+/// (`N`, m; `s` a multiple of [`ROOM_MOVE_STEP_M`], at most [`ROOM_MOVE_MAX_M`]) from which
+/// the point `stop_short_m` short of it (where guidance may call the path done) is at least
+/// `need_m` from every polygon of `grown` (the planner's remembered outlines, grown, `N`, m).
+/// Every sample of the way keeps at least `clearance_m` from them (the planner's rule for its
+/// paths), or, when the rover already stands closer, no less than where it stands. `None` when
+/// the heading does not give the room within the limit (towards or along the obstacle), when
+/// an obstacle is in the way, or for non-finite input. The caller checks that the heading is
+/// inside the hazcam wedge just mapped.
+pub fn room_move(
+    position: Point2,
+    heading_rad: f64,
+    grown: &[ConvexPolygon],
+    need_m: f64,
+    clearance_m: f64,
+    stop_short_m: f64,
+) -> Option<Point2> {
+    let finite = position.iter().all(|v| v.is_finite())
+        && heading_rad.is_finite()
+        && need_m.is_finite()
+        && clearance_m.is_finite()
+        && stop_short_m.is_finite();
+    if !finite {
+        return None;
+    }
+    let nearest = |p: Point2| {
+        grown
+            .iter()
+            .map(|g| g.distance(p))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let floor = nearest(position).min(clearance_m);
+    let (sh, ch) = libm::sincos(heading_rad);
+    let at = |s: f64| [position[0] + s * ch, position[1] + s * sh];
+    // Bounded: ROOM_MOVE_MAX_M / ROOM_MOVE_STEP_M = 8 steps.
+    let steps = (ROOM_MOVE_MAX_M / ROOM_MOVE_STEP_M) as u32;
+    for k in 1..=steps {
+        let s = f64::from(k) * ROOM_MOVE_STEP_M;
+        if nearest(at(s)) < floor {
+            return None;
+        }
+        // At least twice guidance's tolerance, so that the rover does move.
+        if s >= 2.0 * stop_short_m && nearest(at((s - stop_short_m).max(0.0))) >= need_m {
+            return Some(at(s));
+        }
+    }
+    None
+}
 
 /// Radius (m) of the circle the rover's footprint sweeps turning in place about its reference
 /// point: the farthest wheel contact plus the wheel radius fore and aft, the half-width (with
@@ -384,6 +451,7 @@ impl Navigator {
         // margin: the sector whose points are at least `d` inside both edges (apex moved
         // forward by `d / sin(alpha)`) and `d` short of the far range.
         let w = map.wedge;
+        let view = (w.heading_rad, w.half_angle_rad);
         let d = crate::perception::ROVER_HALF_WIDTH_M + WEDGE_EROSION_MARGIN_M;
         let s = libm::sin(w.half_angle_rad);
         let shift = if s > 1e-3 { d / s } else { f64::INFINITY };
@@ -472,10 +540,7 @@ impl Navigator {
             }
             PlanStatus::Gaze => {
                 h.counters.gazes = h.counters.gazes.saturating_add(1);
-                h.gaze_rad = gaze;
-                if h.gaze_rad.is_none() {
-                    h.map_wanted = true;
-                }
+                self.begin_gaze(gaze, position, heading, view);
             }
             PlanStatus::Reached => {
                 h.verdict = PlannerVerdict::Reached;
@@ -510,6 +575,68 @@ impl Navigator {
         }
         if let Some(remaining) = leg_left {
             self.mission_leg(position, remaining);
+        }
+    }
+
+    /// The planner asked to look towards `gaze` (rad from north) with the rover at `position`
+    /// (`N`, m) heading `heading` (rad), just after a map whose wedge `view` (axis heading,
+    /// half-angle, rad) it planned on. The turn is left to [`Self::hazard_command`], unless a
+    /// remembered obstacle is within [`ROOM_MOVE_EXTRA_M`] of the room the turn needs and a
+    /// short drive straight ahead, inside the wedge just mapped and clear of the remembered
+    /// obstacles, gives the room ([`room_move`]): then the rover drives that first (forward,
+    /// as VO expects), and maps and plans again at its end. The planner's gaze limit counts
+    /// gazes without motion, so a turn given up at its start (the rover mapping where it
+    /// stands) would otherwise repeat, unchanged, until the planner halts `Blocked(GazeLimit)`.
+    pub(super) fn begin_gaze(
+        &mut self,
+        gaze: Option<f64>,
+        position: Point2,
+        heading: f64,
+        view: (f64, f64),
+    ) {
+        let sweep = sweep_radius_of(self.traj.nominal_points, &self.config.geometry);
+        let grown = crate::perception::ROVER_HALF_WIDTH_M + self.config.perception.grow_margin_m;
+        let planner = self.config.planner;
+        let stop_short = self.config.guidance.goal_tolerance_m;
+        let Some(h) = self.hazard.as_mut() else {
+            return;
+        };
+        h.gaze_rad = gaze;
+        let Some(target) = gaze else {
+            h.map_wanted = true;
+            return;
+        };
+        let turn = crate::guidance::carrot::wrap_pi(target - heading);
+        let in_view = libm::fabs(crate::guidance::carrot::wrap_pi(heading - view.0))
+            <= view.1 - planner.gaze_margin_rad;
+        if !(libm::fabs(turn) > GAZE_TOLERANCE_RAD && in_view) {
+            return;
+        }
+        let outlines = h.planner.memory().grown();
+        let need = sweep + GAZE_TURN_MARGIN_M + ROOM_MOVE_EXTRA_M - grown;
+        let nearest = outlines
+            .iter()
+            .map(|p| p.distance(position))
+            .fold(f64::INFINITY, f64::min);
+        if nearest >= need {
+            return;
+        }
+        let guidance = room_move(
+            position,
+            heading,
+            outlines,
+            need,
+            planner.clearance_m,
+            stop_short,
+        )
+        .and_then(|end| Path::<MAX_WAYPOINTS>::new(&[position, end]).ok())
+        .and_then(|p| Guidance::new(p, self.config.guidance).ok());
+        if let Some(g) = guidance {
+            h.gaze_rad = None;
+            h.map_wanted = false;
+            h.planned = true;
+            h.counters.room_moves = h.counters.room_moves.saturating_add(1);
+            self.guidance = Some(g);
         }
     }
 
@@ -600,5 +727,169 @@ mod tests {
             crate::linalg::sqrt(0.493 * 0.493 + crate::perception::ROVER_HALF_WIDTH_M.powi(2));
         assert!((r - expected).abs() < 0.01, "{r}");
         assert!(r > crate::perception::ROVER_HALF_WIDTH_M + 0.2);
+    }
+
+    /// The wall of `multi-target` (x 5.8-6.2 m, y -4.5-9.0 m in `N`) grown as the navigator's
+    /// perception grows it (half-width + 0.3 m).
+    fn grown_wall() -> ConvexPolygon {
+        let g = crate::perception::ROVER_HALF_WIDTH_M
+            + NavConfig::rocky8([0.0; 3], 0.0).perception.grow_margin_m;
+        let (x0, x1, y0, y1) = (5.8 - g, 6.2 + g, -4.5 - g, 9.0 + g);
+        match ConvexPolygon::from_points(&[[x0, y0], [x1, y0], [x1, y1], [x0, y1]]) {
+            Ok(p) => p,
+            Err(e) => panic!("wall polygon refused: {e:?}"),
+        }
+    }
+
+    /// The distance from the grown outlines a gaze turn needs before it starts (sweep, margin
+    /// and the room move's extra, less the growth).
+    fn room_needed() -> f64 {
+        let c = NavConfig::rocky8([0.0; 3], 0.0);
+        turn_sweep_radius(&ROCKY8) + GAZE_TURN_MARGIN_M + ROOM_MOVE_EXTRA_M
+            - crate::perception::ROVER_HALF_WIDTH_M
+            - c.perception.grow_margin_m
+    }
+
+    /// HAZ-ROOM-1: a forward room move is found along a heading away from the wall (the
+    /// shortest that gives the room, with guidance's stopping tolerance), none towards or
+    /// along it, none through an obstacle, none for non-finite input.
+    #[test]
+    fn room_move_gains_turning_room_forward_only() {
+        let wall = [grown_wall()];
+        let need = room_needed();
+        // The rover 0.154 m off the grown outline (0.805 m from the wall's face), heading
+        // 20 deg off the away normal (+x).
+        let p = [6.851 + 0.154, 8.2];
+        let away = -20.0_f64.to_radians();
+        let end = room_move(p, away, &wall, need, 0.15, 0.05);
+        let Some(end) = end else {
+            panic!("no room move away from the wall")
+        };
+        let s = libm::hypot(end[0] - p[0], end[1] - p[1]);
+        assert!((0.1 - 1e-9..=ROOM_MOVE_MAX_M + 1e-9).contains(&s), "{s}");
+        assert!(wall[0].distance(end) >= need, "{end:?}");
+        // Towards the wall and along it: no room within the limit.
+        assert_eq!(
+            room_move(p, 160.0_f64.to_radians(), &wall, need, 0.15, 0.05),
+            None
+        );
+        assert_eq!(
+            room_move(p, -90.0_f64.to_radians(), &wall, need, 0.15, 0.05),
+            None
+        );
+        // A rock 0.2 m ahead (its grown outline): in the way.
+        let rock =
+            match ConvexPolygon::from_points(&[[7.25, 8.0], [7.6, 8.0], [7.6, 8.4], [7.25, 8.4]]) {
+                Ok(r) => r,
+                Err(e) => panic!("{e:?}"),
+            };
+        assert_eq!(
+            room_move(p, 0.0, &[wall[0].clone(), rock], need, 0.15, 0.05),
+            None
+        );
+        assert_eq!(
+            room_move([f64::NAN, 0.0], 0.0, &wall, need, 0.15, 0.05),
+            None
+        );
+    }
+
+    fn calibration() -> StereoCalibration {
+        StereoCalibration {
+            fx_px: 385.0,
+            fy_px: 385.0,
+            cx_px: 319.5,
+            cy_px: 239.5,
+            baseline_m: 0.084,
+            rot_rover_from_camera: [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            pos_camera_in_rover_m: [0.2, 0.0, -1.0],
+        }
+    }
+
+    /// A goal-directed navigator (goal (10, 0)) with the wall in the planner's memory and the
+    /// EKF running at rest at `xy`, heading `yaw` (rad).
+    fn navigator_by_the_wall(xy: [f64; 2], yaw: f64) -> Navigator {
+        let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+        config.hazard_avoidance = true;
+        let mut nav = match Navigator::new(config, &[[0.0, 0.0], [10.0, 0.0]], &calibration()) {
+            Ok(n) => n,
+            Err(e) => panic!("navigator refused: {e:?}"),
+        };
+        nav.start_vo();
+        let wedge = Wedge {
+            apex: xy,
+            heading_rad: yaw,
+            half_angle_rad: 0.6,
+            min_range_m: 0.3,
+            max_range_m: 2.0,
+        };
+        let Some(h) = nav.hazard.as_mut() else {
+            panic!("hazard navigation not built")
+        };
+        assert!(h.planner.plan(xy, yaw, &wedge, &[grown_wall()]).is_ok());
+        let mut x = crate::estimation::NominalState::at_rest(1_000_000);
+        x.p_n = Vec3::new(xy[0], xy[1], 0.0);
+        x.q_nr = Quat::from_euler_angles(0.0, 0.0, yaw);
+        let p0 = crate::estimation::CoreCov::identity() * 1e-4;
+        assert!(nav.ekf.reset(x, &p0).is_ok());
+        nav.ekf_running = true;
+        nav.mode = NavMode::Driving;
+        nav
+    }
+
+    /// HAZ-ROOM-2 (`multi-target` with 54 kJ, SIL-SEQ-2): riding the wall 0.804 m from its
+    /// face with 0.805 m needed for the turn, the planner asks to look 58 deg to the side.
+    /// The rover drives forward out of the wall's reach first (a room move, no gaze given up);
+    /// at its end it maps again. Without the move the gaze was given up, the rover mapped in
+    /// place and the planner asked again, until `Blocked(GazeLimit)`.
+    #[test]
+    fn gaze_without_turning_room_drives_forward_first() {
+        let xy = [6.851 + 0.153, 8.2];
+        let yaw = -20.0_f64.to_radians();
+        let mut nav = navigator_by_the_wall(xy, yaw);
+        nav.begin_gaze(Some(-78.0_f64.to_radians()), xy, yaw, (yaw, 0.6));
+        // Drive the guidance path (not a hold, not a turn in place).
+        assert_eq!(nav.hazard_command(), None);
+        let c = nav.hazard_counters();
+        assert_eq!((c.room_moves, c.gazes_skipped), (1, 0));
+        let Some(g) = nav.guidance.as_ref() else {
+            panic!("no guidance path")
+        };
+        let w = g.path().waypoints();
+        let (a, b) = match w {
+            [a, b] => (*a, *b),
+            _ => panic!("{w:?}"),
+        };
+        assert_eq!(a, xy);
+        let heading = libm::atan2(b[1] - a[1], b[0] - a[0]);
+        assert!((heading - yaw).abs() < 1e-9, "{heading}");
+        // At the path's end the rover maps again (a subgoal).
+        assert!(nav.hazard_subgoal_reached());
+        assert!(nav.map_wanted_now());
+    }
+
+    /// HAZ-ROOM-3: with room to spare, or facing the wall, or with a gaze within tolerance,
+    /// the gaze is left to the turn in place (no room move).
+    #[test]
+    fn gaze_with_room_or_no_forward_way_turns_in_place() {
+        // 0.4 m off the grown outline: room to spare; the turn starts.
+        let xy = [6.851 + 0.4, 8.2];
+        let yaw = -20.0_f64.to_radians();
+        let mut nav = navigator_by_the_wall(xy, yaw);
+        nav.begin_gaze(Some(-78.0_f64.to_radians()), xy, yaw, (yaw, 0.6));
+        assert!(matches!(nav.hazard_command(), Some(Some(c)) if c.yaw_rate_rad_s < 0.0));
+        assert_eq!(nav.hazard_counters().room_moves, 0);
+        // Facing the wall at the limit: no forward way; the gaze is given up as before.
+        let xy = [6.851 + 0.15, 8.2];
+        let yaw = 170.0_f64.to_radians();
+        let mut nav = navigator_by_the_wall(xy, yaw);
+        nav.begin_gaze(Some(90.0_f64.to_radians()), xy, yaw, (yaw, 0.6));
+        assert_eq!(nav.hazard_command(), Some(None));
+        let c = nav.hazard_counters();
+        assert_eq!((c.room_moves, c.gazes_skipped), (0, 1));
+        // A heading outside the wedge just mapped: not driven blind.
+        let yaw = -20.0_f64.to_radians();
+        let mut nav = navigator_by_the_wall(xy, yaw);
+        nav.begin_gaze(Some(-78.0_f64.to_radians()), xy, yaw, (yaw + 1.0, 0.6));
+        assert_eq!(nav.hazard_counters().room_moves, 0);
     }
 }
