@@ -1216,7 +1216,14 @@ them on every seed:
   54 kJ left; `unreachable` (HAZ-3) has no contact on seeds 1 and 2 and ends `blocked` with 2
   contacts on seed 3, as before. The gaze turn's swept corners near the ring
   (`docs/hazard-navigation.md`) and the planner's choice of wall end are the flight software to
-  fix; these stay `open` until they hold on every seed.
+  fix; these stay `open` until they hold on every seed. Session 17: the inverse compositional
+  tracking (`docs/vo.md`) moved seed 1's path by millimetres; SEQ-2 then rode the wall's east
+  face 0.804 m from its outline, where a gaze turn needs 0.805 m, and the refused gazes (no
+  motion) reached the planner's gaze limit: T0 and then T1 dropped `Blocked(GazeLimit)`, T0's
+  requirement failed. The room move before a gaze (a short forward drive inside the mapped
+  wedge, `docs/hazard-navigation.md`) fixed it: T0 visited, T1 and T2 dropped for energy.
+  `unreachable` (HAZ-3) touches a rock twice on seed 1 since the tracking change (at (11.73,
+  1.0) m, t = 178 and 189 s; the room move changes nothing there): not investigated yet.
 - **SIL-NAV-2**'s EKF goal on `dunes-long` flips with rounding-level changes: seed 1 gave 0.33 %
   with the expanded Joseph update and 20 % (24 VO failures) with the Cholesky downdate of issue
   18, but on seeds 2 and 3 both forms give the same (6.6 / 6.3 % and 10.0 / 11.3 %) and the code
