@@ -793,24 +793,16 @@ mod tests {
         );
     }
 
-    fn calibration() -> StereoCalibration {
-        StereoCalibration {
-            fx_px: 385.0,
-            fy_px: 385.0,
-            cx_px: 319.5,
-            cy_px: 239.5,
-            baseline_m: 0.084,
-            rot_rover_from_camera: [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-            pos_camera_in_rover_m: [0.2, 0.0, -1.0],
-        }
-    }
-
     /// A goal-directed navigator (goal (10, 0)) with the wall in the planner's memory and the
     /// EKF running at rest at `xy`, heading `yaw` (rad).
     fn navigator_by_the_wall(xy: [f64; 2], yaw: f64) -> Navigator {
         let mut config = NavConfig::rocky8([0.0; 3], 0.0);
         config.hazard_avoidance = true;
-        let mut nav = match Navigator::new(config, &[[0.0, 0.0], [10.0, 0.0]], &calibration()) {
+        let mut nav = match Navigator::new(
+            config,
+            &[[0.0, 0.0], [10.0, 0.0]],
+            &crate::flight::nav::test_hazcam_calibration(),
+        ) {
             Ok(n) => n,
             Err(e) => panic!("navigator refused: {e:?}"),
         };

@@ -783,22 +783,14 @@ mod tests {
     use super::*;
     use crate::estimation::CoreCov;
 
-    fn calibration() -> StereoCalibration {
-        StereoCalibration {
-            fx_px: 385.0,
-            fy_px: 385.0,
-            cx_px: 319.5,
-            cy_px: 239.5,
-            baseline_m: 0.084,
-            rot_rover_from_camera: [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-            pos_camera_in_rover_m: [0.2, 0.0, -1.0],
-        }
-    }
-
     fn navigator(goal_directed: bool) -> Navigator {
         let mut config = NavConfig::rocky8([0.0; 3], 0.0);
         config.hazard_avoidance = goal_directed;
-        let mut nav = match Navigator::new(config, &[[0.0, 0.0], [5.0, 0.0]], &calibration()) {
+        let mut nav = match Navigator::new(
+            config,
+            &[[0.0, 0.0], [5.0, 0.0]],
+            &crate::flight::nav::test_hazcam_calibration(),
+        ) {
             Ok(n) => n,
             Err(e) => panic!("navigator refused: {e:?}"),
         };

@@ -53,6 +53,23 @@ pub mod protection;
 mod radius;
 #[cfg(test)]
 mod tests_vo;
+
+/// The forward hazcam pair the navigator's mission and hazard-navigation tests build their
+/// navigator with: 385 px focal length, principal point at the image centre, 84 mm baseline,
+/// camera axes (x right, y down, z forward) in the rover frame (x forward, y right, z down),
+/// the left camera 0.2 m ahead of and 1.0 m above the rover's reference point.
+#[cfg(test)]
+pub(crate) fn test_hazcam_calibration() -> rover_hal::StereoCalibration {
+    rover_hal::StereoCalibration {
+        fx_px: 385.0,
+        fy_px: 385.0,
+        cx_px: 319.5,
+        cy_px: 239.5,
+        baseline_m: 0.084,
+        rot_rover_from_camera: [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        pos_camera_in_rover_m: [0.2, 0.0, -1.0],
+    }
+}
 pub mod vo_gate;
 mod vo_sched;
 
