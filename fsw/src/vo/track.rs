@@ -155,7 +155,8 @@ fn refine_translation(
 /// warps until the iteration limit.
 ///
 /// A step that raises the sum of squares is taken back and halved (the bilinear surface is
-/// only piecewise smooth). Stops when the template centre moves less than 0.02 px, after at
+/// only piecewise smooth); a halved step whose centre move is below 0.02 px ends the iteration
+/// at the best state. Stops when the template centre moves less than 0.01 px, after at
 /// most `iterations` evaluations.
 fn refine_affine(
     template: &TemplateF,
