@@ -45,7 +45,7 @@ pub struct Candidate {
 /// window rows, and the best candidate per grid cell.
 #[derive(Debug, Clone)]
 pub struct ForstnerDetector {
-    columns: ColumnSums,
+    columns: NativeSums,
     cells: [Candidate; CELL_COUNT],
     candidate_count: usize,
 }
@@ -66,10 +66,18 @@ const NO_CANDIDATE: Candidate = Candidate {
 impl ForstnerDetector {
     /// A detector with zero sums and empty cells (as [`Default`], usable in a `const`).
     pub const EMPTY: Self = Self {
-        columns: [[0; 3]; IMAGE_WIDTH_PX],
+        columns: NativeSums::ZERO,
         cells: [NO_CANDIDATE; CELL_COUNT],
         candidate_count: 0,
     };
+}
+
+#[cfg(any(target_arch = "arm", test))]
+/// A compiler-only scheduling barrier (no instruction) on the rover CPU; nothing elsewhere.
+#[inline(always)]
+fn rover_barrier() {
+    #[cfg(target_arch = "arm")]
+    core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
 }
 
 /// One image row as an array.
@@ -84,7 +92,9 @@ fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[Row<'a>; 3]> {
     Some([up, mid, down])
 }
 
-/// The column sums of the gradient products, `[xx, yy, xy]` per column (kept for the columns
+#[cfg(any(target_arch = "arm", test))]
+/// The column sums of the gradient products, `[xx, yy, xy]` per column, interleaved (the
+/// rover CPU's layout, see [`Interleaved`]; kept for the columns
 /// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`], the only ones a scored window reaches; the others
 /// stay 0).
 type ColumnSums = [[i32; 3]; IMAGE_WIDTH_PX];
@@ -103,6 +113,7 @@ fn gradient(up: u8, down: u8, m0: i32, m2: i32) -> (i32, i32) {
     (m2 - m0, i32::from(down) - i32::from(up))
 }
 
+#[cfg(any(target_arch = "arm", test))]
 /// Adds the gradient products of image row `y` to the column sums (columns
 /// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`]; nothing at the first and last rows).
 fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
@@ -124,10 +135,11 @@ fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
         s[1] = s[1].wrapping_add(gy * gy);
         s[2] = s[2].wrapping_add(gx * gy);
         // One column at a time (a compiler-only barrier, as in `slide_rows`).
-        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+        rover_barrier();
     }
 }
 
+#[cfg(any(target_arch = "arm", test))]
 /// Adds the gradient products of the window rows `y - WINDOW_HALF..=y + WINDOW_HALF` to the
 /// column sums (the first row of a pass): one pass over the columns with the five rows' sums in
 /// registers; row by row ([`add_row`]) when a row has no neighbour in the image. Out of line:
@@ -170,15 +182,15 @@ fn add_window(image: &Image, y: usize, sums: &mut ColumnSums) {
             acc[2] = acc[2].wrapping_add(gx * gy);
         }
         *s = acc;
-        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+        rover_barrier();
     }
 }
 
+#[cfg(any(target_arch = "arm", test))]
 /// Moves the window down one row: adds the products of row `add`, removes those of row
 /// `remove` (one pass over the sums).
 #[inline(never)]
 fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
-    use core::sync::atomic::{compiler_fence, Ordering::SeqCst};
     let (Some([au, am, ad]), Some([ru, rm, rd])) =
         (gradient_rows(image, add), gradient_rows(image, remove))
     else {
@@ -203,7 +215,7 @@ fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
             s1.wrapping_sub(ry * ry),
             s2.wrapping_sub(rx * ry),
         );
-        compiler_fence(SeqCst);
+        rover_barrier();
         let (Some(&au), Some(&ad), Some(&al), Some(&ar)) =
             (au.get(c), ad.get(c), am.get(c - 1), am.get(c + 1))
         else {
@@ -215,13 +227,15 @@ fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
             s1.wrapping_add(ay * ay),
             s2.wrapping_add(ax * ay),
         ];
-        compiler_fence(SeqCst);
+        rover_barrier();
     }
 }
 
+#[cfg(any(target_arch = "arm", test))]
 /// Columns of a full cell's span: its [`GRID_PX`] centres and [`WINDOW_HALF`] on each side.
 const SPAN: usize = GRID_PX + 2 * WINDOW_HALF;
 
+#[cfg(any(target_arch = "arm", test))]
 /// Integer lower bounds a pixel must exceed to pass the thresholds and beat a cell's best
 /// interest `best` (all conservative: a pixel failing one of them fails the exact tests).
 #[derive(Clone, Copy)]
@@ -243,8 +257,10 @@ struct Thresholds {
     min_interest: f64,
     min_roundness: f64,
     /// `floor(4 min_interest) - 1` (saturating; `as` maps NaN to 0).
+    #[cfg_attr(not(any(target_arch = "arm", test)), allow(dead_code))]
     trace_floor: i32,
     /// `floor(min_interest) - 1` (saturating).
+    #[cfg_attr(not(any(target_arch = "arm", test)), allow(dead_code))]
     w_floor: i32,
 }
 
@@ -260,6 +276,7 @@ impl Thresholds {
     }
 
     /// The floors of a cell whose best interest is `best` (non-negative).
+    #[cfg(any(target_arch = "arm", test))]
     #[inline(always)]
     fn floors(&self, best: f32) -> Floors {
         let w = f64::from(best);
@@ -270,6 +287,7 @@ impl Thresholds {
     }
 }
 
+#[cfg(any(target_arch = "arm", test))]
 /// The exact tests of one pixel that passed the trace and diagonal bounds: `(nxx, nyy, nxy)`
 /// are its window sums, `trace = nxx + nyy > 0`. Returns the pixel's interest when it passes
 /// the interest and roundness thresholds and beats `best`.
@@ -304,6 +322,7 @@ fn score_pixel(
     None
 }
 
+#[cfg(any(target_arch = "arm", test))]
 /// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
 /// columns `first - WINDOW_HALF .. first + n + WINDOW_HALF` for the `n` centres
 /// `first..first + n` (`n = span.len() - 2 WINDOW_HALF`, at most [`GRID_PX`]); keeps the
@@ -344,7 +363,7 @@ fn score_span(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t
         }
         // Keeps the leaving column's loads after the tests (a compiler-only barrier, no
         // instruction): loaded before them, they stay live across the rare path and spill.
-        core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+        rover_barrier();
         let Some(&[oa, ob, oc]) = span.get(k) else {
             break;
         };
@@ -361,6 +380,7 @@ fn score_span(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t
     }
 }
 
+#[cfg(any(target_arch = "arm", test))]
 /// [`score_span`] of a full cell ([`GRID_PX`] centres, the span of [`SPAN`] columns),
 /// unrolled: no loop counter, every column at a fixed offset.
 #[inline(always)]
@@ -403,7 +423,7 @@ fn score_full(
                     floors = t.floors(interest);
                 }
             }
-            core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
+            rover_barrier();
             let [oa, ob, oc] = *$old;
             nxx = nxx.wrapping_sub(oa);
             nyy = nyy.wrapping_sub(ob);
@@ -431,6 +451,7 @@ fn score_full(
     }
 }
 
+#[cfg(any(target_arch = "arm", test))]
 /// [`score_span`] of a partial cell (fewer than [`GRID_PX`] centres: the loop stops at the
 /// end of `span`).
 #[inline(never)]
@@ -438,11 +459,386 @@ fn score_partial(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate
     score_span(span, first, y, cell, t);
 }
 
+/// The rover CPU's layout of the column sums: `[xx, yy, xy]` together per column
+/// ([`ColumnSums`]). On the Cortex-M7 one base pointer walks all three sums (post-indexed loads
+/// and stores) and the per-pixel tests run as a sequential scan with early exits
+/// ([`score_full`]); the host's [`Planar`] layout gives the same sums and cells bit for bit
+/// (integer sums, the same exact tests in the same order; `vo_1_optimised_operator_equals_the_reference`
+/// runs both on the host).
+#[cfg(any(target_arch = "arm", test))]
+#[derive(Debug, Clone)]
+struct Interleaved(ColumnSums);
+
+#[cfg(any(target_arch = "arm", test))]
+impl Interleaved {
+    /// Zero sums.
+    const ZERO: Self = Self([[0; 3]; IMAGE_WIDTH_PX]);
+
+    /// Sets every sum to 0.
+    #[cfg(target_arch = "arm")]
+    fn clear(&mut self) {
+        self.0.fill([0; 3]);
+    }
+}
+
+/// The host's layout of the column sums: one array per product (`[xx, yy, xy]` planes of
+/// [`IMAGE_WIDTH_PX`] columns) and the window sums of the current row, so the compiler
+/// vectorises the slide, the window sums and a pre-test of every centre; each cell then scans
+/// only the centres that pass it. Kept off the rover CPU: a planar slide cost it 16 % more
+/// (docs/vo.md), and the f64 pre-test of every centre would run scalar there, where the
+/// integer floors of [`score_full`] reject most centres in a few instructions.
+#[cfg(not(target_arch = "arm"))]
+#[derive(Debug, Clone)]
+struct Planar {
+    /// Column sums `[xx, yy, xy]` of the window rows, per column.
+    sums: [[i32; IMAGE_WIDTH_PX]; 3],
+    /// Window (5x5) sums `[xx, yy, xy]` of the current row, per centre column.
+    window: [[i32; IMAGE_WIDTH_PX]; 3],
+    /// Entry floor of each centre column's cell (interest units, grey levels^2).
+    floor: [f64; IMAGE_WIDTH_PX],
+    /// 1 where a centre may beat its cell's best (the row's vectorised pre-test).
+    pass: [u8; IMAGE_WIDTH_PX],
+}
+
+// The planar scan packs a cell's flags into one 8-byte and one 2-byte word.
+const _: () = assert!(GRID_PX == 10);
+
+/// The column sums of this build's target: [`Interleaved`] on the rover CPU (32-bit Arm).
+#[cfg(target_arch = "arm")]
+type NativeSums = Interleaved;
+/// The column sums of this build's target: [`Planar`] on the host.
+#[cfg(not(target_arch = "arm"))]
+type NativeSums = Planar;
+
+/// Bytes the host's column sums add to [`ForstnerDetector`] over the rover CPU's (0 there):
+/// the rover-CPU size of a structure holding a detector is its host size minus this.
+pub const HOST_LAYOUT_EXTRA_BYTES: usize =
+    core::mem::size_of::<NativeSums>() - core::mem::size_of::<[[i32; 3]; IMAGE_WIDTH_PX]>();
+
+/// One past the last centre the operator scores in a row (its window ends inside the border).
+#[cfg(not(target_arch = "arm"))]
+const CENTRE_END: usize = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
+
+#[cfg(not(target_arch = "arm"))]
+/// `(det, trace)` of the normal matrix with the window sums `(nxx, nyy, nxy)`, in f64 (exact:
+/// see [`score_span`]).
+#[inline(always)]
+fn det_trace(nxx: i32, nyy: i32, nxy: i32) -> (f64, f64) {
+    let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
+    (fxx * fyy - fxy * fxy, fxx + fyy)
+}
+
+#[cfg(not(target_arch = "arm"))]
+/// The image columns [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] of a row shifted by `shift` - 1
+/// (0: one column left, 1: in place, 2: one column right).
+#[inline(always)]
+fn sum_columns<'a>(row: Row<'a>, shift: usize) -> &'a [u8] {
+    row.get(SUM_FIRST_COL + shift - 1..SUM_END_COL + shift - 1)
+        .unwrap_or(&[])
+}
+
+/// `sums += sign * products of image row y` over the planes' columns
+/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] (`sign` +1 or -1; nothing at the first and last
+/// rows). Straight-line over slices: the compiler vectorises it.
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn planar_row(sums: &mut [[i32; IMAGE_WIDTH_PX]; 3], rows: [Row; 3], sign: i32) {
+    let [up, mid, down] = rows;
+    let [xx, yy, xy] = sums;
+    let (Some(xx), Some(yy), Some(xy)) = (
+        xx.get_mut(SUM_FIRST_COL..SUM_END_COL),
+        yy.get_mut(SUM_FIRST_COL..SUM_END_COL),
+        xy.get_mut(SUM_FIRST_COL..SUM_END_COL),
+    ) else {
+        return;
+    };
+    let pixels = sum_columns(up, 1)
+        .iter()
+        .zip(sum_columns(down, 1))
+        .zip(sum_columns(mid, 0).iter().zip(sum_columns(mid, 2)));
+    for (((sxx, syy), sxy), ((&u, &d), (&l, &r))) in xx
+        .iter_mut()
+        .zip(yy.iter_mut())
+        .zip(xy.iter_mut())
+        .zip(pixels)
+    {
+        let (gx, gy) = gradient(u, d, i32::from(l), i32::from(r));
+        *sxx = sxx.wrapping_add(sign.wrapping_mul(gx * gx));
+        *syy = syy.wrapping_add(sign.wrapping_mul(gy * gy));
+        *sxy = sxy.wrapping_add(sign.wrapping_mul(gx * gy));
+    }
+}
+
+#[cfg(not(target_arch = "arm"))]
+impl Planar {
+    /// Zero sums.
+    const ZERO: Self = Self {
+        sums: [[0; IMAGE_WIDTH_PX]; 3],
+        window: [[0; IMAGE_WIDTH_PX]; 3],
+        floor: [f64::INFINITY; IMAGE_WIDTH_PX],
+        pass: [0; IMAGE_WIDTH_PX],
+    };
+
+    /// Sets every sum to 0 (and the scratch rows to their initial values: a cleared detector
+    /// is [`ForstnerDetector::EMPTY`]).
+    fn clear(&mut self) {
+        *self = Self::ZERO;
+    }
+
+    /// Adds the products of the window rows around `y` (the first row of a pass).
+    fn add_window(&mut self, image: &Image, y: usize) {
+        for r in y.saturating_sub(WINDOW_HALF)..=y + WINDOW_HALF {
+            if let Some(rows) = gradient_rows(image, r) {
+                planar_row(&mut self.sums, rows, 1);
+            }
+        }
+    }
+
+    /// Moves the window down one row (adds the products of row `add`, removes row `remove`).
+    fn slide_rows(&mut self, image: &Image, add: usize, remove: usize) {
+        let (Some([au, am, ad]), Some([ru, rm, rd])) =
+            (gradient_rows(image, add), gradient_rows(image, remove))
+        else {
+            return;
+        };
+        let [xx, yy, xy] = &mut self.sums;
+        let (Some(xx), Some(yy), Some(xy)) = (
+            xx.get_mut(SUM_FIRST_COL..SUM_END_COL),
+            yy.get_mut(SUM_FIRST_COL..SUM_END_COL),
+            xy.get_mut(SUM_FIRST_COL..SUM_END_COL),
+        ) else {
+            return;
+        };
+        let added = sum_columns(au, 1)
+            .iter()
+            .zip(sum_columns(ad, 1))
+            .zip(sum_columns(am, 0).iter().zip(sum_columns(am, 2)));
+        let removed = sum_columns(ru, 1)
+            .iter()
+            .zip(sum_columns(rd, 1))
+            .zip(sum_columns(rm, 0).iter().zip(sum_columns(rm, 2)));
+        for (((sxx, syy), sxy), (((&au, &ad), (&al, &ar)), ((&ru, &rd), (&rl, &rr)))) in xx
+            .iter_mut()
+            .zip(yy.iter_mut())
+            .zip(xy.iter_mut())
+            .zip(added.zip(removed))
+        {
+            let (ax, ay) = gradient(au, ad, i32::from(al), i32::from(ar));
+            let (rx, ry) = gradient(ru, rd, i32::from(rl), i32::from(rr));
+            // a^2 - r^2 = (a - r)(a + r): the same integer, one product fewer.
+            *sxx = sxx.wrapping_add((ax - rx) * (ax + rx));
+            *syy = syy.wrapping_add((ay - ry) * (ay + ry));
+            *sxy = sxy.wrapping_add((ax * ay).wrapping_sub(rx * ry));
+        }
+    }
+
+    /// Scores the centres of image row `y` into its grid row's `cells`, skipping the cells
+    /// whose bit is set in `skip_cells` (bit `c` for grid column `c`): the same cells, bit for
+    /// bit, as the rover CPU's sequential scan ([`score_full`], [`score_partial`]).
+    fn score_row(&mut self, cells: &mut [Candidate], y: usize, skip_cells: u64, t: &Thresholds) {
+        // The window sums of every centre BORDER_PX..CENTRE_END (columns centre-2..=centre+2).
+        for (plane, window) in self.sums.iter().zip(self.window.iter_mut()) {
+            let (Some(out), Some(s)) = (
+                window.get_mut(BORDER_PX..CENTRE_END),
+                plane.get(SUM_FIRST_COL..SUM_END_COL),
+            ) else {
+                continue;
+            };
+            let s1 = s.get(1..).unwrap_or(&[]);
+            let s2 = s.get(2..).unwrap_or(&[]);
+            let s3 = s.get(3..).unwrap_or(&[]);
+            let s4 = s.get(4..).unwrap_or(&[]);
+            for (o, ((((&a, &b), &c), &d), &e)) in
+                out.iter_mut().zip(s.iter().zip(s1).zip(s2).zip(s3).zip(s4))
+            {
+                *o = a
+                    .wrapping_add(b)
+                    .wrapping_add(c)
+                    .wrapping_add(d)
+                    .wrapping_add(e);
+            }
+        }
+        // Each centre's entry floor: its cell's best on entry or the interest threshold,
+        // whichever is higher (infinite for a skipped cell). Cell c covers the columns
+        // c GRID_PX.. of every per-column array.
+        let (min_interest, min_roundness) = (t.min_interest, t.min_roundness);
+        let mut skip = skip_cells;
+        for (floor, cell) in self.floor.chunks_exact_mut(GRID_PX).zip(cells.iter()) {
+            let skipped = skip & 1 != 0;
+            skip >>= 1;
+            floor.fill(if skipped {
+                f64::INFINITY
+            } else {
+                f64::from(cell.interest).max(min_interest)
+            });
+        }
+        // The centres that may beat their cell's best, branch-free over the row (vectorised):
+        // det > 0, det >= floor trace and the roundness test, implied by the exact tests of
+        // `score_pixel` (det > best trace and det >= min_interest trace, products rounded
+        // monotonically); a centre failing them fails them for every later, higher best too.
+        // Only the scored centres are written: the others stay 0.
+        let [wxx, wyy, wxy] = &self.window;
+        let range = BORDER_PX..CENTRE_END;
+        let (Some(pass), Some(floor), Some(nxx), Some(nyy), Some(nxy)) = (
+            self.pass.get_mut(range.clone()),
+            self.floor.get(range.clone()),
+            wxx.get(range.clone()),
+            wyy.get(range.clone()),
+            wxy.get(range),
+        ) else {
+            return;
+        };
+        for ((p, &floor), ((&a, &b), &x)) in
+            pass.iter_mut().zip(floor).zip(nxx.iter().zip(nyy).zip(nxy))
+        {
+            let (det, trace) = det_trace(a, b, x);
+            *p = u8::from(
+                (det > 0.0) & (det >= floor * trace) & !(4.0 * det < min_roundness * trace * trace),
+            );
+        }
+        let cell_sums = wxx
+            .chunks_exact(GRID_PX)
+            .zip(wyy.chunks_exact(GRID_PX))
+            .zip(wxy.chunks_exact(GRID_PX));
+        for (c, ((cell, pass), ((nxx, nyy), nxy))) in cells
+            .iter_mut()
+            .zip(self.pass.chunks_exact(GRID_PX))
+            .zip(cell_sums)
+            .enumerate()
+        {
+            // The cell's flags (0 or 1) as a bit mask, bit k for centre k: most cells have no
+            // candidate in a row, two loads tell. Byte i of `lo` moves to bit 56 + i of the
+            // product (the other partial products land on distinct lower bits or overflow).
+            let lo = pass
+                .get(..8)
+                .and_then(|b| <[u8; 8]>::try_from(b).ok())
+                .map_or(0, u64::from_le_bytes);
+            let hi = pass
+                .get(8..)
+                .and_then(|b| <[u8; GRID_PX - 8]>::try_from(b).ok())
+                .map_or(0, u16::from_le_bytes);
+            if lo == 0 && hi == 0 {
+                continue;
+            }
+            let mut candidates = (lo.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32
+                | u32::from(hi & 1) << 8
+                | u32::from(hi >> 8) << 9;
+            // The sequential scan of `score_span` over the passing centres, in order, with
+            // the exact tests of `score_pixel`.
+            let mut best = cell.interest;
+            let mut best_k = None;
+            for _ in 0..GRID_PX {
+                if candidates == 0 {
+                    break;
+                }
+                let k = candidates.trailing_zeros() as usize;
+                candidates &= candidates - 1;
+                let (Some(&a), Some(&b), Some(&x)) = (nxx.get(k), nyy.get(k), nxy.get(k)) else {
+                    break;
+                };
+                let (det, trace) = det_trace(a, b, x);
+                if det > f64::from(best) * trace
+                    && !(det < t.min_interest * trace)
+                    && !(4.0 * det < min_roundness * trace * trace)
+                {
+                    let interest = (det / trace) as f32;
+                    if interest > best {
+                        best = interest;
+                        best_k = Some(k);
+                    }
+                }
+            }
+            if let Some(k) = best_k {
+                *cell = Candidate {
+                    interest: best,
+                    x: (c * GRID_PX + k) as u16,
+                    y: y as u16,
+                };
+            }
+        }
+    }
+
+    /// The sums `[xx, yy, xy]` of column `c` (tests).
+    #[cfg(test)]
+    fn column(&self, c: usize) -> [i32; 3] {
+        [self.sums[0][c], self.sums[1][c], self.sums[2][c]]
+    }
+}
+
+/// The rover CPU's row of [`ForstnerDetector::process_row_masked`] on `$op` (a detector whose
+/// `columns` are [`Interleaved`]): one macro so that the flight code and the host's check of
+/// it (`vo_1_optimised_operator_equals_the_reference`) are the same source. Written in the
+/// method itself: routed through a generic function, the rover CPU build spent 1.6 % more
+/// instructions per row (issue 18, session 18).
+#[cfg(any(target_arch = "arm", test))]
+macro_rules! interleaved_row {
+    ($op:ident, $image:ident, $y:ident, $config:ident, $skip_cells:ident) => {{
+        let (image, y, config, skip_cells) = ($image, $y, $config, $skip_cells);
+        let cell_row = y / GRID_PX;
+        let cells = $op
+            .cells
+            .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
+            .unwrap_or(&mut []);
+        if y == FIRST_ROW || y % GRID_PX == 0 {
+            // A grid row's cells are cleared at its first row (the pass reaches every grid
+            // row, so all cells are cleared by its end, as by `reset` at its start, without a
+            // 37 KB clear in the first item).
+            cells.fill(NO_CANDIDATE);
+        }
+        if y == FIRST_ROW {
+            $op.columns.0.fill([0; 3]);
+            $op.candidate_count = 0;
+            add_window(image, FIRST_ROW, &mut $op.columns.0);
+        } else {
+            slide_rows(
+                image,
+                y + WINDOW_HALF,
+                y - WINDOW_HALF - 1,
+                &mut $op.columns.0,
+            );
+        }
+        let thresholds = Thresholds::new(config);
+        // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
+        // last one ends inside the border), cell by cell. The skip mask is shifted one cell
+        // per step (bit 0 is the current cell).
+        let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
+        let mut skip = skip_cells;
+        for (c, cell) in cells.iter_mut().enumerate() {
+            let skipped = skip & 1 != 0;
+            skip >>= 1;
+            if skipped {
+                continue;
+            }
+            let first = c * GRID_PX;
+            if let Some(span) = $op
+                .columns
+                .0
+                .get(first.wrapping_sub(WINDOW_HALF)..first + GRID_PX + WINDOW_HALF)
+                .and_then(|s| <&[[i32; 3]; SPAN]>::try_from(s).ok())
+                .filter(|_| first >= BORDER_PX && first + GRID_PX <= end)
+            {
+                // A full cell: fixed offsets, no checks.
+                score_full(span, first, y, cell, &thresholds);
+            } else {
+                // The partial cells at the borders stop at the end of their shorter span.
+                let first = first.max(BORDER_PX);
+                let stop = (c * GRID_PX + GRID_PX).min(end);
+                if first >= stop {
+                    continue;
+                }
+                if let Some(span) = $op.columns.0.get(first - WINDOW_HALF..stop + WINDOW_HALF) {
+                    score_partial(span, first, y, cell, &thresholds);
+                }
+            }
+        }
+    }};
+}
+
 impl ForstnerDetector {
     /// Clears the cells and the running sums (in place: the detector becomes
     /// [`Self::EMPTY`]); the next row to score is [`FIRST_ROW`].
     pub fn reset(&mut self) {
-        self.columns.fill([0; 3]);
+        self.columns.clear();
         self.cells.fill(NO_CANDIDATE);
         self.candidate_count = 0;
     }
@@ -467,61 +863,29 @@ impl ForstnerDetector {
         config: &VoConfig,
         skip_cells: u64,
     ) {
-        let cell_row = y / GRID_PX;
-        let cells = self
-            .cells
-            .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
-            .unwrap_or(&mut []);
-        if y == FIRST_ROW || y % GRID_PX == 0 {
-            // A grid row's cells are cleared at its first row (the pass reaches every grid
-            // row, so all cells are cleared by its end, as by `reset` at its start, without a
-            // 37 KB clear in the first item).
-            cells.fill(NO_CANDIDATE);
-        }
-        if y == FIRST_ROW {
-            self.columns.fill([0; 3]);
-            self.candidate_count = 0;
-            add_window(image, FIRST_ROW, &mut self.columns);
-        } else {
-            slide_rows(
-                image,
-                y + WINDOW_HALF,
-                y - WINDOW_HALF - 1,
-                &mut self.columns,
-            );
-        }
-        let thresholds = Thresholds::new(config);
-        // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
-        // last one ends inside the border), cell by cell. The skip mask is shifted one cell
-        // per step (bit 0 is the current cell).
-        let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
-        let mut skip = skip_cells;
-        for (c, cell) in cells.iter_mut().enumerate() {
-            let skipped = skip & 1 != 0;
-            skip >>= 1;
-            if skipped {
-                continue;
+        #[cfg(target_arch = "arm")]
+        interleaved_row!(self, image, y, config, skip_cells);
+        #[cfg(not(target_arch = "arm"))]
+        {
+            let cell_row = y / GRID_PX;
+            let cells = self
+                .cells
+                .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
+                .unwrap_or(&mut []);
+            if y == FIRST_ROW || y % GRID_PX == 0 {
+                // As on the rover CPU: a grid row's cells are cleared at its first row.
+                cells.fill(NO_CANDIDATE);
             }
-            let first = c * GRID_PX;
-            if let Some(span) = self
-                .columns
-                .get(first.wrapping_sub(WINDOW_HALF)..first + GRID_PX + WINDOW_HALF)
-                .and_then(|s| <&[[i32; 3]; SPAN]>::try_from(s).ok())
-                .filter(|_| first >= BORDER_PX && first + GRID_PX <= end)
-            {
-                // A full cell: fixed offsets, no checks.
-                score_full(span, first, y, cell, &thresholds);
+            if y == FIRST_ROW {
+                self.columns.clear();
+                self.candidate_count = 0;
+                self.columns.add_window(image, FIRST_ROW);
             } else {
-                // The partial cells at the borders stop at the end of their shorter span.
-                let first = first.max(BORDER_PX);
-                let stop = (c * GRID_PX + GRID_PX).min(end);
-                if first >= stop {
-                    continue;
-                }
-                if let Some(span) = self.columns.get(first - WINDOW_HALF..stop + WINDOW_HALF) {
-                    score_partial(span, first, y, cell, &thresholds);
-                }
+                self.columns
+                    .slide_rows(image, y + WINDOW_HALF, y - WINDOW_HALF - 1);
             }
+            self.columns
+                .score_row(cells, y, skip_cells, &Thresholds::new(config));
         }
     }
 
@@ -992,22 +1356,51 @@ mod tests {
         assert_eq!(det.cells[..], cells[..]);
     }
 
-    /// Runs the optimised operator and the reference on `img` with `config` and the skip mask
+    /// The rover CPU's operator on the host: [`Interleaved`] sums and the flight row code
+    /// (`interleaved_row!`).
+    struct RoverOperator {
+        columns: Interleaved,
+        cells: [Candidate; CELL_COUNT],
+        candidate_count: usize,
+    }
+
+    impl RoverOperator {
+        fn process_row_masked(&mut self, image: &Image, y: usize, config: &VoConfig, skip: u64) {
+            interleaved_row!(self, image, y, config, skip);
+        }
+    }
+
+    /// Runs the optimised operator (the host's and the rover CPU's) and the reference on `img` with `config` and the skip mask
     /// `mask(grid_row)`; asserts equal cells after every grid row. Returns the non-empty cells.
     fn compare_with_reference(img: &[u8], config: &VoConfig, mask: impl Fn(usize) -> u64) -> usize {
         let image = Image::new(img).unwrap();
         let mut det = Box::new(ForstnerDetector::default());
         let mut columns: Box<ColumnSums> = Box::new([[0; 3]; IMAGE_WIDTH_PX]);
         let mut cells: Box<[Candidate; CELL_COUNT]> = Box::new([NO_CANDIDATE; CELL_COUNT]);
+        let mut rover = Box::new(RoverOperator {
+            columns: Interleaved::ZERO,
+            cells: [NO_CANDIDATE; CELL_COUNT],
+            candidate_count: 0,
+        });
         for y in FIRST_ROW..END_ROW {
             let skip = mask(y / GRID_PX);
             det.process_row_masked(&image, y, config, skip);
             reference::process_row_masked(&mut columns, &mut cells, &image, y, config, skip);
+            rover.process_row_masked(&image, y, config, skip);
             if y % GRID_PX == GRID_PX - 1 || y + 1 == END_ROW {
                 // The reference keeps every interior column; the operator those a scored
                 // window reaches.
-                let column = (SUM_FIRST_COL..SUM_END_COL).find(|&c| det.columns[c] != columns[c]);
+                let column =
+                    (SUM_FIRST_COL..SUM_END_COL).find(|&c| det.columns.column(c) != columns[c]);
                 assert_eq!(column, None, "column sums differ, row {y}");
+                let column =
+                    (SUM_FIRST_COL..SUM_END_COL).find(|&c| rover.columns.0[c] != columns[c]);
+                assert_eq!(column, None, "the rover CPU's sums differ, row {y}");
+                assert_eq!(
+                    rover.cells[..],
+                    det.cells[..],
+                    "the layouts' cells differ, row {y}"
+                );
                 let cell = (0..CELL_COUNT).find(|&c| det.cells[c] != cells[c]);
                 if let Some(c) = cell {
                     panic!("row {y} cell {c}: {:?} != {:?}", det.cells[c], cells[c]);
