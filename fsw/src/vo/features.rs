@@ -495,7 +495,7 @@ struct Planar {
     /// Window (5x5) sums `[xx, yy, xy]` of the current row, per centre column.
     window: [[i32; IMAGE_WIDTH_PX]; 3],
     /// Entry floor of each centre column's cell (interest units, grey levels^2).
-    floor: [f64; IMAGE_WIDTH_PX],
+    floor: [f32; IMAGE_WIDTH_PX],
     /// 1 where a centre may beat its cell's best (the row's vectorised pre-test).
     pass: [u8; IMAGE_WIDTH_PX],
 }
@@ -569,13 +569,31 @@ fn planar_row(sums: &mut [[i32; IMAGE_WIDTH_PX]; 3], rows: [Row; 3], sign: i32) 
     }
 }
 
+/// The host's f32 pre-test of a centre with the window sums `(nxx, nyy, nxy)` against its
+/// cell's entry `floor` (see [`Planar::score_row`]): true whenever the exact tests of
+/// [`score_pixel`] pass for a best interest at most `floor` and a `min_interest` at most
+/// `floor`, with the roundness threshold `min_roundness`.
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn pretest((nxx, nyy, nxy): (i32, i32, i32), floor: f32, min_roundness: f32) -> bool {
+    /// 2^-21: eight units in the last place of f32.
+    const MARGIN: f32 = 1.0 / (1u32 << 21) as f32;
+    let (a, b, x) = (nxx as f32, nyy as f32, nxy as f32);
+    let (ab, xx, trace) = (a * b, x * x, a + b);
+    let (bound, round) = (floor * trace, min_roundness * trace * trace);
+    let (det, spread) = (ab - xx, ab + xx);
+    let det_w = det + (spread + bound) * MARGIN;
+    let det_q = det + (spread + round.abs()) * MARGIN;
+    !(det_w < bound) & !(4.0 * det_q < round)
+}
+
 #[cfg(not(target_arch = "arm"))]
 impl Planar {
     /// Zero sums.
     const ZERO: Self = Self {
         sums: [[0; IMAGE_WIDTH_PX]; 3],
         window: [[0; IMAGE_WIDTH_PX]; 3],
-        floor: [f64::INFINITY; IMAGE_WIDTH_PX],
+        floor: [f32::INFINITY; IMAGE_WIDTH_PX],
         pass: [0; IMAGE_WIDTH_PX],
     };
 
@@ -659,24 +677,25 @@ impl Planar {
             }
         }
         // Each centre's entry floor: its cell's best on entry or the interest threshold,
-        // whichever is higher (infinite for a skipped cell). Cell c covers the columns
+        // whichever is higher. Cell c covers the columns
         // c GRID_PX.. of every per-column array.
-        let (min_interest, min_roundness) = (t.min_interest, t.min_roundness);
-        let mut skip = skip_cells;
+        // In f32: `min_interest` is a configured f32 and `best` an f32, so the floor is exact.
+        let (min_interest, min_roundness) = (t.min_interest as f32, t.min_roundness as f32);
         for (floor, cell) in self.floor.chunks_exact_mut(GRID_PX).zip(cells.iter()) {
-            let skipped = skip & 1 != 0;
-            skip >>= 1;
-            floor.fill(if skipped {
-                f64::INFINITY
-            } else {
-                f64::from(cell.interest).max(min_interest)
-            });
+            floor.fill(cell.interest.max(min_interest));
         }
-        // The centres that may beat their cell's best, branch-free over the row (vectorised):
-        // det > 0, det >= floor trace and the roundness test, implied by the exact tests of
-        // `score_pixel` (det > best trace and det >= min_interest trace, products rounded
-        // monotonically); a centre failing them fails them for every later, higher best too.
-        // Only the scored centres are written: the others stay 0.
+        // The centres that may beat their cell's best, branch-free over the row (vectorised,
+        // four f32 lanes): the interest and roundness tests of `score_pixel` in f32 with a
+        // margin, `det + m_w >= floor trace` and `4 (det + m_q) >= min_roundness trace^2`,
+        // `m_w = 2^-21 (nxx nyy + nxy^2 + floor trace)`, `m_q = 2^-21 (nxx nyy + nxy^2 +
+        // |min_roundness trace^2|)`, each written as `!(x < y)` so that a NaN threshold passes
+        // as in `score_pixel`. A centre passing the exact tests (det > best trace and
+        // det >= min_interest trace, so det >= floor trace up to 2^-53; the roundness test)
+        // passes these: the window sums and the trace are exact in f32 (below 2^24), the f32
+        // det is within 2.0001 2^-24 (nxx nyy + nxy^2) of the true one, each f32 product
+        // within 2^-23 of its value, and each margin about 8 2^-24 of the sum it bounds. A
+        // centre failing them fails the exact tests for every later, higher best too. Only the
+        // scored centres are written: the others stay 0.
         let [wxx, wyy, wxy] = &self.window;
         let range = BORDER_PX..CENTRE_END;
         let (Some(pass), Some(floor), Some(nxx), Some(nyy), Some(nxy)) = (
@@ -691,21 +710,24 @@ impl Planar {
         for ((p, &floor), ((&a, &b), &x)) in
             pass.iter_mut().zip(floor).zip(nxx.iter().zip(nyy).zip(nxy))
         {
-            let (det, trace) = det_trace(a, b, x);
-            *p = u8::from(
-                (det > 0.0) & (det >= floor * trace) & !(4.0 * det < min_roundness * trace * trace),
-            );
+            *p = u8::from(pretest((a, b, x), floor, min_roundness));
         }
         let cell_sums = wxx
             .chunks_exact(GRID_PX)
             .zip(wyy.chunks_exact(GRID_PX))
             .zip(wxy.chunks_exact(GRID_PX));
+        let mut skip = skip_cells;
         for (c, ((cell, pass), ((nxx, nyy), nxy))) in cells
             .iter_mut()
             .zip(self.pass.chunks_exact(GRID_PX))
             .zip(cell_sums)
             .enumerate()
         {
+            let skipped = skip & 1 != 0;
+            skip >>= 1;
+            if skipped {
+                continue;
+            }
             // The cell's flags (0 or 1) as a bit mask, bit k for centre k: most cells have no
             // candidate in a row, two loads tell. Byte i of `lo` moves to bit 56 + i of the
             // product (the other partial products land on distinct lower bits or overflow).
@@ -739,7 +761,7 @@ impl Planar {
                 let (det, trace) = det_trace(a, b, x);
                 if det > f64::from(best) * trace
                     && !(det < t.min_interest * trace)
-                    && !(4.0 * det < min_roundness * trace * trace)
+                    && !(4.0 * det < t.min_roundness * trace * trace)
                 {
                     let interest = (det / trace) as f32;
                     if interest > best {
@@ -1396,11 +1418,10 @@ mod tests {
                 let column =
                     (SUM_FIRST_COL..SUM_END_COL).find(|&c| rover.columns.0[c] != columns[c]);
                 assert_eq!(column, None, "the rover CPU's sums differ, row {y}");
-                assert_eq!(
-                    rover.cells[..],
-                    det.cells[..],
-                    "the layouts' cells differ, row {y}"
-                );
+                if let Some(c) = (0..CELL_COUNT).find(|&c| rover.cells[c] != det.cells[c]) {
+                    let (r, h) = (rover.cells[c], det.cells[c]);
+                    panic!("row {y} cell {c}: rover CPU {r:?}, host {h:?}");
+                }
                 let cell = (0..CELL_COUNT).find(|&c| det.cells[c] != cells[c]);
                 if let Some(c) = cell {
                     panic!("row {y} cell {c}: {:?} != {:?}", det.cells[c], cells[c]);
@@ -1489,6 +1510,58 @@ mod tests {
         }
         // The comparison is not vacuous: the flight thresholds find many cells.
         assert!(flight_cells > 6 * 1000, "{flight_cells} cells");
+    }
+
+    #[test]
+    fn vo_1_planar_pretest_keeps_every_exact_pass() {
+        // The f32 pre-test of the host's pass never rejects a centre the exact tests accept:
+        // random window sums up to the largest possible (25 * 255^2 * 2), interests at and one
+        // f32 step around the centre's own (the boundary), thresholds from the flight's to
+        // extreme ones.
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let max_sum = 25 * 255 * 255 * 2;
+        let (mut exact_passes, mut checked) = (0, 0);
+        for i in 0..400_000 {
+            let scale = [max_sum, 1 << 16, 1 << 8][i % 3];
+            let a = (next() % scale) as i32;
+            let b = (next() % scale) as i32;
+            let bound = ((f64::from(a) * f64::from(b)).sqrt() as i64).max(1);
+            let x = (next() % (2 * bound as u64 + 1)) as i64 - bound;
+            let x = x as i32;
+            let (det, trace) = det_trace(a, b, x);
+            if trace <= 0.0 {
+                continue;
+            }
+            let w = (det / trace) as f32;
+            let nudge = [w, f32::from_bits(w.to_bits().wrapping_sub(1)), w * 0.5, 0.0];
+            let best = nudge[i % 4].max(0.0);
+            let (min_interest, min_roundness) = [
+                (50.0f32, 0.3f32),
+                (2000.0, 0.0),
+                (0.0, 1.0),
+                (w, 0.5),
+                (f32::NAN, f32::NAN),
+            ][i % 5];
+            let exact = det > f64::from(best) * trace
+                && !(det < f64::from(min_interest) * trace)
+                && !(4.0 * det < f64::from(min_roundness) * trace * trace);
+            let floor = best.max(min_interest);
+            checked += 1;
+            if exact {
+                exact_passes += 1;
+                assert!(
+                    pretest((a, b, x), floor, min_roundness),
+                    "({a}, {b}, {x}) best {best} min {min_interest} {min_roundness}"
+                );
+            }
+        }
+        assert!(exact_passes > checked / 10, "{exact_passes} of {checked}");
     }
 
     #[test]
