@@ -537,35 +537,47 @@ fn sum_columns<'a>(row: Row<'a>, shift: usize) -> &'a [u8] {
         .unwrap_or(&[])
 }
 
-/// `sums += sign * products of image row y` over the planes' columns
-/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] (`sign` +1 or -1; nothing at the first and last
-/// rows). Straight-line over slices: the compiler vectorises it.
+/// The planes' columns [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] (`None` only if these constant
+/// ranges left the arrays, which they do not).
 #[cfg(not(target_arch = "arm"))]
 #[inline(always)]
-fn planar_row(sums: &mut [[i32; IMAGE_WIDTH_PX]; 3], rows: [Row; 3], sign: i32) {
-    let [up, mid, down] = rows;
+fn sum_planes(
+    sums: &mut [[i32; IMAGE_WIDTH_PX]; 3],
+) -> Option<(&mut [i32], &mut [i32], &mut [i32])> {
     let [xx, yy, xy] = sums;
-    let (Some(xx), Some(yy), Some(xy)) = (
-        xx.get_mut(SUM_FIRST_COL..SUM_END_COL),
-        yy.get_mut(SUM_FIRST_COL..SUM_END_COL),
-        xy.get_mut(SUM_FIRST_COL..SUM_END_COL),
-    ) else {
-        return;
-    };
-    let pixels = sum_columns(up, 1)
+    Some((
+        xx.get_mut(SUM_FIRST_COL..SUM_END_COL)?,
+        yy.get_mut(SUM_FIRST_COL..SUM_END_COL)?,
+        xy.get_mut(SUM_FIRST_COL..SUM_END_COL)?,
+    ))
+}
+
+/// The pixels `((up, down), (left, right))` of the central differences of the columns
+/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] of a row whose neighbours are `[up, mid, down]`.
+#[cfg(not(target_arch = "arm"))]
+#[inline(always)]
+fn difference_pixels<'a>(
+    [up, mid, down]: [Row<'a>; 3],
+) -> impl Iterator<Item = ((&'a u8, &'a u8), (&'a u8, &'a u8))> {
+    sum_columns(up, 1)
         .iter()
         .zip(sum_columns(down, 1))
-        .zip(sum_columns(mid, 0).iter().zip(sum_columns(mid, 2)));
-    for (((sxx, syy), sxy), ((&u, &d), (&l, &r))) in xx
-        .iter_mut()
-        .zip(yy.iter_mut())
-        .zip(xy.iter_mut())
-        .zip(pixels)
-    {
+        .zip(sum_columns(mid, 0).iter().zip(sum_columns(mid, 2)))
+}
+
+/// `sums += products of image row y` over the planes' columns
+/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] (the first rows of a pass).
+#[cfg(not(target_arch = "arm"))]
+fn planar_add_row(sums: &mut [[i32; IMAGE_WIDTH_PX]; 3], rows: [Row; 3]) {
+    let Some((xx, yy, xy)) = sum_planes(sums) else {
+        return;
+    };
+    let planes = xx.iter_mut().zip(yy.iter_mut()).zip(xy.iter_mut());
+    for (((sxx, syy), sxy), ((&u, &d), (&l, &r))) in planes.zip(difference_pixels(rows)) {
         let (gx, gy) = gradient(u, d, i32::from(l), i32::from(r));
-        *sxx = sxx.wrapping_add(sign.wrapping_mul(gx * gx));
-        *syy = syy.wrapping_add(sign.wrapping_mul(gy * gy));
-        *sxy = sxy.wrapping_add(sign.wrapping_mul(gx * gy));
+        *sxx = sxx.wrapping_add(gx * gx);
+        *syy = syy.wrapping_add(gy * gy);
+        *sxy = sxy.wrapping_add(gx * gy);
     }
 }
 
@@ -607,39 +619,24 @@ impl Planar {
     fn add_window(&mut self, image: &Image, y: usize) {
         for r in y.saturating_sub(WINDOW_HALF)..=y + WINDOW_HALF {
             if let Some(rows) = gradient_rows(image, r) {
-                planar_row(&mut self.sums, rows, 1);
+                planar_add_row(&mut self.sums, rows);
             }
         }
     }
 
     /// Moves the window down one row (adds the products of row `add`, removes row `remove`).
     fn slide_rows(&mut self, image: &Image, add: usize, remove: usize) {
-        let (Some([au, am, ad]), Some([ru, rm, rd])) =
-            (gradient_rows(image, add), gradient_rows(image, remove))
-        else {
-            return;
-        };
-        let [xx, yy, xy] = &mut self.sums;
-        let (Some(xx), Some(yy), Some(xy)) = (
-            xx.get_mut(SUM_FIRST_COL..SUM_END_COL),
-            yy.get_mut(SUM_FIRST_COL..SUM_END_COL),
-            xy.get_mut(SUM_FIRST_COL..SUM_END_COL),
+        let (Some(added), Some(removed), Some((xx, yy, xy))) = (
+            gradient_rows(image, add),
+            gradient_rows(image, remove),
+            sum_planes(&mut self.sums),
         ) else {
             return;
         };
-        let added = sum_columns(au, 1)
-            .iter()
-            .zip(sum_columns(ad, 1))
-            .zip(sum_columns(am, 0).iter().zip(sum_columns(am, 2)));
-        let removed = sum_columns(ru, 1)
-            .iter()
-            .zip(sum_columns(rd, 1))
-            .zip(sum_columns(rm, 0).iter().zip(sum_columns(rm, 2)));
-        for (((sxx, syy), sxy), (((&au, &ad), (&al, &ar)), ((&ru, &rd), (&rl, &rr)))) in xx
-            .iter_mut()
-            .zip(yy.iter_mut())
-            .zip(xy.iter_mut())
-            .zip(added.zip(removed))
+        let planes = xx.iter_mut().zip(yy.iter_mut()).zip(xy.iter_mut());
+        let rows = difference_pixels(added).zip(difference_pixels(removed));
+        for (((sxx, syy), sxy), (((&au, &ad), (&al, &ar)), ((&ru, &rd), (&rl, &rr)))) in
+            planes.zip(rows)
         {
             let (ax, ay) = gradient(au, ad, i32::from(al), i32::from(ar));
             let (rx, ry) = gradient(ru, rd, i32::from(rl), i32::from(rr));
@@ -889,13 +886,15 @@ impl ForstnerDetector {
         interleaved_row!(self, image, y, config, skip_cells);
         #[cfg(not(target_arch = "arm"))]
         {
+            // The rover CPU's row code, with the host's layout (kept apart from
+            // `interleaved_row!`: shared through a function, the grid-row preamble changed the
+            // rover CPU build's code).
             let cell_row = y / GRID_PX;
             let cells = self
                 .cells
                 .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
                 .unwrap_or(&mut []);
             if y == FIRST_ROW || y % GRID_PX == 0 {
-                // As on the rover CPU: a grid row's cells are cleared at its first row.
                 cells.fill(NO_CANDIDATE);
             }
             if y == FIRST_ROW {
