@@ -696,3 +696,78 @@ fn pln_in_place_init_equals_new() {
     used.init(config).unwrap();
     assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
 }
+
+/// PLN-6 (minimum drive): a path handed to guidance takes the rover at least `min_drive_m`
+/// away, measured straight from the rover to the path's end, however the route bends. Swept
+/// over rovers inside the clearance band in front of a rock (escape leg first, which skips the
+/// gaze test) and beside it, headings of -60 to 60 deg and goals round the rock, with the
+/// default configuration and the flight's (`min_drive_m` 0.1 m, clearance 0.15 m). Before the
+/// rule a boundary-following route cut by the wedge right after the escape leg gave a 6.7 cm
+/// polyline ending 5 cm away, inside guidance's stopping tolerance (`rockfield-goal`, a rover
+/// holding and mapping on one spot until fault protection stopped it).
+#[test]
+fn pln_6_every_driven_path_ends_min_drive_away() {
+    let rock = rect(0.5, -1.0, 1.5, 1.0);
+    let configs = [
+        PlannerConfig::default(),
+        PlannerConfig {
+            clearance_m: 0.15,
+            min_drive_m: 0.1,
+            ..PlannerConfig::default()
+        },
+    ];
+    let goals = [
+        [3.0, 0.0],
+        [1.0, 3.0],
+        [3.0, 2.0],
+        [-1.0, 3.0],
+        [1.0, -3.0],
+        [3.0, -1.5],
+    ];
+    let (mut driven, mut gazes, mut short) = (0, 0, 0);
+    for config in configs {
+        let band = config.clearance_m;
+        for k in 0..12 {
+            // In front of the rock (x just below 0.5) and beside it (y just beyond 1.0).
+            let depth = band * (0.05 + 0.9 * f64::from(k % 4) / 3.0);
+            let along = -0.9 + 0.6 * f64::from(k / 4);
+            let positions = [[0.5 - depth, along], [1.0 + along * 0.5, 1.0 + depth]];
+            for position in positions {
+                for h in 0..7 {
+                    let heading = (-60.0 + 20.0 * f64::from(h)).to_radians();
+                    for goal in goals {
+                        let mut p = Planner::new(config).unwrap();
+                        p.set_goal(goal).unwrap();
+                        let w = wedge_at(position, heading);
+                        let out = p
+                            .plan(position, heading, &w, core::slice::from_ref(&rock))
+                            .unwrap();
+                        match out.status {
+                            PlanStatus::Driving => {
+                                driven += 1;
+                                let path = out.path.unwrap();
+                                let end = *path.waypoints().last().unwrap();
+                                let reach = dist(position, end);
+                                if reach < config.min_drive_m {
+                                    short += 1;
+                                    eprintln!(
+                                        "short drive {reach:.4} m from {position:?} heading \
+                                         {heading:.2} to {goal:?}: {:?}",
+                                        path.waypoints()
+                                    );
+                                }
+                            }
+                            PlanStatus::Gaze => gazes += 1,
+                            _ => {}
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(
+        short, 0,
+        "{short} of {driven} driven paths end within min_drive"
+    );
+    assert!(driven > 100 && gazes > 10, "driven {driven}, gazes {gazes}");
+}
