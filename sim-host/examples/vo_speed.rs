@@ -6,7 +6,7 @@
 //! (`fx_px`, `fy_px`, `cx_px`, `cy_px`, `baseline_m` of the rectified left camera), then runs
 //! `fsw::vo::VisualOdometry<150>` exactly as the flight software does: the flight `VoConfig` of
 //! `NavConfig::rocky8` (through `FswConfig::rocky8`), `start` then `step` with the flight's
-//! background quantum (`ExecConfig::background_quantum`, 100 cost units) until finished, one
+//! background quantum (`ExecConfig::background_quantum`, 60 cost units) until finished, one
 //! update per consecutive pair, no motion prior (`None`: "no motion", as the flight passes when
 //! it has none). The camera frame is taken as the rover frame (identity mounting): the pairs
 //! come from a fixed camera, and the mounting only rotates the output.

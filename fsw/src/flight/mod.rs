@@ -261,13 +261,14 @@ impl TimeBase {
 
 impl FswConfig {
     /// Defaults for Rocky 8 starting at `position` (m, `N`) heading `yaw_rad` (from north): the
-    /// default executive with 100 cost units of VO work per minor frame (about 0.5 M
-    /// instructions of work items on average, at most 1.0 M plus one item; a 25 cm VO update in
-    /// about 0.6 s; `docs/timing.md`).
+    /// default executive with 60 cost units of background work per minor frame (at most
+    /// 0.6 M instructions plus one item; the largest frame measured with its slice takes 80 %
+    /// of the 5 ms period at CPI 2.0, where 100 units took 133 %; a VO update with the
+    /// rectification of its pair about 14,000 units, 1.1 s; `docs/timing.md`).
     pub fn rocky8(position: [f64; 3], yaw_rad: f64) -> Self {
         Self {
             exec: ExecConfig {
-                background_quantum: 100,
+                background_quantum: 60,
                 ..ExecConfig::default()
             },
             nav: NavConfig::rocky8(position, yaw_rad),
