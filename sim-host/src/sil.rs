@@ -1229,6 +1229,22 @@ them on every seed:
   18, but on seeds 2 and 3 both forms give the same (6.6 / 6.3 % and 10.0 / 11.3 %) and the code
   of issue 17 gives 6.5 % and 21.5 % (55 VO failures) there: the slip on the steep dune flanks
   breaks VO tracking on some runs whatever the update form.
+- **Session 19: the background quantum went from 100 to 60 cost units per minor frame**: the
+  rover CPU's largest minor frame with its background slice took 133 % of the 5 ms period at
+  CPI 2.0, now 80 % (`docs/timing.md`); a VO update with the rectification of its pair (about
+  14,000 cost units on the timing tape) now takes about 1.1 s of slices instead of about
+  0.7 s. All cases re-run: no check changed its
+  verdict except SIL-NAV-2's EKF goal (18.7 -> 0.27 %, which flips with small changes, above).
+  The figures moved both ways within their seed scatter (EKF error, seeds 1 / 2 / 3, 100 -> 60
+  units): marsyard-25m 0.26 / 0.44 / 0.16 -> 0.41 / 0.39 / 0.34 %, slope-10-cross 0.55 / 1.15 /
+  0.43 -> 0.57 / 1.11 / 0.41 %, rough-kinematics 0.33 / 1.00 / 0.09 -> 0.32 / 1.02 / 0.06 %,
+  slope-10-faults 0.88 / 1.02 / 0.24 -> 0.67 / 1.24 / 1.85 % (GNC-4 runs seed 3). At 60 units
+  `rockfield-goal` (SIL-HAZ-1) first failed: the planner handed guidance a 6.7 cm
+  boundary-following path ending 5 cm away, inside guidance's stopping tolerance, and the rover
+  held and mapped on one spot until fault protection stopped it (`SlipLimit` at 3.5 m of 20 m).
+  Fixed in the flight software (every driven path ends at least `min_drive`, 0.1 m, away,
+  `docs/planning.md` step 10), not by keeping the larger quantum: HAZ-1 then reached its goal
+  (path 1.055 x the straight line).
 - SIL-SLIP-1/2 are references: the lumped slip model of before issue 13 (its lateral constant
   chosen to reproduce H05's drift) on the two cases that the per-wheel rigid-wheel
   terramechanics, now the default (`docs/terramechanics.md`), runs in SIL-GNC-1 and SIL-NAV-1.
