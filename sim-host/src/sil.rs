@@ -1242,9 +1242,9 @@ them on every seed:
   `rockfield-goal` (SIL-HAZ-1) first failed: the planner handed guidance a 6.7 cm
   boundary-following path ending 5 cm away, inside guidance's stopping tolerance, and the rover
   held and mapped on one spot until fault protection stopped it (`SlipLimit` at 3.5 m of 20 m).
-  Fixed in the flight software (every driven path ends at least `min_drive`, 0.1 m, away,
+  Fixed in the flight software (every cut path driven ends at least `min_reach`, 0.1 m, away,
   `docs/planning.md` step 10), not by keeping the larger quantum: HAZ-1 then reached its goal
-  (path 1.055 x the straight line).
+  (path 1.056 x the straight line).
 - SIL-SLIP-1/2 are references: the lumped slip model of before issue 13 (its lateral constant
   chosen to reproduce H05's drift) on the two cases that the per-wheel rigid-wheel
   terramechanics, now the default (`docs/terramechanics.md`), runs in SIL-GNC-1 and SIL-NAV-1.

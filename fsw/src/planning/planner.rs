@@ -51,6 +51,10 @@ pub struct PlannerConfig {
     /// Driving direction is taken over at least this distance; shorter visible paths trigger a
     /// gaze, m.
     pub min_drive_m: f64,
+    /// A cut path is handed to guidance only when its end is at least this far from the rover
+    /// in a straight line, else the planner asks for a gaze towards the cut leg, m. Must exceed
+    /// guidance's stopping tolerance: guidance arrives at once at a path ending within it.
+    pub min_reach_m: f64,
     /// Gaze requests without motion before the planner halts `Blocked(GazeLimit)`.
     pub max_consecutive_gazes: u32,
     /// A new way on replaces the one chosen at the last step only when its heuristic distance
@@ -70,13 +74,14 @@ impl Default for PlannerConfig {
 
 impl PlannerConfig {
     /// The defaults: 0.1 m goal tolerance, 5 cm clearance and progress margin, 5 deg gaze
-    /// margin, 5 cm minimum drive, 8 gazes, 0.5 m switch margin, 500 m follow limit.
+    /// margin, 5 cm minimum drive and reach, 8 gazes, 0.5 m switch margin, 500 m follow limit.
     pub const DEFAULT: Self = Self {
         goal_tolerance_m: 0.1,
         clearance_m: 0.05,
         progress_epsilon_m: 0.05,
         gaze_margin_rad: 5.0 * PI / 180.0,
         min_drive_m: 0.05,
+        min_reach_m: 0.05,
         max_consecutive_gazes: 8,
         switch_margin_m: 0.5,
         max_follow_m: 500.0,
@@ -93,6 +98,7 @@ impl PlannerConfig {
             && self.gaze_margin_rad.is_finite()
             && self.gaze_margin_rad >= 0.0
             && pos(self.min_drive_m)
+            && pos(self.min_reach_m)
             && self.max_consecutive_gazes > 0
             && self.switch_margin_m.is_finite()
             && self.switch_margin_m >= 0.0

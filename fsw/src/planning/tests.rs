@@ -697,22 +697,22 @@ fn pln_in_place_init_equals_new() {
     assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
 }
 
-/// PLN-6 (minimum drive): a path handed to guidance takes the rover at least `min_drive_m`
+/// PLN-6 (minimum reach): a path handed to guidance takes the rover at least `min_reach_m`
 /// away, measured straight from the rover to the path's end, however the route bends. Swept
 /// over rovers inside the clearance band in front of a rock (escape leg first, which skips the
 /// gaze test) and beside it, headings of -60 to 60 deg and goals round the rock, with the
-/// default configuration and the flight's (`min_drive_m` 0.1 m, clearance 0.15 m). Before the
+/// default configuration and the flight's (`min_reach_m` 0.1 m, clearance 0.15 m). Before the
 /// rule a boundary-following route cut by the wedge right after the escape leg gave a 6.7 cm
 /// polyline ending 5 cm away, inside guidance's stopping tolerance (`rockfield-goal`, a rover
 /// holding and mapping on one spot until fault protection stopped it).
 #[test]
-fn pln_6_every_driven_path_ends_min_drive_away() {
+fn pln_6_every_driven_path_ends_min_reach_away() {
     let rock = rect(0.5, -1.0, 1.5, 1.0);
     let configs = [
         PlannerConfig::default(),
         PlannerConfig {
             clearance_m: 0.15,
-            min_drive_m: 0.1,
+            min_reach_m: 0.1,
             ..PlannerConfig::default()
         },
     ];
@@ -748,7 +748,7 @@ fn pln_6_every_driven_path_ends_min_drive_away() {
                                 let path = out.path.unwrap();
                                 let end = *path.waypoints().last().unwrap();
                                 let reach = dist(position, end);
-                                if reach < config.min_drive_m {
+                                if reach < config.min_reach_m {
                                     short += 1;
                                     eprintln!(
                                         "short drive {reach:.4} m from {position:?} heading \

@@ -395,11 +395,11 @@ impl NavConfig {
             },
             // Guidance follows the planner's polyline with a carrot, which cuts the corners of
             // a path round an obstacle: the clearance over the grown obstacles covers it.
-            // The shortest drive the planner hands over is twice guidance's stopping tolerance
-            // (0.05 m): a path ending within the tolerance is arrived at before it is driven.
+            // A path the planner hands over ends at least twice guidance's stopping tolerance
+            // (0.05 m) away: a path ending within the tolerance is arrived at before it is driven.
             planner: crate::planning::PlannerConfig {
                 clearance_m: 0.15,
-                min_drive_m: 0.1,
+                min_reach_m: 0.1,
                 ..crate::planning::PlannerConfig::default()
             },
             map_interval_m: 1.0,

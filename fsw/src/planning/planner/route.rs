@@ -173,7 +173,7 @@ impl Planner {
         // by the wedge right after a bend went 6.7 cm to an end 5 cm away on `rockfield-goal`;
         // the rover held, mapped and got the same path back until fault protection stopped it).
         let reach = path_pts.last().map_or(0.0, |end| dist(position, *end));
-        if length < self.config.min_drive_m || reach < self.config.min_drive_m {
+        if length < self.config.min_drive_m || reach < self.config.min_reach_m {
             if let Some(y) = cut_yaw {
                 return self.gaze(y, subgoal, summary);
             }
