@@ -167,7 +167,7 @@ impl Planner {
                 break;
             }
         }
-        // A cut path must take the rover at least `min_drive` away, measured straight to its
+        // A cut path must take the rover at least `min_reach` away, measured straight to its
         // end: guidance stops within its tolerance of a path's end, so a path whose end is that
         // close is no drive at all, however long its polyline (a boundary-following route cut
         // by the wedge right after a bend went 6.7 cm to an end 5 cm away on `rockfield-goal`;
