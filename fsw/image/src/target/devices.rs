@@ -341,7 +341,13 @@ impl Clock for SystickClock {
                 continue;
             }
             if before == after && current <= first {
-                let ticks = u64::from(before) + u64::from(pending);
+                // A pending tick counts only once the value has reloaded: QEMU can also raise
+                // the pending bit while the value still reads the end of the period (seen as an
+                // RG2 release one 125,000-count period long in `docs/timing.md`, session 19).
+                // The handler runs within a few instructions of the reload, so a pending tick
+                // with the value in the second half of the period is the reload still to come.
+                let reloaded = into_frame < u64::from(self.reload / 2);
+                let ticks = u64::from(before) + u64::from(pending && reloaded);
                 let mut value = ticks * u64::from(self.reload) + into_frame;
                 // QEMU raises the SysTick pending bit when its timer callback runs, a few
                 // instructions after the counter has reloaded: a read in that window sees the
