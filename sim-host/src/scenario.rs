@@ -488,6 +488,7 @@ mod tests {
             "slope-20-cross",
             "step-climb",
             "rock-crawl",
+            "rock-field-crawl",
             "undulating",
             "flat-firm",
             "rockfield-goal",

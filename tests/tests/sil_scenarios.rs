@@ -1,4 +1,4 @@
-//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..5, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7, SIL-HAZ-1..3, SIL-LOC-1..2, SIL-SEQ-1..2: closed-loop scenario runs of the flight software on the
+//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..6, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7, SIL-HAZ-1..3, SIL-LOC-1..2, SIL-SEQ-1..2: closed-loop scenario runs of the flight software on the
 //! simulator with rendered stereo, against the thresholds of `sim_host::sil::CASES` (the same
 //! table `sim-host sil` writes to `docs/sil-results.md`).
 
@@ -111,6 +111,11 @@ fn sil_kin_4_undulating_contact_angles() {
 #[test]
 fn sil_kin_5_step_climb() {
     check("SIL-KIN-5");
+}
+
+#[test]
+fn sil_kin_6_rock_field_crawl() {
+    check("SIL-KIN-6");
 }
 
 #[test]

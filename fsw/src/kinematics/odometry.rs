@@ -171,9 +171,35 @@ pub struct KinematicOdometry {
     trans_0_k_m: Vec3,
     covariance: Mat6,
     contact_rad: [f64; WHEEL_COUNT],
+    window_rad: [f64; WHEEL_COUNT],
     window: SuspensionWindow,
     contact_trans_0_k_m: Vec3,
     axles_m: [Vec3; WHEEL_COUNT],
+    angle_window: Option<AngleWindow>,
+}
+
+/// The joint readings since the last contact-angle update ([`ContactConfig::window_travel_m`]).
+#[derive(Debug, Clone, Copy)]
+struct AngleWindow {
+    /// Reading at the window's start.
+    start: JointState,
+    /// Time of the last reading added, us.
+    last_t_us: u64,
+    /// Sum of the steps' gyro rotation increments, rad, `R` (`None` if a step had none).
+    gyro_rad: Option<Vec3>,
+    /// Wheels valid in every step of the window.
+    valid: [bool; WHEEL_COUNT],
+}
+
+impl AngleWindow {
+    fn new(start: &JointState) -> Self {
+        AngleWindow {
+            start: *start,
+            last_t_us: start.t_us,
+            gyro_rad: Some(Vec3::zeros()),
+            valid: [true; WHEEL_COUNT],
+        }
+    }
 }
 
 fn skew(v: &Vec3) -> Mat3 {
@@ -203,9 +229,11 @@ impl KinematicOdometry {
             trans_0_k_m: crate::types::VEC3_ZERO,
             covariance: crate::types::zero_matrix::<6, 6>(),
             contact_rad: [0.0; WHEEL_COUNT],
+            window_rad: [0.0; WHEEL_COUNT],
             window: SuspensionWindow::new(),
             contact_trans_0_k_m: crate::types::VEC3_ZERO,
             axles_m: [crate::types::VEC3_ZERO; WHEEL_COUNT],
+            angle_window: None,
         }
     }
 
@@ -215,6 +243,15 @@ impl KinematicOdometry {
     /// persist across intervals ([`Self::start`]).
     pub fn contact_angles_rad(&self) -> [f64; WHEEL_COUNT] {
         self.contact_rad
+    }
+
+    /// The contact angles estimated over windows of travel
+    /// ([`ContactConfig::window_travel_m`]), rad, index `wheel - 1`, same convention as
+    /// [`Self::contact_angles_rad`]: less noisy and lagging by up to one window, for the
+    /// rough-terrain inverse kinematics. Equal to [`Self::contact_angles_rad`] when the
+    /// window distance is 0.
+    pub fn windowed_contact_angles_rad(&self) -> [f64; WHEEL_COUNT] {
+        self.window_rad
     }
 
     /// Axle centres (origins of the contact frames `C_i`, m, `R`, index `wheel - 1`) at the
@@ -228,6 +265,8 @@ impl KinematicOdometry {
     /// Reset the contact-angle estimates to 0 (contacts below the axles).
     pub fn reset_contact_angles(&mut self) {
         self.contact_rad = [0.0; WHEEL_COUNT];
+        self.window_rad = [0.0; WHEEL_COUNT];
+        self.angle_window = None;
     }
 
     /// Start a new interval at the reading `joints` (time `t0 = joints.t_us`). Errors: the
@@ -278,7 +317,10 @@ impl KinematicOdometry {
         let result = self.step(&prev, joints, gyro_rad);
         self.last = match result {
             Ok(()) => Some(*joints),
-            Err(_) => None,
+            Err(_) => {
+                self.angle_window = None;
+                None
+            }
         };
         result
     }
@@ -341,6 +383,9 @@ impl KinematicOdometry {
         } else {
             None
         };
+        // The smoothed angles over windows of travel (for the inverse kinematics).
+        let windowed = (use_contacts && self.config.contact.window_travel_m > 0.0)
+            .then(|| self.window_angles(prev, cur, &valid, gyro_rad));
         // Borrowed from the contact solution when it is the measurement (copying its Jacobians
         // and least squares cost about 1,000 instructions per step on the rover CPU, issue 18).
         let fallback;
@@ -376,7 +421,155 @@ impl KinematicOdometry {
         if let Some((_, _, _, angles)) = contact {
             self.contact_rad = angles;
         }
+        match windowed {
+            Some((angles, window)) => {
+                self.window_rad = angles;
+                self.angle_window = Some(window);
+            }
+            None => self.window_rad = self.contact_rad,
+        }
         Ok(())
+    }
+
+    /// The windowed contact angles ([`Self::windowed_contact_angles_rad`]) after the step
+    /// `prev` -> `cur`: the step joins the current window (a new one starts
+    /// at `prev` if the last did not end there); once the valid wheels' mean rim travel over the
+    /// window reaches the window distance, the angles are estimated from the window's joint
+    /// increments at its mid-point configuration (its own wheel frames: the step's frames
+    /// instead, half a window of articulation away, would save 0.8 KB of the deepest stack path
+    /// but the estimate is then linearised off its data), with the sum of its gyro increments
+    /// ([`contact_step_frames`], V99 sec. 6) and the current windowed angles as the prior, taken
+    /// relative to their mean (`ContactConfig::zero_mean`), and a new window starts at `cur`.
+    /// A window whose estimate fails (fewer than three wheels valid throughout, a singular
+    /// system) is dropped and the angles hold. Returns the angles and the window to keep.
+    fn window_angles(
+        &self,
+        prev: &JointState,
+        cur: &JointState,
+        valid: &[bool; WHEEL_COUNT],
+        gyro_rad: Option<Vec3>,
+    ) -> ([f64; WHEEL_COUNT], AngleWindow) {
+        let mut window = match self.angle_window {
+            Some(w) if w.last_t_us == prev.t_us => w,
+            _ => AngleWindow::new(prev),
+        };
+        window.last_t_us = cur.t_us;
+        window.gyro_rad = match (window.gyro_rad, gyro_rad) {
+            (Some(a), Some(b)) => Some(a + b),
+            _ => None,
+        };
+        for (w, v) in window.valid.iter_mut().zip(valid.iter()) {
+            *w = *w && *v;
+        }
+        let start = &window.start;
+        let drive: [f64; WHEEL_COUNT] = core::array::from_fn(|i| {
+            let ok = window.valid.get(i).copied().unwrap_or(false);
+            match (cur.drive_angle_rad.get(i), start.drive_angle_rad.get(i)) {
+                (Some(c), Some(s)) if ok => c - s,
+                _ => 0.0,
+            }
+        });
+        let radius = self.geometry.wheel_radius_m;
+        let (mut travel, mut n) = (0.0, 0.0);
+        for (d, ok) in drive.iter().zip(window.valid.iter()) {
+            if *ok {
+                travel += libm::fabs(radius * d);
+                n += 1.0;
+            }
+        }
+        if n < 1.0 || travel / n < self.config.contact.window_travel_m {
+            return (self.window_rad, window);
+        }
+        let mid = |a: f64, b: f64| 0.5 * (a + b);
+        let state = SuspensionState {
+            rocker_rad: mid(start.rocker_rad, cur.rocker_rad),
+            bogie_rad: [
+                mid(start.bogie_rad[0], cur.bogie_rad[0]),
+                mid(start.bogie_rad[1], cur.bogie_rad[1]),
+            ],
+            steer_rad: core::array::from_fn(|i| {
+                let ok = window.valid.get(i).copied().unwrap_or(false);
+                match (start.steer_angle_rad.get(i), cur.steer_angle_rad.get(i)) {
+                    (Some(a), Some(b)) if ok => mid(*a, *b),
+                    _ => 0.0,
+                }
+            }),
+        };
+        let increments = SuspensionRates {
+            rocker_rad_s: cur.rocker_rad - start.rocker_rad,
+            bogie_rad_s: [
+                cur.bogie_rad[0] - start.bogie_rad[0],
+                cur.bogie_rad[1] - start.bogie_rad[1],
+            ],
+        };
+        let next = AngleWindow::new(cur);
+        if check_suspension(&self.geometry, &state).is_err() {
+            return (self.window_rad, next);
+        }
+        let frames = wheel_frames_trusted(&self.geometry, &state);
+        match contact_step_frames(
+            &self.geometry,
+            &frames,
+            &increments,
+            &drive,
+            &window.valid,
+            window.gyro_rad,
+            &self.window_rad,
+            &self.config.contact,
+            false,
+        ) {
+            Ok(sol) => (self.zero_mean(sol.contact_angles_rad, &window.valid), next),
+            Err(_) => (self.window_rad, next),
+        }
+    }
+
+    /// `angles` relative to their mean over the valid wheels with
+    /// [`ContactConfig::zero_mean`], else unchanged.
+    fn zero_mean(
+        &self,
+        mut angles: [f64; WHEEL_COUNT],
+        valid: &[bool; WHEEL_COUNT],
+    ) -> [f64; WHEEL_COUNT] {
+        let (mut sum, mut n) = (0.0, 0.0);
+        for (a, v) in angles.iter().zip(valid.iter()) {
+            if *v {
+                sum += a;
+                n += 1.0;
+            }
+        }
+        if self.config.contact.zero_mean && n > 0.0 {
+            let mean = sum / n;
+            for a in angles.iter_mut() {
+                *a -= mean;
+            }
+        }
+        angles
+    }
+
+    /// The body step `[dp; dphi]` of one joint step as the eq. 15 least squares along the
+    /// contact tangents at `angles` (rad), with its Jacobians and least squares; returns the
+    /// angles with them.
+    #[allow(clippy::type_complexity)]
+    fn step_along(
+        &self,
+        frames: &[super::geometry::WheelFrames; WHEEL_COUNT],
+        increments: &SuspensionRates,
+        drive: &[f64; WHEEL_COUNT],
+        valid: &[bool; WHEEL_COUNT],
+        angles: [f64; WHEEL_COUNT],
+    ) -> Result<
+        (
+            Vec6,
+            [WheelJacobian; WHEEL_COUNT],
+            ContactLeastSquares,
+            [f64; WHEEL_COUNT],
+        ),
+        KinematicsError,
+    > {
+        let jacobians = contact_jacobians(frames, self.geometry.wheel_radius_m, &angles);
+        let lsq = ContactLeastSquares::new(&jacobians.map(|j| j.contact_point_m), valid)?;
+        let step = lsq.solve(&contact_velocities(&jacobians, increments, drive));
+        Ok((step, jacobians, lsq, angles))
     }
 
     /// The contact-angle body step of one joint step (V99 sec. 6, [`super::contact`]): the
@@ -418,25 +611,11 @@ impl KinematicOdometry {
         // `ContactConfig::zero_mean` the angles are taken relative to their mean over the
         // valid wheels, and the body step is the eq. 15 least squares along the resulting
         // contact tangents.
-        let mut angles = sol.contact_angles_rad;
-        let (mut sum, mut n) = (0.0, 0.0);
-        for (a, v) in angles.iter().zip(valid.iter()) {
-            if *v {
-                sum += a;
-                n += 1.0;
-            }
-        }
-        let zero_mean = self.config.contact.zero_mean && n > 0.0;
-        if zero_mean {
-            let mean = sum / n;
-            for a in angles.iter_mut() {
-                *a -= mean;
-            }
-        }
-        let jacobians = contact_jacobians(frames, self.geometry.wheel_radius_m, &angles);
-        let lsq = ContactLeastSquares::new(&jacobians.map(|j| j.contact_point_m), valid)?;
-        let step = if zero_mean {
-            lsq.solve(&contact_velocities(&jacobians, increments, drive))
+        let angles = self.zero_mean(sol.contact_angles_rad, valid);
+        let (step, jacobians, lsq, angles) =
+            self.step_along(frames, increments, drive, valid, angles)?;
+        let step = if self.config.contact.zero_mean {
+            step
         } else {
             sol.body_step
         };

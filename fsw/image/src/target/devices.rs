@@ -333,10 +333,16 @@ impl Clock for SystickClock {
             let into_frame = u64::from(self.reload.saturating_sub(current));
             if !pending && into_frame <= RELOAD_WINDOW_COUNTS && before == after {
                 // Just after a reload with no tick pending: either the handler already counted
-                // it or QEMU has not raised it yet (see below). Wait until the window has
-                // passed and read again (bounded; the wait is rare and deterministic).
-                for _ in 0..RELOAD_WINDOW_SPIN {
-                    cortex_m::asm::nop();
+                // it or QEMU has not raised it yet (see below). Wait until the value has left
+                // the window or the tick is pending, and read again (bounded; the wait is rare
+                // and deterministic, and ends as soon as the window has passed).
+                for _ in 0..RELOAD_WINDOW_POLLS {
+                    let now = SYST::get_current();
+                    if u64::from(self.reload.saturating_sub(now)) > RELOAD_WINDOW_COUNTS
+                        || SCB::is_pendst_pending()
+                    {
+                        break;
+                    }
                 }
                 continue;
             }
@@ -368,10 +374,16 @@ impl Clock for SystickClock {
     }
 }
 
-/// SysTick counts after a reload in which QEMU may not have raised the pending bit yet.
-const RELOAD_WINDOW_COUNTS: u64 = 2;
-/// Wait (no-operations) that takes a read past that window.
-const RELOAD_WINDOW_SPIN: u32 = 128;
+/// SysTick counts after a reload in which QEMU may not have raised the pending bit yet. QEMU
+/// runs the timer callback at the end of a translation block, which can be hundreds of
+/// instructions after the reload. 2 counts (80 instructions) was too short: at 5a90e8d the
+/// one-off `localization_map` call measured 8.79 M instead of 13.79 M instructions, its end
+/// read one 125,000-count period behind and its start read too long before for the
+/// never-backwards rule below to notice. 32 counts are 1,280 instructions.
+const RELOAD_WINDOW_COUNTS: u64 = 32;
+/// Largest number of polls of the value while waiting out that window (about 10 instructions
+/// each: more than the window). Reads land in the window in about 1 of 4,000 cases.
+const RELOAD_WINDOW_POLLS: u32 = 256;
 
 /// IMU of a rover at rest on level ground.
 pub struct StillImu {

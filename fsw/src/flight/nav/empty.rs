@@ -41,6 +41,7 @@ pub(super) const EMPTY_CONFIG: NavConfig = NavConfig {
             max_angle_rad: 0.0,
             iterations: 0,
             zero_mean: false,
+            window_travel_m: 0.0,
         },
     },
     track: TrackConfig {

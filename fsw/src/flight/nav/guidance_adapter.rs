@@ -148,8 +148,9 @@ impl Navigator {
     /// The body command `cmd` (rover frame) scaled to the wheel-rate limit and turned into
     /// wheel commands by inverse kinematics (eq. 16-25) at the suspension state of `joints`;
     /// with [`NavConfig::ik_contact_angles`] the rough-terrain inverse kinematics on the
-    /// odometry's contact angles, falling back to eq. 16-25 when it fails. `None` (counted) when
-    /// the kinematics fails.
+    /// odometry's windowed contact angles
+    /// ([`crate::kinematics::KinematicOdometry::windowed_contact_angles_rad`]), falling back
+    /// to eq. 16-25 when it fails. `None` (counted) when the kinematics fails.
     fn motor_command(
         &mut self,
         cmd: VehicleCommand,
@@ -159,7 +160,7 @@ impl Navigator {
         // Turns in place on eq. 16-25 (`NavConfig::ik_contact_min_angle_rad`).
         let translating = cmd.x_dot_m_s != 0.0 || cmd.y_dot_m_s != 0.0;
         if self.config.ik_contact_angles && translating {
-            let mut angles = self.odometry.contact_angles_rad();
+            let mut angles = self.odometry.windowed_contact_angles_rad();
             for a in angles.iter_mut() {
                 if libm::fabs(*a) < self.config.ik_contact_min_angle_rad {
                     *a = 0.0;
