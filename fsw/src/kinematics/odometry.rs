@@ -206,6 +206,47 @@ fn skew(v: &Vec3) -> Mat3 {
     Mat3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
+/// The body step of one joint step `[dp; dphi]`, the wheel Jacobians and the least squares it
+/// was solved with, and the contact angles (rad) it used.
+type ContactParts = (
+    Vec6,
+    [WheelJacobian; WHEEL_COUNT],
+    ContactLeastSquares,
+    [f64; WHEEL_COUNT],
+);
+
+/// The suspension and steering state halfway between readings `a` and `b` (steering 0 for the
+/// wheels not `valid`), rad: the configuration a step's increments are linearised at.
+fn mid_state(a: &JointState, b: &JointState, valid: &[bool; WHEEL_COUNT]) -> SuspensionState {
+    let mid = |x: f64, y: f64| 0.5 * (x + y);
+    SuspensionState {
+        rocker_rad: mid(a.rocker_rad, b.rocker_rad),
+        bogie_rad: [
+            mid(a.bogie_rad[0], b.bogie_rad[0]),
+            mid(a.bogie_rad[1], b.bogie_rad[1]),
+        ],
+        steer_rad: core::array::from_fn(|i| {
+            let ok = valid.get(i).copied().unwrap_or(false);
+            match (a.steer_angle_rad.get(i), b.steer_angle_rad.get(i)) {
+                (Some(x), Some(y)) if ok => mid(*x, *y),
+                _ => 0.0,
+            }
+        }),
+    }
+}
+
+/// The rocker and bogie increments from reading `a` to reading `b`, rad (in the fields named
+/// `_rad_s`).
+fn suspension_increments(a: &JointState, b: &JointState) -> SuspensionRates {
+    SuspensionRates {
+        rocker_rad_s: b.rocker_rad - a.rocker_rad,
+        bogie_rad_s: [
+            b.bogie_rad[0] - a.bogie_rad[0],
+            b.bogie_rad[1] - a.bogie_rad[1],
+        ],
+    }
+}
+
 fn finite_reading(j: &JointState) -> bool {
     let angles = [j.rocker_rad, j.bogie_rad[0], j.bogie_rad[1]];
     let wheels_ok = j
@@ -339,29 +380,9 @@ impl KinematicOdometry {
         }
         let valid: [bool; WHEEL_COUNT] =
             core::array::from_fn(|i| prev.wheel_valid[i] && cur.wheel_valid[i]);
-        let mid = |a: f64, b: f64| 0.5 * (a + b);
-        let state = SuspensionState {
-            rocker_rad: mid(prev.rocker_rad, cur.rocker_rad),
-            bogie_rad: [
-                mid(prev.bogie_rad[0], cur.bogie_rad[0]),
-                mid(prev.bogie_rad[1], cur.bogie_rad[1]),
-            ],
-            steer_rad: core::array::from_fn(|i| {
-                if valid[i] {
-                    mid(prev.steer_angle_rad[i], cur.steer_angle_rad[i])
-                } else {
-                    0.0
-                }
-            }),
-        };
+        let state = mid_state(prev, cur, &valid);
         check_suspension(&self.geometry, &state)?;
-        let increments = SuspensionRates {
-            rocker_rad_s: cur.rocker_rad - prev.rocker_rad,
-            bogie_rad_s: [
-                cur.bogie_rad[0] - prev.bogie_rad[0],
-                cur.bogie_rad[1] - prev.bogie_rad[1],
-            ],
-        };
+        let increments = suspension_increments(prev, cur);
         let drive: [f64; WHEEL_COUNT] = core::array::from_fn(|i| {
             if valid[i] {
                 cur.drive_angle_rad[i] - prev.drive_angle_rad[i]
@@ -480,28 +501,8 @@ impl KinematicOdometry {
         if n < 1.0 || travel / n < self.config.contact.window_travel_m {
             return (self.window_rad, window);
         }
-        let mid = |a: f64, b: f64| 0.5 * (a + b);
-        let state = SuspensionState {
-            rocker_rad: mid(start.rocker_rad, cur.rocker_rad),
-            bogie_rad: [
-                mid(start.bogie_rad[0], cur.bogie_rad[0]),
-                mid(start.bogie_rad[1], cur.bogie_rad[1]),
-            ],
-            steer_rad: core::array::from_fn(|i| {
-                let ok = window.valid.get(i).copied().unwrap_or(false);
-                match (start.steer_angle_rad.get(i), cur.steer_angle_rad.get(i)) {
-                    (Some(a), Some(b)) if ok => mid(*a, *b),
-                    _ => 0.0,
-                }
-            }),
-        };
-        let increments = SuspensionRates {
-            rocker_rad_s: cur.rocker_rad - start.rocker_rad,
-            bogie_rad_s: [
-                cur.bogie_rad[0] - start.bogie_rad[0],
-                cur.bogie_rad[1] - start.bogie_rad[1],
-            ],
-        };
+        let state = mid_state(start, cur, &window.valid);
+        let increments = suspension_increments(start, cur);
         let next = AngleWindow::new(cur);
         if check_suspension(&self.geometry, &state).is_err() {
             return (self.window_rad, next);
@@ -549,7 +550,6 @@ impl KinematicOdometry {
     /// The body step `[dp; dphi]` of one joint step as the eq. 15 least squares along the
     /// contact tangents at `angles` (rad), with its Jacobians and least squares; returns the
     /// angles with them.
-    #[allow(clippy::type_complexity)]
     fn step_along(
         &self,
         frames: &[super::geometry::WheelFrames; WHEEL_COUNT],
@@ -557,15 +557,7 @@ impl KinematicOdometry {
         drive: &[f64; WHEEL_COUNT],
         valid: &[bool; WHEEL_COUNT],
         angles: [f64; WHEEL_COUNT],
-    ) -> Result<
-        (
-            Vec6,
-            [WheelJacobian; WHEEL_COUNT],
-            ContactLeastSquares,
-            [f64; WHEEL_COUNT],
-        ),
-        KinematicsError,
-    > {
+    ) -> Result<ContactParts, KinematicsError> {
         let jacobians = contact_jacobians(frames, self.geometry.wheel_radius_m, &angles);
         let lsq = ContactLeastSquares::new(&jacobians.map(|j| j.contact_point_m), valid)?;
         let step = lsq.solve(&contact_velocities(&jacobians, increments, drive));
@@ -577,7 +569,6 @@ impl KinematicOdometry {
     /// (`ContactConfig::zero_mean`), and the body step is the eq. 15 least squares along the
     /// resulting contact tangents. Returns the step `[dp; dphi]`, the Jacobians, the least
     /// squares and the angles.
-    #[allow(clippy::type_complexity)]
     fn contact_solution(
         &self,
         frames: &[super::geometry::WheelFrames; WHEEL_COUNT],
@@ -585,15 +576,7 @@ impl KinematicOdometry {
         drive: &[f64; WHEEL_COUNT],
         valid: &[bool; WHEEL_COUNT],
         gyro_rad: Option<Vec3>,
-    ) -> Result<
-        (
-            Vec6,
-            [WheelJacobian; WHEEL_COUNT],
-            ContactLeastSquares,
-            [f64; WHEEL_COUNT],
-        ),
-        KinematicsError,
-    > {
+    ) -> Result<ContactParts, KinematicsError> {
         let sol = contact_step_frames(
             &self.geometry,
             frames,

@@ -214,6 +214,16 @@ fn traverse_with(
 
 use crate::types::RelativePose;
 
+/// Wheel-centre paths of the ramp tests: the front right wheel's centre rises along 30 deg
+/// past world x = 0 (the foot), the others stay level (height up, m, of wheel `i` at `x`).
+fn fr_ramp_30(i: usize, x: f64) -> f64 {
+    if i == 0 && x > 0.0 {
+        x * libm::tan(30.0 * DEG)
+    } else {
+        0.0
+    }
+}
+
 /// KIN-10: the front right wheel climbs a 30 deg ramp (its centre moves along a 30 deg
 /// tangent) while the other five roll on the level. The estimator recovers the true contact
 /// angle of that wheel (30 deg minus the tilt of its wheel frame, which is 30 deg at the foot
@@ -222,16 +232,7 @@ use crate::types::RelativePose;
 #[test]
 fn kin_10_front_right_climbs_30_deg_ramp() {
     let x_foot = 0.0;
-    let tan30 = libm::tan(30.0 * DEG);
-    // Wheel-centre paths: FR rises along 30 deg past the foot (world x of its axle), the
-    // others stay level.
-    let h = move |i: usize, x: f64| {
-        if i == 0 && x > x_foot {
-            (x - x_foot) * tan30
-        } else {
-            0.0
-        }
-    };
+    let h = fr_ramp_30;
     let front_x = axles(&truth_from(0.0, &[0.0; 6]))[0].x;
     for gyro in [true, false] {
         // Body from FR 2 cm before the foot to 10 cm past it (5.8 cm rise), 5 mm steps.
@@ -375,8 +376,7 @@ fn rel(a: &[f64; 6]) -> [f64; 6] {
 /// `docs/kinematics.md`.)
 #[test]
 fn kin_10_zero_mean_on_the_ramp() {
-    let tan30 = libm::tan(30.0 * DEG);
-    let h = move |i: usize, x: f64| if i == 0 && x > 0.0 { x * tan30 } else { 0.0 };
+    let h = fr_ramp_30;
     let front_x = axles(&truth_from(0.0, &[0.0; 6]))[0].x;
     let x0 = -front_x - 0.02;
     let run = traverse_with(x0, x0 + 0.12, 24, &h, true, true);
@@ -864,14 +864,7 @@ fn kin_15_windowed_angles_on_level_ground_with_encoder_noise() {
 #[test]
 fn kin_15_windowed_angles_follow_a_ramp() {
     let x_foot = 0.0;
-    let tan30 = libm::tan(30.0 * DEG);
-    let h = move |i: usize, x: f64| {
-        if i == 0 && x > x_foot {
-            (x - x_foot) * tan30
-        } else {
-            0.0
-        }
-    };
+    let h = fr_ramp_30;
     let front_x = axles(&truth_from(0.0, &[0.0; 6]))[0].x;
     let mut cfg = OdometryConfig {
         contact_translation: true,
