@@ -26,6 +26,15 @@ pub const BLIND_SKID_FACTOR: f64 = 1.5;
 /// ... plus this floor, m (the odometry's noise over a short interval).
 pub const BLIND_SKID_FLOOR_M: f64 = 0.01;
 
+/// The ground vehicle's vertical constraint on a kinematic interval of `step_m` (m, its 3D
+/// translation): the rover does not move along its own `z` axis, 1-sigma 20 % of the step plus
+/// 0.5 mm (H04 sec. 3 leaves the vertical unobserved); the variance, m^2, added to the
+/// interval's `z` where the flight software fuses it (VO lost, an IMU shock's grace).
+fn vertical_constraint_variance(step_m: f64) -> f64 {
+    let sigma_z = 0.2 * step_m + 5.0e-4;
+    sigma_z * sigma_z
+}
+
 /// The slip hold (`NavConfig::slip_hold_cycles`, `slip_hold_rejections`): at least
 /// `slip_hold_rejections` (and at least one) of the last `slip_hold_cycles` (at most 32)
 /// tested intervals were rejected.
@@ -194,11 +203,29 @@ impl Navigator {
         // As `Navigator::vo_lost` (field by field: the filter is borrowed here).
         let vo_lost =
             !self.config.vo_enabled || self.cycles_since_vo > self.config.vo_timeout_cycles;
-        // Intervals that span an IMU shock (`Navigator::imu_shock`): no hold, and a rejection
-        // is not slip.
+        // Intervals that may carry an IMU shock's velocity error (`Navigator::imu_shock`): no
+        // hold, and a rejection is not slip but the velocity still wrong (below).
         let shock = self.shock_grace > 0;
         self.shock_grace = self.shock_grace.saturating_sub(1);
         let holding = slip_holding(&self.config, self.reject_history) && !shock;
+        if shock {
+            // A shock is the accelerometer's: its error is in the velocity, in all three axes,
+            // and with VO alive nothing else observes the vertical between captures. The
+            // intervals of its grace are gated and fused on their translation only (the gyro
+            // is unaffected; on a rock field the kinematic rotation can disagree with it by
+            // several of its sigmas and would refuse the interval) and with the ground
+            // vehicle's vertical constraint, so that the accepted ones re-anchor the whole
+            // velocity (`rock-field-crawl` seed 1: without the vertical the estimate went
+            // 15 m up in 3.5 s before the next VO update pulled it back; with the rotation the
+            // intervals after a series of shocks were refused at d2 100-1,000 on 4 mrad of
+            // roll and pitch and the velocity error stayed).
+            for (k, o) in rp.observed.iter_mut().enumerate() {
+                *o = k >= 3;
+            }
+            if let Some(v) = rp.covariance.get_mut((5, 5)) {
+                *v += vertical_constraint_variance(rp.trans_0_1_m.norm());
+            }
+        }
         // The gate test (eq. 46) at the odometry's own covariance: the slip detector. With VO
         // alive an accepted interval is fused by the same call (unless holding); without VO the
         // interval is tested here and then fused with the slip allowance below.
@@ -281,6 +308,9 @@ impl Navigator {
                     );
                 }
                 let slip = !d.accepted && !shock;
+                if shock {
+                    self.shock_interval(&rp, d.residual.as_slice(), d.accepted);
+                }
                 self.reject_history = (self.reject_history << 1) | u32::from(slip);
                 if d.accepted {
                     self.reject_streak = 0;
@@ -459,7 +489,6 @@ impl Navigator {
         let step = rp.trans_0_1_m.norm();
         let yaw = libm::fabs(crate::estimation::state::log_quat(&rp.rot_0_1).z);
         let f = self.config.vo_loss_slip_fraction;
-        let sigma_z = 0.2 * step + 5.0e-4;
         // Added variances of [rx, ry, rz, x, y, z].
         let extra = [
             0.0,
@@ -467,7 +496,7 @@ impl Navigator {
             (f * yaw) * (f * yaw) + 1.0e-8,
             (f * step) * (f * step),
             (f * step) * (f * step),
-            sigma_z * sigma_z,
+            vertical_constraint_variance(step),
         ];
         if let Some(o) = rp.observed.get_mut(5) {
             *o = true;
@@ -506,6 +535,48 @@ impl Navigator {
         };
         let result = ekf.inflate_position(delta);
         self.recorder.inflate_position(delta);
+        if let Err(e) = result {
+            self.ekf_error(e);
+        }
+    }
+
+    /// One kinematic interval of an IMU shock's grace ([`Navigator::imu_shock`]), gated (and,
+    /// accepted, fused) on its translation: [`SHOCK_SETTLED_INTERVALS`] accepted in a row end
+    /// the grace (the velocity is anchored again); a rejected one shows that the velocity is
+    /// still wrong, by the residual's translation over the interval's duration, and the
+    /// velocity covariance grows by that (at least [`NavConfig::streak_velocity_sigma_m_s`], at
+    /// most 1 m/s) so that the next interval can correct it. A single accepted interval at the
+    /// shock's inflated covariance may leave part of the error with a collapsed covariance
+    /// (`rock-field-crawl` seed 1: 0.5 m/s left after five clipped samples, which the slip
+    /// hold then kept for 2.5 s: 0.7 m of lateral error until VO pulled it back).
+    fn shock_interval(&mut self, rp: &RelativePose, residual: &[f64], accepted: bool) {
+        if accepted {
+            self.shock_accepted = self.shock_accepted.saturating_add(1);
+            if self.shock_accepted >= SHOCK_SETTLED_INTERVALS {
+                self.shock_grace = 0;
+                self.shock_accepted = 0;
+            }
+            return;
+        }
+        self.shock_accepted = 0;
+        let Some(ekf) = self.ekf_running.then_some(&mut self.ekf) else {
+            return;
+        };
+        let dt_s = rp.t1_us.saturating_sub(rp.t0_us) as f64 * 1e-6;
+        let (rx, ry, rz) = (
+            residual.get(3).copied().unwrap_or(0.0),
+            residual.get(4).copied().unwrap_or(0.0),
+            residual.get(5).copied().unwrap_or(0.0),
+        );
+        let r = crate::linalg::sqrt(rx * rx + ry * ry + rz * rz);
+        let implied = if dt_s > 0.0 && r.is_finite() {
+            r / dt_s
+        } else {
+            0.0
+        };
+        let v = crate::linalg::clamp(implied, self.config.streak_velocity_sigma_m_s, 1.0);
+        let result = ekf.inflate_velocity(v, 0.0);
+        self.recorder.inflate_velocity(v, 0.0);
         if let Err(e) = result {
             self.ekf_error(e);
         }
