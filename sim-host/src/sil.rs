@@ -1292,7 +1292,7 @@ them on every seed:
   truth scrubbing 17.9 % of the wheels' ground travel. The EKF ends 12 % off: the teleports
   are seen by neither the wheels nor the clipped IMU, and VO failed twice after the first
   (`TooFewTracked`, while the filter's prior was 0.28 m off: about 70 px at 1.5 m, beyond
-  the tracker's 24 px search). With the truth's own contact
+  the flight tracker's 8 px search around the prior). With the truth's own contact
   angles fed to the inverse kinematics (a diagnostic, not in the code) the scrub was 35-42 %:
   it is not the angle estimate; the truth's contacts on the caps or what the inverse
   kinematics leaves out remain to be separated.
