@@ -451,6 +451,34 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
     );
 }
 
+/// Mars gravity of the shock tests' straight drive, m/s^2.
+const SHOCK_TEST_G: f64 = 3.711;
+
+/// The straight drive of the shock tests (FP-8, FP-9): the flight configuration without the
+/// sun wait, VO counted as alive (its fusion is not modelled here: the gate path of the drive),
+/// a navigator bound for (100, 0) m; with the accelerometer's range (18 g0, m/s^2) and the
+/// wheel radius (m).
+fn shock_test_drive() -> (Navigator, f64, f64) {
+    let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+    config.align_sun_wait_samples = 0;
+    config.vo_timeout_cycles = u32::MAX;
+    let nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calibration()) {
+        Ok(n) => n,
+        Err(e) => panic!("navigator refused: {e:?}"),
+    };
+    (nav, 18.0 * 9.806_65, config.geometry.wheel_radius_m)
+}
+
+/// Forward acceleration of the shock tests' drive at `t` (s), m/s^2: a 0.5 s ramp from rest to
+/// 0.1 m/s starting at 2.5 s.
+fn shock_test_ramp(t: f64) -> f64 {
+    if t > 2.5 && t <= 3.0 {
+        0.1 / 0.5
+    } else {
+        0.0
+    }
+}
+
 /// FP-8 (issue 14, `cul-de-sac` seed 2): an IMU shock whose largest sample the accelerometer
 /// clips at its range leaves 0.39 m/s in the filter's velocity (the shock's samples no longer
 /// sum to the true change). Without the response the kinematic gate reads the difference as
@@ -460,29 +488,14 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
 #[test]
 fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
     let run = |respond: bool| {
-        let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-        config.align_sun_wait_samples = 0;
-        // VO counts as alive (its fusion is not modelled here): the gate path of the drive.
-        config.vo_timeout_cycles = u32::MAX;
-        let range = 18.0 * 9.806_65;
-        let mut nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calibration()) {
-            Ok(n) => n,
-            Err(e) => panic!("navigator refused: {e:?}"),
-        };
-        let r = config.geometry.wheel_radius_m;
-        let (g, v_cruise, t_start, t_ramp) = (3.711, 0.1, 2.5, 0.5);
+        let (mut nav, range, r) = shock_test_drive();
         let (mut x, mut v) = (0.0_f64, 0.0_f64);
         // The shock at 20 s: true specific forces that sum to no velocity change.
         let shock = [94.8, -253.9, 145.0, 14.1];
         let dt = 0.005;
         let mut errors = std::vec::Vec::new();
         for k in 1..=24 * 200u64 {
-            let t = k as f64 * dt;
-            let mut a = if t > t_start && t <= t_start + t_ramp {
-                v_cruise / t_ramp
-            } else {
-                0.0
-            };
+            let mut a = shock_test_ramp(k as f64 * dt);
             let i = k as i64 - 20 * 200;
             if (0..4).contains(&i) {
                 a = shock[i as usize];
@@ -493,7 +506,7 @@ fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
             if respond && measured != a {
                 nav.imu_shock(range * dt);
             }
-            straight_frame(&mut nav, k, [measured, 0.0, -g], (x, v, r));
+            straight_frame(&mut nav, k, [measured, 0.0, -SHOCK_TEST_G], (x, v, r));
             if i >= 0 && k % 20 == 0 {
                 errors.push((i, nav.ekf.state().v_n.x - v));
             }
@@ -533,17 +546,7 @@ fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
 /// 0.02 m/s on every axis 1 s after the last shock.
 #[test]
 fn fp_9_a_series_of_shocks_is_reanchored_on_every_axis() {
-    let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-    config.align_sun_wait_samples = 0;
-    // VO counts as alive (its fusion is not modelled here): the gate path of the drive.
-    config.vo_timeout_cycles = u32::MAX;
-    let range = 18.0 * 9.806_65;
-    let mut nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calibration()) {
-        Ok(n) => n,
-        Err(e) => panic!("navigator refused: {e:?}"),
-    };
-    let r = config.geometry.wheel_radius_m;
-    let (g, v_cruise, t_start, t_ramp) = (3.711, 0.1, 2.5, 0.5);
+    let (mut nav, range, r) = shock_test_drive();
     let (mut x, mut v) = (0.0_f64, 0.0_f64);
     // Two shocks 0.3 s apart (at 20 s and 20.3 s), true accelerations (lateral, vertical) that
     // sum to no velocity change; the accelerometer clips their first samples.
@@ -555,11 +558,7 @@ fn fp_9_a_series_of_shocks_is_reanchored_on_every_axis() {
     let mut worst_sigma = 0.0_f64;
     for k in 1..=24 * 200u64 {
         let t = k as f64 * dt;
-        let ax = if t > t_start && t <= t_start + t_ramp {
-            v_cruise / t_ramp
-        } else {
-            0.0
-        };
+        let ax = shock_test_ramp(t);
         v += ax * dt;
         x += v * dt;
         let (mut ay, mut az) = (0.0_f64, 0.0_f64);
@@ -575,7 +574,12 @@ fn fp_9_a_series_of_shocks_is_reanchored_on_every_axis() {
             nav.imu_shock(range * dt);
         }
         // Specific force in R (z down): the lateral and vertical accelerations with gravity.
-        straight_frame(&mut nav, k, [ax, clipped[0], clipped[1] - g], (x, v, r));
+        straight_frame(
+            &mut nav,
+            k,
+            [ax, clipped[0], clipped[1] - SHOCK_TEST_G],
+            (x, v, r),
+        );
         worst_sigma = worst_sigma.max(nav.horizontal_sigma_m());
         if k as i64 == shock_at[1] + 200 {
             let s = nav.ekf.state();
