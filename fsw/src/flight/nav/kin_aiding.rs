@@ -218,12 +218,15 @@ impl Navigator {
             // velocity (`rock-field-crawl` seed 1: without the vertical the estimate went
             // 15 m up in 3.5 s before the next VO update pulled it back; with the rotation the
             // intervals after a series of shocks were refused at d2 100-1,000 on 4 mrad of
-            // roll and pitch and the velocity error stayed).
+            // roll and pitch and the velocity error stayed). Without VO the fusion below adds
+            // the vertical constraint itself (`fuse_without_vo`).
             for (k, o) in rp.observed.iter_mut().enumerate() {
-                *o = k >= 3;
+                *o = k >= 3 && (k < 5 || !vo_lost);
             }
-            if let Some(v) = rp.covariance.get_mut((5, 5)) {
-                *v += vertical_constraint_variance(rp.trans_0_1_m.norm());
+            if !vo_lost {
+                if let Some(v) = rp.covariance.get_mut((5, 5)) {
+                    *v += vertical_constraint_variance(rp.trans_0_1_m.norm());
+                }
             }
         }
         // The gate test (eq. 46) at the odometry's own covariance: the slip detector. With VO
