@@ -48,6 +48,9 @@ enum Command {
         /// Directory of the scenario files.
         #[arg(long, default_value = "scenarios")]
         scenarios: PathBuf,
+        /// Also write each case's `summary.json` into this directory, as `<case id>.json`.
+        #[arg(long)]
+        summaries: Option<PathBuf>,
     },
     /// Measure the slip gate's detection probability against the true slip magnitude (slope
     /// sweeps of slope-10-cross, two seeds, in parallel) and the slip-hold policy; write the
@@ -580,7 +583,7 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
     Ok((summary, result))
 }
 
-fn sil(out: PathBuf, scenarios: PathBuf) -> anyhow::Result<()> {
+fn sil(out: PathBuf, scenarios: PathBuf, summaries: Option<PathBuf>) -> anyhow::Result<()> {
     use rayon::prelude::*;
     println!(
         "sim-host sil: {} cases with rendered stereo, in parallel",
@@ -590,6 +593,13 @@ fn sil(out: PathBuf, scenarios: PathBuf) -> anyhow::Result<()> {
         .par_iter()
         .map(|c| sim_host::sil::run_case(*c, &scenarios))
         .collect::<anyhow::Result<_>>()?;
+    if let Some(dir) = &summaries {
+        std::fs::create_dir_all(dir)?;
+        for r in &results {
+            let json = serde_json::to_string_pretty(&r.summary)?;
+            std::fs::write(dir.join(format!("{}.json", r.case.id)), json + "\n")?;
+        }
+    }
     let page = sim_host::sil::markdown(&results);
     std::fs::write(&out, &page)?;
     print!("{page}");
@@ -635,7 +645,11 @@ fn main() -> anyhow::Result<()> {
             seed,
             out,
         }) => compare(scenario, seed, out),
-        Some(Command::Sil { out, scenarios }) => sil(out, scenarios),
+        Some(Command::Sil {
+            out,
+            scenarios,
+            summaries,
+        }) => sil(out, scenarios, summaries),
         Some(Command::Detection {
             out,
             figure,
