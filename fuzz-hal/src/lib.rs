@@ -270,7 +270,7 @@ pub fn run(config: FuzzConfig, mut progress: impl FnMut(&FuzzReport)) -> FuzzRep
             },
         };
         let mut fsw_config = FswConfig::rocky8(start_n, yaw);
-        fsw_config.nav.ekf.sun = Some(sun);
+        fsw_config.nav.filter.ekf.sun = Some(sun);
         let mut fsw = match Fsw::new(devices, &fsw_config, &path) {
             Ok(f) => Box::new(f),
             Err(e) => panic!("the flight software refused a valid configuration: {e:?}"),

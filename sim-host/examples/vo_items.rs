@@ -28,7 +28,9 @@ fn main() {
     let ground = TexturedSurface::new(HeightFn(|_x: f64, _y: f64| 0.0), texture);
     let sun = Sun::from_azimuth_elevation(0.6, 0.7);
     let mut renderer = StereoRenderer::new(calib, RenderSettings::default());
-    let config = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0).vo;
+    let config = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0)
+        .vo
+        .pipeline;
     let Ok(mut vo) = VisualOdometry::<150>::new(config, &calib) else {
         eprintln!("VO refused the calibration");
         return;

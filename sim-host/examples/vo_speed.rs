@@ -191,7 +191,7 @@ fn main() -> Result<()> {
     }
     let calibration = read_calibration(&dir.join("calibration.txt"))?;
     let flight = FswConfig::rocky8([0.0; 3], 0.0);
-    let config: VoConfig = flight.nav.vo;
+    let config: VoConfig = flight.nav.vo.pipeline;
     let quantum = flight.exec.background_quantum;
     // On the heap like the flight's static slot (no 90 KB temporary on the stack).
     let mut vo = Box::new(VisualOdometry::<FEATURES>::EMPTY);

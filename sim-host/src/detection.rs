@@ -360,11 +360,11 @@ pub fn scenario(job: &Job, scenarios_dir: &Path) -> anyhow::Result<Scenario> {
 }
 
 fn set_hold_0(c: &mut fsw::flight::FswConfig) {
-    c.nav.slip_hold_cycles = 0;
+    c.nav.kin.slip_hold_cycles = 0;
 }
 
 fn set_hold_20(c: &mut fsw::flight::FswConfig) {
-    c.nav.slip_hold_cycles = 20;
+    c.nav.kin.slip_hold_cycles = 20;
 }
 
 /// Run `job`: rendered stereo, the flight software driving, simulated time as the counter.

@@ -391,12 +391,12 @@ fn header(scenario: &Scenario, seed: u64, frames: u64) -> anyhow::Result<TapeHea
         lens: (!scenario.sensors.ideal_lens).then(crate::sensors::lens::nominal_lens),
         // The planned start (the flight configuration's), not the truth.
         start_pose: [
-            nav.initial_position_n_m[0],
-            nav.initial_position_n_m[1],
-            nav.initial_position_n_m[2],
+            nav.align.initial_position_n_m[0],
+            nav.align.initial_position_n_m[1],
+            nav.align.initial_position_n_m[2],
             0.0,
             0.0,
-            nav.initial_yaw_rad,
+            nav.align.initial_yaw_rad,
         ],
         nav_params: fsw_image::flight_replay::nav_params(&config),
         waypoints,

@@ -71,7 +71,7 @@ pub fn run_still(frames: u64) -> anyhow::Result<RunSummary> {
     let mut fsw_config = FswConfig::rocky8([0.0; 3], 0.0);
     // The ephemeris of the fixed sun (30 deg up, due north at local noon at 60 deg S on the
     // equinox; it moves 0.04 deg in 10 s), so the alignment takes its heading from the sun.
-    fsw_config.nav.ekf.sun = Some(fsw::estimation::ephemeris::SunEphemeris::from_site(
+    fsw_config.nav.filter.ekf.sun = Some(fsw::estimation::ephemeris::SunEphemeris::from_site(
         -60.0, 0.0, 12.0,
     ));
     let mut fsw = Fsw::new(devices, &fsw_config, &[[0.0, 0.0], [1.0, 0.0]])

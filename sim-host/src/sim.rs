@@ -220,7 +220,7 @@ pub struct RunResult {
     /// The same with sign ([`crate::world::World::scrub_net_m`]), %.
     pub truth_scrub_net_pct: f64,
     /// Per-device health counters of the flight software: IMU, joints, camera, sun, power.
-    pub device_health: [fsw::telemetry::DeviceHealth; fsw::flight::DEVICE_COUNT],
+    pub device_health: [fsw::flight::DeviceHealth; fsw::flight::DEVICE_COUNT],
     /// Battery energy used over the run by the truth energy model, J ([`crate::energy`]).
     pub energy_used_j: f64,
     /// Mean electrical power of the truth energy model over the run, W.
@@ -405,7 +405,8 @@ fn mission_run(
 ) -> MissionRun {
     let outcomes: Vec<_> = (0..spec.targets.len())
         .map(|i| {
-            nav.target_outcome(i)
+            nav.goal()
+                .target_outcome(i)
                 .unwrap_or(fsw::flight::nav::TargetOutcome::Pending)
         })
         .collect();
@@ -419,13 +420,18 @@ fn mission_run(
         })
         .fold(0.0, f64::max);
     MissionRun {
-        counters: nav.mission_counters(),
+        counters: nav.goal().mission_counters(),
         outcomes,
-        order: nav.visit_order().iter().map(|&i| usize::from(i)).collect(),
+        order: nav
+            .goal()
+            .visit_order()
+            .iter()
+            .map(|&i| usize::from(i))
+            .collect(),
         visits: visits.to_vec(),
         worst_miss_m,
         energy_budget_j: spec.energy_budget_j,
-        phase: nav.mission_phase(),
+        phase: nav.goal().mission_phase(),
     }
 }
 
@@ -508,7 +514,7 @@ pub fn run_with<H: RunHooks>(
             vo_enabled: !options.no_vo,
         },
     );
-    config.nav.localization.enabled = options.localization;
+    config.nav.goal.localization.enabled = options.localization;
     if let Some(configure) = options.configure {
         configure(&mut config);
     }
@@ -602,7 +608,7 @@ pub fn run_with<H: RunHooks>(
         let nav = fsw.nav();
         if nav.counters().vo_updates > vo_seen {
             vo_seen = nav.counters().vo_updates;
-            if let Some(out) = nav.vo_output() {
+            if let Some(out) = nav.vo().output() {
                 vo_features += f64::from(out.quality.features);
                 vo_inliers += f64::from(out.quality.inliers);
                 if let Some(mut check) = out.pose.as_ref().and_then(|rp| vo_check(rp, &history)) {
@@ -613,8 +619,8 @@ pub fn run_with<H: RunHooks>(
                 }
             }
         }
-        if nav.mission_phase() != mission_phase {
-            mission_phase = nav.mission_phase();
+        if nav.goal().mission_phase() != mission_phase {
+            mission_phase = nav.goal().mission_phase();
             if let (fsw::flight::nav::MissionPhase::Dwelling { target }, Some(m)) =
                 (mission_phase, &scenario.mission)
             {
@@ -630,7 +636,7 @@ pub fn run_with<H: RunHooks>(
                 });
             }
         }
-        if let Some(fix) = nav.last_localization() {
+        if let Some(fix) = nav.goal().last_localization() {
             if fix.search != loc_seen {
                 loc_seen = fix.search;
                 if let Some(check) = loc_check(&fix, &history) {
@@ -721,10 +727,10 @@ pub fn run_with<H: RunHooks>(
         mean_power_w: w.energy.mean_power_w(),
         fsw_energy_used_j: state.power.map(|p| p.energy_used_j),
         stereo_frames: state.stereo_frames,
-        nav: *fsw.nav().counters(),
+        nav: fsw.nav().counters(),
         nav_mode: fsw.nav().mode(),
         fault_response: fsw.nav().fault_response(),
-        last_ekf_error: fsw.nav().last_ekf_error().map(|e| format!("{e:?}")),
+        last_ekf_error: fsw.nav().filter().last_error().map(|e| format!("{e:?}")),
         driver: match source {
             CommandSource::Flight => "flight".to_string(),
             CommandSource::Reference(_) => "reference".to_string(),
@@ -732,12 +738,12 @@ pub fn run_with<H: RunHooks>(
         slip_compensation: !options.no_slip_comp,
         vo_mean_features: (vo_seen > 0).then(|| vo_features / f64::from(vo_seen)),
         vo_mean_inliers: (vo_seen > 0).then(|| vo_inliers / f64::from(vo_seen)),
-        vo_boresight: fsw.nav().vo_boresight(),
+        vo_boresight: fsw.nav().calibration().boresight(),
         radius_scales: {
-            let (k, n) = fsw.nav().kin3d_radius_scale();
-            (fsw.nav().radius_scale(), k, n)
+            let (k, n) = fsw.nav().calibration().dr_scale();
+            (fsw.nav().kin().radius_scale(), k, n)
         },
-        vo_last_error: fsw.nav().last_vo_error().map(|e| format!("{e:?}")),
+        vo_last_error: fsw.nav().vo().last_error().map(|e| format!("{e:?}")),
         vo_checks,
         rocks: w
             .terrain
@@ -754,24 +760,26 @@ pub fn run_with<H: RunHooks>(
             .then_some(hazard_monitor.min_distance_m),
         mission,
         localization: uplinked.map(|(map, inserted)| LocalizationRun {
-            counters: fsw.nav().localization_counters(),
+            counters: fsw.nav().goal().localization_counters(),
             map_points: inserted,
             map_features: map.features_mapped,
             checks: loc_checks,
             last_error: fsw
                 .nav()
+                .goal()
                 .last_localization_error()
                 .map(|e| format!("{e:?}")),
         }),
         planner: (scenario.navigation == crate::scenario::NavigationKind::Roverbug).then(|| {
             let (a, b) = (scenario.waypoints[0], end);
             PlannerRun {
-                verdict: fsw.nav().planner_verdict(),
-                hazard: fsw.nav().hazard_counters(),
-                planner: fsw.nav().planner_counters(),
+                verdict: fsw.nav().goal().planner_verdict(),
+                hazard: fsw.nav().goal().hazard_counters(),
+                planner: fsw.nav().goal().planner_counters(),
                 straight_line_m: (b[0] - a[0]).hypot(b[1] - a[1]),
                 last_status: fsw
                     .nav()
+                    .goal()
                     .planner_output()
                     .map(|o| format!("{:?}", o.status)),
             }
@@ -872,16 +880,16 @@ pub fn flight_config(scenario: &Scenario, options: DriveOptions) -> FswConfig {
     let mission = Mission::plan(scenario);
     let mut config = FswConfig::rocky8(mission.start_n_m, mission.start_yaw_rad);
     let nav = &mut config.nav;
-    nav.ekf.sun = Some(mission.sun);
-    nav.guidance.cruise_speed_m_s = mission
+    nav.filter.ekf.sun = Some(mission.sun);
+    nav.drive.guidance.cruise_speed_m_s = mission
         .cruise_speed_m_s
-        .min(nav.guidance.max_wheel_speed_m_s);
-    nav.slip_compensation = options.slip_compensation;
-    nav.vo_enabled = options.vo_enabled;
-    nav.protection.arrival_tolerance_m = mission.goal_tolerance_m;
-    nav.protection.slip_limit = mission.slip_limit;
-    nav.protection.max_position_sigma_m = mission.max_position_sigma_m;
-    nav.hazard_avoidance = mission.goal_directed;
+        .min(nav.drive.guidance.max_wheel_speed_m_s);
+    nav.drive.slip_compensation = options.slip_compensation;
+    nav.vo.enabled = options.vo_enabled;
+    nav.drive.protection.arrival_tolerance_m = mission.goal_tolerance_m;
+    nav.drive.protection.slip_limit = mission.slip_limit;
+    nav.drive.protection.max_position_sigma_m = mission.max_position_sigma_m;
+    nav.goal.hazard_avoidance = mission.goal_directed;
     config
 }
 

@@ -34,26 +34,29 @@ fn flight_configuration_is_the_nominal_profile_plus_the_plan() {
         // The plan, computed here from the scenario's waypoints and site only.
         let [a, b] = [scenario.waypoints[0], scenario.waypoints[1]];
         let yaw = (b[1] - a[1]).atan2(b[0] - a[0]);
-        let start = config.nav.initial_position_n_m;
+        let start = config.nav.align.initial_position_n_m;
         assert_eq!([start[0], start[1]], a, "{}: planned start", scenario.name);
         let mut expected = FswConfig::rocky8(start, yaw);
         let site = &scenario.site;
-        expected.nav.ekf.sun = Some(SunEphemeris::from_site(
+        expected.nav.filter.ekf.sun = Some(SunEphemeris::from_site(
             site.latitude_deg,
             site.solar_longitude_deg,
             site.local_solar_time_h,
         ));
-        expected.nav.protection.arrival_tolerance_m = scenario.goal_tolerance_m;
-        expected.nav.protection.slip_limit = scenario.slip_limit;
-        expected.nav.protection.max_position_sigma_m = scenario.max_position_sigma_m;
-        expected.nav.hazard_avoidance =
+        expected.nav.drive.protection.arrival_tolerance_m = scenario.goal_tolerance_m;
+        expected.nav.drive.protection.slip_limit = scenario.slip_limit;
+        expected.nav.drive.protection.max_position_sigma_m = scenario.max_position_sigma_m;
+        expected.nav.goal.hazard_avoidance =
             scenario.navigation == sim_host::scenario::NavigationKind::Roverbug;
-        expected.nav.guidance.cruise_speed_m_s = scenario
+        expected.nav.drive.guidance.cruise_speed_m_s = scenario
             .speed_m_s
-            .min(expected.nav.guidance.max_wheel_speed_m_s);
+            .min(expected.nav.drive.guidance.max_wheel_speed_m_s);
         assert_eq!(config, expected, "{}", scenario.name);
         // The filter's IMU model is the nominal profile's, whatever the simulator's IMU is.
-        assert_eq!(config.nav.ekf.imu_noise, EkfConfig::default().imu_noise);
+        assert_eq!(
+            config.nav.filter.ekf.imu_noise,
+            EkfConfig::default().imu_noise
+        );
         for seed in [1, 2, 3, 7, 1234] {
             let mut seeded = scenario.clone();
             seeded.seed = seed;

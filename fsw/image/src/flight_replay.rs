@@ -22,8 +22,9 @@
 
 use core::fmt::Write;
 use fsw::flight::nav::Navigator;
+use fsw::flight::{DeviceHealth, FrameStatus};
 use fsw::flight::{Devices, FlightState, Fsw, FswConfig, FswError, Platform};
-use fsw::telemetry::{DeviceHealth, FrameStatus, RecordKind};
+use fsw::telemetry::RecordKind;
 use rover_replay::tape::{ByteSource, FrameMark, TapeReader, MAX_WAYPOINTS, NAV_PARAMS};
 use rover_replay::{Digest, Divergence, FrameOutputs, MobilityOutput, TapeError, TapeHandle};
 
@@ -47,7 +48,7 @@ impl FlightSetup {
     /// the alignment takes its heading from the sun as on a real drive.
     pub fn still() -> Self {
         let mut config = FswConfig::rocky8([0.0; 3], 0.0);
-        config.nav.ekf.sun = Some(fsw::estimation::ephemeris::SunEphemeris::from_site(
+        config.nav.filter.ekf.sun = Some(fsw::estimation::ephemeris::SunEphemeris::from_site(
             -60.0, 0.0, 12.0,
         ));
         Self {
@@ -76,7 +77,7 @@ impl FlightSetup {
 pub fn nav_params(config: &FswConfig) -> [f64; NAV_PARAMS] {
     let n = &config.nav;
     let flag = |b: bool| if b { 1.0 } else { 0.0 };
-    let (lat, dec, h0) = match n.ekf.sun {
+    let (lat, dec, h0) = match n.filter.ekf.sun {
         Some(e) => (e.latitude_rad, e.declination_rad, e.hour_angle_t0_rad),
         None => (0.0, 0.0, 0.0),
     };
@@ -85,13 +86,13 @@ pub fn nav_params(config: &FswConfig) -> [f64; NAV_PARAMS] {
         lat,
         dec,
         h0,
-        flag(n.ekf.sun.is_some()),
-        n.guidance.cruise_speed_m_s,
-        flag(n.slip_compensation),
-        flag(n.vo_enabled),
-        n.protection.arrival_tolerance_m,
-        n.protection.slip_limit,
-        n.protection.max_position_sigma_m,
+        flag(n.filter.ekf.sun.is_some()),
+        n.drive.guidance.cruise_speed_m_s,
+        flag(n.drive.slip_compensation),
+        flag(n.vo.enabled),
+        n.drive.protection.arrival_tolerance_m,
+        n.drive.protection.slip_limit,
+        n.drive.protection.max_position_sigma_m,
     ];
     for (slot, v) in p.iter_mut().zip(values) {
         *slot = v;
@@ -109,17 +110,17 @@ pub fn flight_config(setup: &FlightSetup) -> FswConfig {
         return config;
     };
     let nav = &mut config.nav;
-    nav.ekf.sun = (p[3] != 0.0).then_some(fsw::estimation::ephemeris::SunEphemeris {
+    nav.filter.ekf.sun = (p[3] != 0.0).then_some(fsw::estimation::ephemeris::SunEphemeris {
         latitude_rad: p[0],
         declination_rad: p[1],
         hour_angle_t0_rad: p[2],
     });
-    nav.guidance.cruise_speed_m_s = p[4];
-    nav.slip_compensation = p[5] != 0.0;
-    nav.vo_enabled = p[6] != 0.0;
-    nav.protection.arrival_tolerance_m = p[7];
-    nav.protection.slip_limit = p[8];
-    nav.protection.max_position_sigma_m = p[9];
+    nav.drive.guidance.cruise_speed_m_s = p[4];
+    nav.drive.slip_compensation = p[5] != 0.0;
+    nav.vo.enabled = p[6] != 0.0;
+    nav.drive.protection.arrival_tolerance_m = p[7];
+    nav.drive.protection.slip_limit = p[8];
+    nav.drive.protection.max_position_sigma_m = p[9];
     config
 }
 

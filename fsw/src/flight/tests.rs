@@ -1,7 +1,7 @@
 //! HAL-1: every device reading is checked and counted; bad readings are not kept.
 
 use super::*;
-use rover_hal::{MobilityCommand, StereoCalibration, StereoFrame};
+use rover_hal::{CaptureStatus, ErrorKind, MobilityCommand, StereoCalibration, StereoFrame};
 
 /// A scripted sequence of results, replayed one per call and then repeating the last.
 struct Script<T: Copy, const N: usize> {
@@ -245,7 +245,7 @@ fn hal_1_device_faults_are_counted_and_bad_readings_dropped() {
 
 /// The last `FrameStatus` record the flight software sent (the navigation records are
 /// accepted and ignored).
-struct StatusTelemetry(Option<crate::telemetry::FrameStatus>);
+struct StatusTelemetry(Option<crate::flight::FrameStatus>);
 impl Telemetry for StatusTelemetry {
     type Error = ErrorKind;
     fn send(&mut self, record: &[u8]) -> Result<(), ErrorKind> {
@@ -333,14 +333,14 @@ fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
         fsw.tick();
     }
     assert_eq!(fsw.state().power, Some(first));
-    assert_eq!(fsw.nav().last_power(), Some(first));
+    assert_eq!(fsw.nav().goal().last_power(), Some(first));
     for k in 1..8u64 {
         for _ in 0..1_000 {
             fsw.tick();
         }
         assert_eq!(fsw.state().power, Some(first), "reading {k} refused");
         assert_eq!(
-            fsw.nav().last_power(),
+            fsw.nav().goal().last_power(),
             Some(first),
             "reading {k} not passed on"
         );
@@ -355,7 +355,7 @@ fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
         fsw.tick();
     }
     assert_eq!(fsw.state().power, Some(last));
-    assert_eq!(fsw.nav().last_power(), Some(last));
+    assert_eq!(fsw.nav().goal().last_power(), Some(last));
     let h = power(&fsw);
     assert_eq!(
         (h.good, h.invalid, h.time_backwards, h.errors),
@@ -378,7 +378,7 @@ fn hal_2_power_readings_checked_and_passed_to_the_navigator() {
 /// NAV-1: the navigator aligns on 400 samples at rest (tilt from gravity, heading from the sun
 /// sensor against the ephemeris), then commands forward motion along the path; losing the IMU
 /// stops the rover; an invalid path is refused with an error value. Without a sun reading the
-/// alignment waits `align_sun_wait_samples` more samples and takes the plan's heading.
+/// alignment waits `AlignConfig::sun_wait_samples` more samples and takes the plan's heading.
 #[test]
 fn nav_1_alignment_drive_command_and_sensor_loss_hold() {
     use crate::estimation::ephemeris::SunEphemeris;
@@ -392,7 +392,7 @@ fn nav_1_alignment_drive_command_and_sensor_loss_hold() {
     let g = 3.711;
     let mut config = NavConfig::rocky8([0.0; 3], 0.0);
     let ephemeris = SunEphemeris::from_site(-14.6, 30.0, 10.5);
-    config.ekf.sun = Some(ephemeris);
+    config.filter.ekf.sun = Some(ephemeris);
     let q_true = crate::types::Quat::from_euler_angles(roll, 0.0, true_yaw);
     let imu = |k: u64| ImuSample {
         t_us: 5_000 * (k + 1),
@@ -405,7 +405,7 @@ fn nav_1_alignment_drive_command_and_sensor_loss_hold() {
         Ok(n) => n,
         Err(e) => panic!("navigator refused: {e:?}"),
     };
-    let wait = u64::from(config.align_samples + config.align_sun_wait_samples);
+    let wait = u64::from(config.align.samples + config.align.sun_wait_samples);
     for k in 0..wait - 1 {
         blind.propagate(Some(&imu(k)));
     }
@@ -475,11 +475,11 @@ fn nav_2_rejection_streak_recovers_a_filter_tuned_too_tight() {
         let mut config = NavConfig::rocky8([0.0; 3], 0.0);
         // VO built but never started (no images): no VO update ever arrives, and with an
         // infinite timeout the VO-loss fallback never engages.
-        config.vo_enabled = true;
-        config.vo_timeout_cycles = u32::MAX;
-        config.align_sun_wait_samples = 0;
+        config.vo.enabled = true;
+        config.vo.timeout_cycles = u32::MAX;
+        config.align.sun_wait_samples = 0;
         if !recover {
-            config.reject_streak_cycles = u32::MAX;
+            config.kin.reject_streak_cycles = u32::MAX;
         }
         let calib = crate::vo::rocky8_hazcam();
         let mut nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calib) {
@@ -519,7 +519,7 @@ fn nav_2_rejection_streak_recovers_a_filter_tuned_too_tight() {
                 }
             }
         }
-        let c = *nav.counters();
+        let c = nav.counters();
         (
             (nav.pose().p_n.x - x).abs(),
             error_30s,
@@ -563,13 +563,13 @@ fn nav_3_stop_and_go_without_vo_measures_slip_with_the_imu() {
     use nav::{NavConfig, Navigator};
     let run = |stop_and_go: bool| {
         let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-        config.vo_enabled = false;
-        config.align_sun_wait_samples = 0;
+        config.vo.enabled = false;
+        config.align.sun_wait_samples = 0;
         if !stop_and_go {
-            config.blind_stop_interval_m = 0.0;
+            config.drive.blind_stop_interval_m = 0.0;
         }
         // The ground accepts the uncertainty of a drive without VO (as on `dunes-long`).
-        config.protection.max_position_sigma_m = 100.0;
+        config.drive.protection.max_position_sigma_m = 100.0;
         let calib = crate::vo::rocky8_hazcam();
         let mut nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calib) {
             Ok(n) => n,
@@ -611,7 +611,7 @@ fn nav_3_stop_and_go_without_vo_measures_slip_with_the_imu() {
                 nav.zero_velocity_cycle();
             }
         }
-        let c = *nav.counters();
+        let c = nav.counters();
         (
             (nav.pose().p_n.x - x).abs(),
             x,
@@ -693,7 +693,7 @@ fn fp_3_implausible_values_and_time_leaps() {
     let mut previous = None;
     for tick in 0..10u64 {
         let t = 5_000 * tick + 5_000;
-        if check_time(&mut health, &mut base, previous, t, tick, &limits) {
+        if devices::check_time(&mut health, &mut base, previous, t, tick, &limits) {
             previous = Some(t);
             base.accept(tick);
         }
@@ -701,7 +701,7 @@ fn fp_3_implausible_values_and_time_leaps() {
     let mut accepted_at = None;
     for tick in 10..40u64 {
         let t = 3_600_000_000 + 5_000 * tick;
-        if check_time(&mut health, &mut base, previous, t, tick, &limits) {
+        if devices::check_time(&mut health, &mut base, previous, t, tick, &limits) {
             previous = Some(t);
             base.accept(tick);
             accepted_at.get_or_insert(tick);
@@ -724,8 +724,8 @@ fn fp_3_implausible_values_and_time_leaps() {
 fn fp_4_imu_time_rebase_keeps_the_filter() {
     use nav::{NavConfig, NavMode, Navigator};
     let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-    config.align_sun_wait_samples = 0;
-    config.vo_enabled = false;
+    config.align.sun_wait_samples = 0;
+    config.vo.enabled = false;
     let calib = crate::vo::rocky8_hazcam();
     let mut nav = match Navigator::new(config, &[[0.0, 0.0], [5.0, 0.0]], &calib) {
         Ok(n) => n,
@@ -763,8 +763,8 @@ fn fp_4_imu_time_rebase_keeps_the_filter() {
 fn fp_5_alignment_dispersion_restarts() {
     use nav::{NavConfig, NavMode, Navigator};
     let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-    config.align_sun_wait_samples = 0;
-    config.vo_enabled = false;
+    config.align.sun_wait_samples = 0;
+    config.vo.enabled = false;
     let calib = crate::vo::rocky8_hazcam();
     let mut nav = match Navigator::new(config, &[[0.0, 0.0], [5.0, 0.0]], &calib) {
         Ok(n) => n,
@@ -893,7 +893,7 @@ fn rect_6_lens_calibration_at_start_vo() {
     assert!(ok.state().rectifying);
     assert_eq!(ok.state().rectify_fault, None);
     assert!(ok.rectifier().has_map());
-    assert!(ok.nav().vo_built());
+    assert!(ok.nav().vo().built());
     let stats = ok.rectifier().map_stats();
     assert!(stats.min_margin_px > 1.0 && stats.max_round_trip_px < 0.01);
 
@@ -909,13 +909,13 @@ fn rect_6_lens_calibration_at_start_vo() {
         let f = fsw_with_lens(Some(lens), memory);
         assert_eq!(f.state().rectify_fault, Some(want));
         assert!(!f.state().rectifying);
-        assert!(!f.nav().vo_built(), "VO must stay off: {want:?}");
+        assert!(!f.nav().vo().built(), "VO must stay off: {want:?}");
     }
 
     let plain = fsw_with_lens(None, false);
     assert!(!plain.state().rectifying);
     assert_eq!(plain.state().rectify_fault, None);
-    assert!(plain.nav().vo_built());
+    assert!(plain.nav().vo().built());
 }
 
 /// Issue 18: a used navigator initialised in place (`Navigator::init`, the rover CPU's way) runs
@@ -927,10 +927,8 @@ fn nav_4_in_place_init_of_a_used_navigator_runs_as_a_new_one() {
     let calib = StuckCamera(None).calibration();
     let path = [[0.0, 0.0], [5.0, 1.0]];
     // No sun: the alignment ends after its 400 samples.
-    let config = NavConfig {
-        align_sun_wait_samples: 0,
-        ..NavConfig::rocky8([0.0; 3], 0.0)
-    };
+    let mut config = NavConfig::rocky8([0.0; 3], 0.0);
+    config.align.sun_wait_samples = 0;
     let run = |nav: &mut Navigator, samples: u64| {
         let mut out = std::vec::Vec::new();
         nav.start_vo();
@@ -953,7 +951,7 @@ fn nav_4_in_place_init_of_a_used_navigator_runs_as_a_new_one() {
             nav.counters(),
             ekf,
             nav.slip(),
-            nav.vo_built()
+            nav.vo().built()
         ));
         out
     };
@@ -965,10 +963,8 @@ fn nav_4_in_place_init_of_a_used_navigator_runs_as_a_new_one() {
         "{expected:?}"
     );
     // Used with another start and path, then initialised in place.
-    let other = NavConfig {
-        align_sun_wait_samples: 0,
-        ..NavConfig::rocky8([1.0, 2.0, 0.0], 0.4)
-    };
+    let mut other = NavConfig::rocky8([1.0, 2.0, 0.0], 0.4);
+    other.align.sun_wait_samples = 0;
     let mut used =
         std::boxed::Box::new(Navigator::new(other, &[[1.0, 2.0], [3.0, 3.0]], &calib).unwrap());
     // Twice: stopped after the alignment, and in the middle of it.
@@ -980,6 +976,6 @@ fn nav_4_in_place_init_of_a_used_navigator_runs_as_a_new_one() {
     assert_ne!(run(&mut used, 200), expected);
     used.init(&config, &path, &calib).unwrap();
     assert_eq!(used.mode(), NavMode::Aligning);
-    assert!(!used.vo_built());
+    assert!(!used.vo().built());
     assert_eq!(run(&mut used, 420), expected);
 }

@@ -240,7 +240,10 @@ pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
         print_stats("vo_item", name, s);
     }
     let flight = fsw::flight::FswConfig::rocky8([0.0; 3], 0.0);
-    for (kind, cost) in fsw::vo::WorkKind::ALL.iter().zip(flight.nav.vo.work_cost) {
+    for (kind, cost) in fsw::vo::WorkKind::ALL
+        .iter()
+        .zip(flight.nav.vo.pipeline.work_cost)
+    {
         report(format_args!("timing vo_cost {} {}\n", kind.name(), cost));
     }
     report(format_args!(

@@ -21,7 +21,7 @@ const DR_MAX_GAP_US: u64 = 50_000;
 
 /// The diagnostic trajectories of the navigator (all in `N`, m, rotations `R` to `N`).
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Trajectories {
+pub struct Trajectories {
     /// 3D kinematics: the contact-angle translation (eq. 15 without it) rotated by the EKF
     /// attitude at each interval start, its vertical from the track memory.
     pub kin3d: PoseEstimate,
@@ -157,6 +157,22 @@ impl Trajectories {
         if let Some(axles) = axles_r_m {
             self.track.record(&self.kin3d.p_n, &r_now, axles);
         }
+    }
+
+    /// The planar model's wheel contact points (zero suspension state, m, `R`).
+    pub fn nominal_points(&self) -> Option<&[Vec3; WHEEL_COUNT]> {
+        self.nominal_points.as_ref()
+    }
+
+    /// True once the VO-only trajectory has started.
+    pub fn vo_started(&self) -> bool {
+        self.vo.is_some()
+    }
+
+    /// VO made a new keyframe without a previous one (start, or after an outage): the VO-only
+    /// trajectory is anchored again at the next VO pose.
+    pub fn vo_restart(&mut self) {
+        self.vo = None;
     }
 
     /// Background: a VO relative pose between two keyframes; `anchor` is the EKF pose of its

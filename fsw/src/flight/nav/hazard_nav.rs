@@ -16,10 +16,18 @@
 //!   rover stands and waits for the next map (counted); a map that fails (blank images, too
 //!   few points) is counted and retried at the next capture.
 
-use super::*;
+use super::drive::{Drive, MAX_WAYPOINTS};
+use super::filter::NavFilter;
+use super::goal::{GoalCtx, GoalNav, ModeRequest};
+use super::protection::FaultResponse;
+use super::{yaw_of, StereoStage};
 use crate::guidance::Point2;
+use crate::guidance::{Guidance, Path};
+use crate::kinematics::{wheel_contact_points, RoverGeometry, SuspensionState, VehicleCommand};
 use crate::perception::{CameraPose, HazardMap, HazardMapper, MapProgress};
 use crate::planning::{ConvexPolygon, PlanStatus, Planner, PlannerOutput, Wedge};
+use crate::types::{Quat, Vec3};
+use rover_hal::{StereoCalibration, StereoFrame};
 
 /// Counters of the hazard navigation (telemetry and the simulator's summary).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -68,7 +76,7 @@ pub enum PlannerVerdict {
 }
 
 /// State of the goal-directed drive.
-pub(super) struct HazardNav {
+pub struct HazardNav {
     /// Goal-directed driving (the planner's paths replace the guidance path). False: the
     /// mapper serves terrain-map localization on a path drive alone ([`super::loc_nav`]).
     planning: bool,
@@ -242,18 +250,22 @@ impl HazardNav {
     }
 }
 
-impl Navigator {
+impl GoalNav {
     /// Build the hazard mapper and the planner in place (about 68 KB) when
     /// [`NavConfig::hazard_avoidance`] is on, or the mapper alone for terrain-map localization
     /// on a path drive ([`LocalizationSettings::enabled`]); the goal is the last waypoint of
     /// the plan. A configuration the mapper refuses leaves the drive held (counted in
     /// [`NavCounters::command_errors`]) rather than driving blind.
-    pub(super) fn start_hazard_nav(&mut self) {
+    pub(super) fn start_hazard_nav(
+        &mut self,
+        goal: Option<[f64; 2]>,
+        calibration: &StereoCalibration,
+    ) {
         let planning = self.config.hazard_avoidance;
         if !(planning || self.loc_on()) || self.hazard.is_some() {
             return;
         }
-        let Some(goal) = self.guidance.as_ref().map(|g| g.path().goal()) else {
+        let Some(goal) = goal else {
             return;
         };
         // Built in its storage (no 68 KB value through the stack).
@@ -262,7 +274,7 @@ impl Navigator {
             .planner
             .init(self.config.planner)
             .and_then(|()| h.planner.set_goal(goal));
-        let mapper = h.mapper.init(self.config.perception, &self.calibration);
+        let mapper = h.mapper.init(self.config.perception, calibration);
         match (mapper, planner) {
             (Ok(()), Ok(())) => {
                 h.planning = planning;
@@ -278,7 +290,7 @@ impl Navigator {
                 self.hazard.built = true;
             }
             // The drive holds without a hazard navigation (`guidance_cycle`).
-            _ => self.counters.command_errors = self.counters.command_errors.saturating_add(1),
+            _ => self.build_errors = self.build_errors.saturating_add(1),
         }
     }
 
@@ -323,17 +335,17 @@ impl Navigator {
     }
 
     /// True when a hazard map should be made from the next frame.
-    pub(super) fn map_due(&self) -> bool {
+    pub(super) fn map_due(&self, filter: &NavFilter) -> bool {
         let Some(h) = self.hazard.as_ref() else {
             return false;
         };
-        if !self.ekf_running || h.verdict != PlannerVerdict::Driving {
+        if !filter.is_running() || h.verdict != PlannerVerdict::Driving {
             return false;
         }
         if h.map_wanted || !h.planned {
             return true;
         }
-        let p = self.ekf.state().p_n;
+        let p = filter.state().p_n;
         match h.last_map_xy {
             None => true,
             Some(q) => {
@@ -362,15 +374,20 @@ impl Navigator {
     /// Background: start a hazard map on `frame`, taken with the rover at `pose` (rotation
     /// `R -> N`, position in `N`, from the capture clone). Returns true when the map runs (the
     /// frame stays held); false when no map is due or it could not start (counted).
-    pub(super) fn start_map(&mut self, frame: &StereoFrame, pose: Option<(Quat, Vec3)>) -> bool {
-        if !self.map_due() {
+    pub(super) fn start_map(
+        &mut self,
+        frame: &StereoFrame,
+        pose: Option<(Quat, Vec3)>,
+        ctx: &mut GoalCtx<'_>,
+    ) -> bool {
+        if !self.map_due(ctx.filter) {
             return false;
         }
         let xy = {
-            let p = self.ekf.state().p_n;
+            let p = ctx.filter.state().p_n;
             [p.x, p.y]
         };
-        let calibration = self.calibration;
+        let calibration = *ctx.calibration;
         let Some(h) = self.hazard.as_mut() else {
             return false;
         };
@@ -384,7 +401,7 @@ impl Navigator {
             h.counters.maps_started = h.counters.maps_started.saturating_add(1);
             h.last_map_xy = Some(xy);
             h.map_wanted = false;
-            self.stereo = StereoStage::Mapping { items: 0 };
+            *ctx.stage = StereoStage::Mapping { items: 0 };
         } else {
             h.counters.map_errors = h.counters.map_errors.saturating_add(1);
         }
@@ -398,27 +415,28 @@ impl Navigator {
         frame: &StereoFrame,
         items: u32,
         quantum: u32,
+        ctx: &mut GoalCtx<'_>,
     ) -> (u32, bool) {
         let Some(h) = self.hazard.as_mut() else {
-            self.stereo = StereoStage::Idle;
+            *ctx.stage = StereoStage::Idle;
             return (0, true);
         };
         match h.mapper.step(frame, quantum) {
             MapProgress::Working { items: total } => {
-                self.stereo = StereoStage::Mapping { items: total };
+                *ctx.stage = StereoStage::Mapping { items: total };
                 (total.saturating_sub(items).max(1), false)
             }
             MapProgress::Finished(result) => {
-                self.stereo = StereoStage::Idle;
+                *ctx.stage = StereoStage::Idle;
                 match result {
                     Ok(()) => {
                         h.counters.maps = h.counters.maps.saturating_add(1);
                         if h.planning {
-                            self.plan_step();
+                            self.plan_step(ctx);
                         }
                         // Terrain-map localization on the same map: its search keeps the
                         // pipeline busy.
-                        if self.loc_after_map() {
+                        if self.loc_after_map(ctx) {
                             return (quantum.max(1), false);
                         }
                     }
@@ -433,8 +451,8 @@ impl Navigator {
     }
 
     /// One RoverBug step on the map just finished, at the current EKF pose.
-    fn plan_step(&mut self) {
-        let x = *self.ekf.state();
+    fn plan_step(&mut self, ctx: &mut GoalCtx<'_>) {
+        let x = *ctx.filter.state();
         let position = [x.p_n.x, x.p_n.y];
         let heading = yaw_of(&x.q_nr);
         let Some(h) = self.hazard.as_mut() else {
@@ -524,12 +542,12 @@ impl Navigator {
                     .as_ref()
                     .map(|p| p.waypoints())
                     .and_then(|w| Path::<MAX_WAYPOINTS>::new(w).ok())
-                    .and_then(|p| Guidance::new(p, self.config.guidance).ok());
+                    .and_then(|p| Guidance::new(p, ctx.drive.config().guidance).ok());
                 match guidance {
                     Some(g) => {
                         h.counters.paths = h.counters.paths.saturating_add(1);
                         h.planned = true;
-                        self.guidance = Some(g);
+                        ctx.drive.set_guidance(g);
                     }
                     None => {
                         // A path guidance refuses (too short): look again.
@@ -540,7 +558,7 @@ impl Navigator {
             }
             PlanStatus::Gaze => {
                 h.counters.gazes = h.counters.gazes.saturating_add(1);
-                self.begin_gaze(gaze, position, heading, view);
+                self.begin_gaze(gaze, position, heading, view, ctx.drive);
             }
             PlanStatus::Reached => {
                 h.verdict = PlannerVerdict::Reached;
@@ -549,12 +567,12 @@ impl Navigator {
                 let goal = h.planner.goal().unwrap_or(position);
                 let line = Path::<MAX_WAYPOINTS>::new(&[position, goal])
                     .ok()
-                    .and_then(|p| Guidance::new(p, self.config.guidance).ok());
+                    .and_then(|p| Guidance::new(p, ctx.drive.config().guidance).ok());
                 match line {
-                    Some(g) => self.guidance = Some(g),
+                    Some(g) => ctx.drive.set_guidance(g),
                     None => {
-                        if !self.mission_arrived() {
-                            self.mode = NavMode::Arrived;
+                        if !self.mission_arrived(ctx.filter) {
+                            ctx.mode = Some(ModeRequest::Arrived);
                         }
                     }
                 }
@@ -563,13 +581,13 @@ impl Navigator {
                 h.verdict = PlannerVerdict::Unreachable;
                 // With targets the sequencer drops it and the rover goes on to the next.
                 if !self.mission_unreachable() {
-                    self.fault_stop(FaultResponse::GoalUnreachable);
+                    ctx.mode = Some(ModeRequest::Stop(FaultResponse::GoalUnreachable));
                 }
             }
             PlanStatus::Blocked(_) => {
                 h.verdict = PlannerVerdict::Blocked;
                 if !self.mission_unreachable() {
-                    self.fault_stop(FaultResponse::PlannerBlocked);
+                    ctx.mode = Some(ModeRequest::Stop(FaultResponse::PlannerBlocked));
                 }
             }
         }
@@ -593,11 +611,13 @@ impl Navigator {
         position: Point2,
         heading: f64,
         view: (f64, f64),
+        drive: &mut Drive,
     ) {
-        let sweep = sweep_radius_of(self.traj.nominal_points, &self.config.geometry);
+        let sweep = self.sweep_m;
         let grown = crate::perception::ROVER_HALF_WIDTH_M + self.config.perception.grow_margin_m;
         let planner = self.config.planner;
-        let stop_short = self.config.guidance.goal_tolerance_m;
+        let guidance_config = drive.config().guidance;
+        let stop_short = guidance_config.goal_tolerance_m;
         let Some(h) = self.hazard.as_mut() else {
             return;
         };
@@ -630,23 +650,23 @@ impl Navigator {
             stop_short,
         )
         .and_then(|end| Path::<MAX_WAYPOINTS>::new(&[position, end]).ok())
-        .and_then(|p| Guidance::new(p, self.config.guidance).ok());
+        .and_then(|p| Guidance::new(p, guidance_config).ok());
         if let Some(g) = guidance {
             h.gaze_rad = None;
             h.map_wanted = false;
             h.planned = true;
             h.counters.room_moves = h.counters.room_moves.saturating_add(1);
-            self.guidance = Some(g);
+            drive.set_guidance(g);
         }
     }
 
     /// RG2, from [`Self::guidance_cycle`] before guidance: the hazard navigation's say in the
     /// motor command. `Some(None)`: hold still (waiting for a map); `Some(Some(c))`: turn in
     /// place with body command `c` (gaze); `None`: drive the guidance path.
-    pub(super) fn hazard_command(&mut self) -> Option<Option<VehicleCommand>> {
-        let heading = self.ekf_running.then(|| yaw_of(&self.ekf.state().q_nr));
-        let position = [self.ekf.state().p_n.x, self.ekf.state().p_n.y];
-        let sweep = sweep_radius_of(self.traj.nominal_points, &self.config.geometry);
+    pub(super) fn hazard_command(&mut self, filter: &NavFilter) -> Option<Option<VehicleCommand>> {
+        let heading = filter.is_running().then(|| yaw_of(&filter.state().q_nr));
+        let position = [filter.state().p_n.x, filter.state().p_n.y];
+        let sweep = self.sweep_m;
         let grown = crate::perception::ROVER_HALF_WIDTH_M + self.config.perception.grow_margin_m;
         let h = self.hazard.as_mut()?;
         if !h.planning || h.verdict != PlannerVerdict::Driving {
@@ -716,6 +736,12 @@ impl Navigator {
 #[cfg(test)]
 mod tests {
     use super::*;
+    #[allow(unused_imports)]
+    use crate::estimation::NominalState;
+    #[allow(unused_imports)]
+    use crate::flight::nav::*;
+    #[allow(unused_imports)]
+    use crate::kinematics::ROCKY8;
 
     /// The turning sweep of Rocky 8: farthest wheel contact 0.393 m ahead plus the 0.10 m
     /// wheel radius, 0.351 m half-width: about 0.61 m, wider than the 0.351 m the obstacles
@@ -733,7 +759,10 @@ mod tests {
     /// perception grows it (half-width + 0.3 m).
     fn grown_wall() -> ConvexPolygon {
         let g = crate::perception::ROVER_HALF_WIDTH_M
-            + NavConfig::rocky8([0.0; 3], 0.0).perception.grow_margin_m;
+            + NavConfig::rocky8([0.0; 3], 0.0)
+                .goal
+                .perception
+                .grow_margin_m;
         let (x0, x1, y0, y1) = (5.8 - g, 6.2 + g, -4.5 - g, 9.0 + g);
         match ConvexPolygon::from_points(&[[x0, y0], [x1, y0], [x1, y1], [x0, y1]]) {
             Ok(p) => p,
@@ -747,7 +776,7 @@ mod tests {
         let c = NavConfig::rocky8([0.0; 3], 0.0);
         turn_sweep_radius(&ROCKY8) + GAZE_TURN_MARGIN_M + ROOM_MOVE_EXTRA_M
             - crate::perception::ROVER_HALF_WIDTH_M
-            - c.perception.grow_margin_m
+            - c.goal.perception.grow_margin_m
     }
 
     /// HAZ-ROOM-1: a forward room move is found along a heading away from the wall (the
@@ -797,7 +826,7 @@ mod tests {
     /// EKF running at rest at `xy`, heading `yaw` (rad).
     fn navigator_by_the_wall(xy: [f64; 2], yaw: f64) -> Navigator {
         let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-        config.hazard_avoidance = true;
+        config.goal.hazard_avoidance = true;
         let mut nav = match Navigator::new(
             config,
             &[[0.0, 0.0], [10.0, 0.0]],
@@ -814,7 +843,7 @@ mod tests {
             min_range_m: 0.3,
             max_range_m: 2.0,
         };
-        let Some(h) = nav.hazard.as_mut() else {
+        let Some(h) = nav.goal.hazard.as_mut() else {
             panic!("hazard navigation not built")
         };
         assert!(h.planner.plan(xy, yaw, &wedge, &[grown_wall()]).is_ok());
@@ -822,8 +851,8 @@ mod tests {
         x.p_n = Vec3::new(xy[0], xy[1], 0.0);
         x.q_nr = Quat::from_euler_angles(0.0, 0.0, yaw);
         let p0 = crate::estimation::CoreCov::identity() * 1e-4;
-        assert!(nav.ekf.reset(x, &p0).is_ok());
-        nav.ekf_running = true;
+        assert!(nav.filter.ekf_mut().reset(x, &p0).is_ok());
+        nav.filter.set_running();
         nav.mode = NavMode::Driving;
         nav
     }
@@ -838,12 +867,18 @@ mod tests {
         let xy = [6.851 + 0.153, 8.2];
         let yaw = -20.0_f64.to_radians();
         let mut nav = navigator_by_the_wall(xy, yaw);
-        nav.begin_gaze(Some(-78.0_f64.to_radians()), xy, yaw, (yaw, 0.6));
+        nav.goal.begin_gaze(
+            Some(-78.0_f64.to_radians()),
+            xy,
+            yaw,
+            (yaw, 0.6),
+            &mut nav.drive,
+        );
         // Drive the guidance path (not a hold, not a turn in place).
-        assert_eq!(nav.hazard_command(), None);
-        let c = nav.hazard_counters();
+        assert_eq!(nav.goal.hazard_command(&nav.filter), None);
+        let c = nav.goal.hazard_counters();
         assert_eq!((c.room_moves, c.gazes_skipped), (1, 0));
-        let Some(g) = nav.guidance.as_ref() else {
+        let Some(g) = nav.drive.guidance() else {
             panic!("no guidance path")
         };
         let w = g.path().waypoints();
@@ -855,8 +890,8 @@ mod tests {
         let heading = libm::atan2(b[1] - a[1], b[0] - a[0]);
         assert!((heading - yaw).abs() < 1e-9, "{heading}");
         // At the path's end the rover maps again (a subgoal).
-        assert!(nav.hazard_subgoal_reached());
-        assert!(nav.map_wanted_now());
+        assert!(nav.goal.hazard_subgoal_reached());
+        assert!(nav.goal.map_wanted_now());
     }
 
     /// HAZ-ROOM-3: with room to spare, or facing the wall, or with a gaze within tolerance,
@@ -867,21 +902,41 @@ mod tests {
         let xy = [6.851 + 0.4, 8.2];
         let yaw = -20.0_f64.to_radians();
         let mut nav = navigator_by_the_wall(xy, yaw);
-        nav.begin_gaze(Some(-78.0_f64.to_radians()), xy, yaw, (yaw, 0.6));
-        assert!(matches!(nav.hazard_command(), Some(Some(c)) if c.yaw_rate_rad_s < 0.0));
-        assert_eq!(nav.hazard_counters().room_moves, 0);
+        nav.goal.begin_gaze(
+            Some(-78.0_f64.to_radians()),
+            xy,
+            yaw,
+            (yaw, 0.6),
+            &mut nav.drive,
+        );
+        assert!(
+            matches!(nav.goal.hazard_command(&nav.filter), Some(Some(c)) if c.yaw_rate_rad_s < 0.0)
+        );
+        assert_eq!(nav.goal.hazard_counters().room_moves, 0);
         // Facing the wall at the limit: no forward way; the gaze is given up as before.
         let xy = [6.851 + 0.15, 8.2];
         let yaw = 170.0_f64.to_radians();
         let mut nav = navigator_by_the_wall(xy, yaw);
-        nav.begin_gaze(Some(90.0_f64.to_radians()), xy, yaw, (yaw, 0.6));
-        assert_eq!(nav.hazard_command(), Some(None));
-        let c = nav.hazard_counters();
+        nav.goal.begin_gaze(
+            Some(90.0_f64.to_radians()),
+            xy,
+            yaw,
+            (yaw, 0.6),
+            &mut nav.drive,
+        );
+        assert_eq!(nav.goal.hazard_command(&nav.filter), Some(None));
+        let c = nav.goal.hazard_counters();
         assert_eq!((c.room_moves, c.gazes_skipped), (0, 1));
         // A heading outside the wedge just mapped: not driven blind.
         let yaw = -20.0_f64.to_radians();
         let mut nav = navigator_by_the_wall(xy, yaw);
-        nav.begin_gaze(Some(-78.0_f64.to_radians()), xy, yaw, (yaw + 1.0, 0.6));
-        assert_eq!(nav.hazard_counters().room_moves, 0);
+        nav.goal.begin_gaze(
+            Some(-78.0_f64.to_radians()),
+            xy,
+            yaw,
+            (yaw + 1.0, 0.6),
+            &mut nav.drive,
+        );
+        assert_eq!(nav.goal.hazard_counters().room_moves, 0);
     }
 }

@@ -24,13 +24,18 @@
 //!   gone makes the fix stale (counted, not fused). Every search failure is counted and never
 //!   fused; the scan then starts again.
 
-use super::*;
+use super::filter::NavFilter;
+use super::goal::{GoalCtx, GoalNav};
+use super::{hazard_nav, yaw_of, StereoStage};
 use crate::estimation::absolute_pose::AbsolutePose;
+use crate::estimation::CloneHandle;
+use crate::kinematics::VehicleCommand;
 use crate::localization::{
     GlobalMap, LocalScan, LocalizationError, LocalizationFix, Localizer, LocalizerConfig,
     SearchProgress, MAX_POINTS,
 };
 use crate::perception::GridFrame;
+use crate::types::Vec3;
 
 /// Cost units (10,000 rover-CPU instructions) of one node expansion of the search: up to 8
 /// children of up to [`MAX_POINTS`] point terms (about 60 instructions each, `docs/timing.md`).
@@ -402,7 +407,7 @@ const READ_VARIANCE: f64 = 1e-12;
 
 /// Where the navigator keeps terrain-map localization: the storage the platform provided and
 /// whether it was built for this drive.
-pub(super) struct LocSlot {
+pub struct LocSlot {
     store: Option<&'static mut LocNav>,
     built: bool,
 }
@@ -443,7 +448,7 @@ impl LocSlot {
     }
 }
 
-impl Navigator {
+impl GoalNav {
     /// The storage of terrain-map localization (about 82 KB; external RAM on the rover CPU).
     /// Without it, an enabled localization is refused by [`Self::start_vo`] (counted).
     pub fn provide_localization_memory(&mut self, store: &'static mut LocNav) {
@@ -462,11 +467,11 @@ impl Navigator {
         }
         let valid = s.is_valid();
         let Some(l) = self.loc.store.as_deref_mut().filter(|_| valid) else {
-            self.counters.command_errors = self.counters.command_errors.saturating_add(1);
+            self.build_errors = self.build_errors.saturating_add(1);
             return;
         };
         if l.localizer.init(s.localizer).is_err() {
-            self.counters.command_errors = self.counters.command_errors.saturating_add(1);
+            self.build_errors = self.build_errors.saturating_add(1);
             return;
         }
         l.restart_scan();
@@ -524,17 +529,16 @@ impl Navigator {
     /// A hazard map started on the capture of `clone` with VO off: localization keeps the
     /// clone (the fix is applied there); the one it held before is released. With
     /// localization off the clone is released.
-    pub(super) fn loc_keep_clone(&mut self, clone: Option<CloneHandle>) {
-        let old = match self.loc.as_mut() {
+    pub(super) fn loc_keep_clone(&mut self, clone: Option<CloneHandle>) -> Option<CloneHandle> {
+        match self.loc.as_mut() {
             Some(l) => core::mem::replace(&mut l.clone, clone),
             None => clone,
-        };
-        self.release(old);
+        }
     }
 
     /// After a hazard map finished: add it to the local map and start a search when the local
     /// map is complete. Returns true when a search runs (the stereo pipeline stays busy).
-    pub(super) fn loc_after_map(&mut self) -> bool {
+    pub(super) fn loc_after_map(&mut self, ctx: &mut GoalCtx<'_>) -> bool {
         let (max_new, span, maps_per_fix) = {
             let s = &self.config.localization;
             let per = usize::from(s.maps_per_fix.max(1));
@@ -587,7 +591,7 @@ impl Navigator {
         let (stopping, view_count) = (l.stop != Stop::Idle, l.view_count);
         let driving_fix_due = l.maps_in_scan >= maps_per_fix;
         // The camera nadir in the rover frame (for the target selection of the next stop).
-        if let Some(rover) = self.loc_capture_pose(t_us) {
+        if let Some(rover) = self.loc_capture_pose(t_us, ctx) {
             let (s, c) = libm::sincos(rover[2]);
             let (dx, dy) = (
                 frame.origin_world_m[0] - rover[0],
@@ -609,8 +613,8 @@ impl Navigator {
             }
             Some(_) => {
                 // The stop's last view: search now, whatever the number of maps.
-                let started = self.loc_start_search();
-                let pos = self.ekf_xy();
+                let started = self.loc_start_search(ctx);
+                let pos = ekf_xy(ctx.filter);
                 if let Some(l) = self.loc.as_mut() {
                     if started {
                         l.stop = Stop::Searching;
@@ -623,14 +627,8 @@ impl Navigator {
             }
             // While a stop turns or waits, the maps of the drive do not start a search.
             None if stopping || !driving_fix_due => false,
-            None => self.loc_start_search(),
+            None => self.loc_start_search(ctx),
         }
-    }
-
-    /// The EKF's horizontal position `[x, y]` (`N`, m).
-    fn ekf_xy(&self) -> [f64; 2] {
-        let p = self.ekf.state().p_n;
-        [p.x, p.y]
     }
 
     /// RG2, from [`Self::guidance_cycle`] before guidance (path drives): a localization stop's
@@ -641,23 +639,25 @@ impl Navigator {
     /// [`LocalizationSettings::stop_sigma_fraction`] of fault protection's limit;
     /// its views are the headings whose hazcam wedge holds the most mapped rocks
     /// ([`crate::localization::select_target`], V99 sec. 5's target selection).
-    pub(super) fn loc_command(&mut self) -> Option<Option<VehicleCommand>> {
+    pub(super) fn loc_command(
+        &mut self,
+        filter: &NavFilter,
+        max_sigma: f64,
+        vo_lost: bool,
+    ) -> Option<Option<VehicleCommand>> {
         // Goal-directed drives stop only with the day's targets, on the sigma trigger (the
         // sequencer's "localize now", V99 sec. 3).
         // Not while dwelling at a target or waiting for a plan.
         let mission = matches!(self.mission_phase(), super::MissionPhase::Driving { .. });
-        if (self.config.hazard_avoidance && !mission) || !self.ekf_running {
+        if (self.config.hazard_avoidance && !mission) || !filter.is_running() {
             return None;
         }
         let s = self.config.localization;
-        let x = *self.ekf.state();
+        let x = *filter.state();
         let pos = [x.p_n.x, x.p_n.y];
         let yaw = yaw_of(&x.q_nr);
-        let sigma = self.horizontal_sigma_m();
-        let max_sigma = self.config.protection.max_position_sigma_m;
-        let vo_lost = self.vo_lost();
-        let sweep = hazard_nav::sweep_radius_of(self.traj.nominal_points, &self.config.geometry)
-            + hazard_nav::GAZE_TURN_MARGIN_M;
+        let sigma = filter.horizontal_sigma_m();
+        let sweep = self.sweep_m + hazard_nav::GAZE_TURN_MARGIN_M;
         let l = self.loc.as_mut()?;
         match l.stop {
             Stop::Idle => {
@@ -726,11 +726,11 @@ impl Navigator {
     }
 
     /// Starts the search of the local map around the newest map's EKF pose.
-    fn loc_start_search(&mut self) -> bool {
+    fn loc_start_search(&mut self, ctx: &mut GoalCtx<'_>) -> bool {
         let Some((t_us, frame)) = self.loc.as_ref().and_then(|l| l.newest) else {
             return false;
         };
-        let prior_cov = self.loc_prior_covariance(t_us, &frame);
+        let prior_cov = self.loc_prior_covariance(t_us, &frame, ctx);
         let caps = {
             let s = &self.config.localization;
             [
@@ -768,7 +768,7 @@ impl Navigator {
             Ok(()) => {
                 l.counters.searches = l.counters.searches.saturating_add(1);
                 l.pending = Some(Pending { t_us });
-                self.stereo = StereoStage::Localizing;
+                *ctx.stage = StereoStage::Localizing;
                 true
             }
             Err(e) => {
@@ -786,9 +786,14 @@ impl Navigator {
     /// The EKF's covariance of the grid frame's `[x, y, heading]` at the capture `t_us`
     /// (the rover pose's covariance from the filter, carried to the grid origin by the lever
     /// arm). `None` when the capture's state is gone.
-    fn loc_prior_covariance(&self, t_us: u64, frame: &GridFrame) -> Option<[[f64; 3]; 3]> {
-        let rover = self.loc_capture_pose(t_us)?;
-        let ekf = self.ekf_running.then_some(&self.ekf)?;
+    fn loc_prior_covariance(
+        &self,
+        t_us: u64,
+        frame: &GridFrame,
+        ctx: &GoalCtx<'_>,
+    ) -> Option<[[f64; 3]; 3]> {
+        let rover = self.loc_capture_pose(t_us, ctx)?;
+        let ekf = ctx.filter.running()?;
         let probe = AbsolutePose {
             t_us,
             position_m: [rover[0], rover[1]],
@@ -817,19 +822,19 @@ impl Navigator {
 
     /// The EKF's rover pose `[x, y, yaw]` at the capture `t_us` (from its clone), if the clone
     /// is live: the clone localization kept (VO off) or VO's keyframe clone.
-    fn loc_capture_pose(&self, t_us: u64) -> Option<[f64; 3]> {
+    fn loc_capture_pose(&self, t_us: u64, ctx: &GoalCtx<'_>) -> Option<[f64; 3]> {
         let held = self.loc.as_ref().and_then(|l| l.clone);
-        let handle = [held, self.key_clone]
+        let handle = [held, ctx.key_clone]
             .into_iter()
             .flatten()
             .find(|h| h.t_us() == t_us)?;
-        let (q, p) = self.clone_pose_of(Some(handle))?;
+        let (q, p) = ctx.filter.clone_pose(Some(handle))?;
         Some([p.x, p.y, yaw_of(&q)])
     }
 
     /// Background: advance the search by at most `quantum` cost units. Returns the units used
     /// and whether the search (and the stereo pipeline's work on this frame) finished.
-    pub(super) fn loc_step(&mut self, quantum: u32) -> (u32, bool) {
+    pub(super) fn loc_step(&mut self, quantum: u32, ctx: &mut GoalCtx<'_>) -> (u32, bool) {
         let nodes = (quantum / LOC_NODE_COST_UNITS).max(1);
         let progress = match self.loc.as_mut() {
             Some(l) => l.localizer.step(&l.map, nodes),
@@ -838,16 +843,16 @@ impl Navigator {
         match progress {
             SearchProgress::Working { .. } => (quantum.max(1), false),
             SearchProgress::Finished(result) => {
-                self.stereo = StereoStage::Idle;
-                self.loc_finish(result);
+                *ctx.stage = StereoStage::Idle;
+                self.loc_finish(result, ctx);
                 (quantum.max(1), true)
             }
         }
     }
 
     /// The search was abandoned (the frame was lost): counted as a failure.
-    pub(super) fn loc_abandon(&mut self) {
-        let pos = self.ekf_xy();
+    pub(super) fn loc_abandon(&mut self, filter: &NavFilter) {
+        let pos = ekf_xy(filter);
         if let Some(l) = self.loc.as_mut() {
             if l.stop == Stop::Searching {
                 l.stop = Stop::Idle;
@@ -862,8 +867,12 @@ impl Navigator {
     }
 
     /// A search ended: fuse the fix at its capture (gated), or count the failure.
-    fn loc_finish(&mut self, result: Result<LocalizationFix, LocalizationError>) {
-        let pos = self.ekf_xy();
+    fn loc_finish(
+        &mut self,
+        result: Result<LocalizationFix, LocalizationError>,
+        ctx: &mut GoalCtx<'_>,
+    ) {
+        let pos = ekf_xy(ctx.filter);
         if let Some(l) = self.loc.as_mut() {
             if l.stop == Stop::Searching {
                 l.stop = Stop::Idle;
@@ -885,27 +894,25 @@ impl Navigator {
             }
         };
         let t_us = pending.t_us;
-        let estimate = self.loc_capture_pose(t_us);
+        let estimate = self.loc_capture_pose(t_us, ctx);
         let gated = self.config.localization.gated;
         // The fix is applied at its capture's clone. No recording or replay can be active
         // here (the search runs in the stereo pipeline, which starts no capture meanwhile);
         // if one were, the update could not be replayed: stale.
-        let quiet = !self.recorder.active() && !self.recorder.replaying();
         let transferred = estimate.and_then(|e| fix.transfer(e).map(|(p, c)| (e, p, c)));
-        let outcome = match (transferred, self.ekf_running && quiet) {
-            (Some((prior, pose, covariance)), true) => {
+        let outcome = match transferred {
+            Some((prior, pose, covariance)) => {
                 let m = AbsolutePose {
                     t_us,
                     position_m: [pose[0], pose[1]],
                     yaw_rad: pose[2],
                     covariance,
                 };
-                self.ekf
-                    .update_absolute_pose(&m, gated)
-                    .ok()
+                ctx.filter
+                    .absolute_pose(&m, gated)
                     .map(|d| (prior, pose, covariance, d))
             }
-            _ => None,
+            None => None,
         };
         let Some(l) = self.loc.as_mut() else {
             return;
@@ -936,9 +943,21 @@ impl Navigator {
     }
 }
 
+/// The EKF's horizontal position `[x, y]` (`N`, m).
+fn ekf_xy(filter: &NavFilter) -> [f64; 2] {
+    let p = filter.state().p_n;
+    [p.x, p.y]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    #[allow(unused_imports)]
+    use crate::estimation::NominalState;
+    #[allow(unused_imports)]
+    use crate::flight::nav::*;
+    #[allow(unused_imports)]
+    use crate::kinematics::ROCKY8;
 
     #[test]
     fn capped_covariance_keeps_correlation_and_small_sigmas() {

@@ -36,7 +36,10 @@
 //!
 //! Frames and units: positions in `N` (x north, y east), m; times s since boot; energies J.
 
-use super::*;
+use super::drive::MAX_WAYPOINTS;
+use super::filter::NavFilter;
+use super::goal::{GoalCtx, GoalNav, ModeRequest};
+use crate::guidance::{Guidance, Path};
 use crate::sequencer::{
     ResourceModel, Sequencer, SequencerCounters, SequencerError, Situation, Target, TargetStatus,
     MAX_TARGETS,
@@ -180,7 +183,7 @@ pub enum TargetOutcome {
 }
 
 /// The mission state of the navigator.
-pub(super) struct Mission {
+pub struct Mission {
     /// Latest accepted power reading (checked by the flight task: time advancing, finite,
     /// energy not decreasing).
     pub(super) power: Option<PowerReading>,
@@ -301,11 +304,11 @@ impl Mission {
     }
 }
 
-impl Navigator {
+impl GoalNav {
     /// RG4: a checked power reading (the battery energy used since boot, J, and the bus power,
     /// W; V99 sec. 3: "current power reserves"). With targets uplinked, the plan is checked
     /// against the energy left and a replan is asked for when it no longer fits.
-    pub fn power(&mut self, reading: &PowerReading) {
+    pub fn power(&mut self, reading: &PowerReading, filter: &NavFilter) {
         let m = &mut self.mission;
         // One equation of the two-power fit per interval between readings.
         if let (Some(prev), true) = (m.power, m.sequencer.is_some()) {
@@ -332,7 +335,7 @@ impl Navigator {
         }
         // The plan is checked with the powers the telemetry shows.
         self.mission_calibrate();
-        let Some(situation) = self.mission_situation() else {
+        let Some(situation) = self.mission_situation(filter) else {
             return;
         };
         let m = &mut self.mission;
@@ -430,11 +433,11 @@ impl Navigator {
 
     /// The rover's situation for the sequencer: EKF time and position, the energy left, the
     /// end of the plan. `None` before the EKF runs.
-    fn mission_situation(&self) -> Option<Situation> {
-        if !self.ekf_running {
+    fn mission_situation(&self, filter: &NavFilter) -> Option<Situation> {
+        if !filter.is_running() {
             return None;
         }
-        let x = self.ekf.state();
+        let x = filter.state();
         let m = &self.mission;
         let (used, _) = m.energy_used();
         Some(Situation {
@@ -447,14 +450,14 @@ impl Navigator {
 
     /// RG2, first in [`Self::guidance_cycle`]: the time since the last cycle is booked as
     /// driving (`moving`: wheel rates were commanded) or standing, for the calibration.
-    pub(super) fn mission_book(&mut self, moving: bool) {
+    pub(super) fn mission_book(&mut self, moving: bool, filter: &NavFilter) {
         // Path drives (no targets) pay nothing here, every RG2 cycle.
         if self.mission.phase == MissionPhase::None {
             return;
         }
-        let t = self.ekf.state().t_us;
+        let t = filter.state().t_us;
         let xy = {
-            let p = self.ekf.state().p_n;
+            let p = filter.state().p_n;
             [p.x, p.y]
         };
         let stop = self.loc_stop_active();
@@ -493,8 +496,8 @@ impl Navigator {
     /// RG2, from [`Self::guidance_cycle`]: the mission's say in the motor command. `Some(())`
     /// holds the rover still (waiting for a plan, dwelling at a target); `None` lets the
     /// goal-directed drive go on.
-    pub(super) fn mission_command(&mut self) -> Option<()> {
-        let t = self.ekf.state().t_us;
+    pub(super) fn mission_command(&mut self, filter: &NavFilter) -> Option<()> {
+        let t = filter.state().t_us;
         let m = &mut self.mission;
         match m.phase {
             MissionPhase::None | MissionPhase::Driving { .. } => None,
@@ -520,8 +523,8 @@ impl Navigator {
     /// Guidance arrived at the goal (within fault protection's tolerance). With targets: the
     /// dwell at the target starts and the rover keeps driving afterwards; returns true.
     /// Without: false (the drive is over).
-    pub(super) fn mission_arrived(&mut self) -> bool {
-        let t = self.ekf.state().t_us;
+    pub(super) fn mission_arrived(&mut self, filter: &NavFilter) -> bool {
+        let t = filter.state().t_us;
         let m = &mut self.mission;
         let MissionPhase::Driving { target } = m.phase else {
             return m.phase != MissionPhase::None;
@@ -621,14 +624,14 @@ impl Navigator {
     }
 
     /// True when a replan waits for the background.
-    pub fn mission_replan_due(&self) -> bool {
-        self.mission.replan_due && self.ekf_running
+    pub fn mission_replan_due(&self, filter: &NavFilter) -> bool {
+        self.mission.replan_due && filter.is_running()
     }
 
     /// Background: the replan (module doc) and its consequence: the next target becomes the
     /// planner's goal, or the mission is done. Returns the work units used (one slice).
-    pub fn mission_background(&mut self, quantum: u32) -> u32 {
-        let Some(situation) = self.mission_situation() else {
+    pub fn mission_background(&mut self, quantum: u32, ctx: &mut GoalCtx<'_>) -> u32 {
+        let Some(situation) = self.mission_situation(ctx.filter) else {
             return 0;
         };
         self.mission.replan_due = false;
@@ -668,11 +671,11 @@ impl Navigator {
                     m.counters.goal_switches = m.counters.goal_switches.saturating_add(1);
                     seq.clear_leg_penalties();
                 }
-                self.mission_goal(i, goal);
+                self.mission_goal(i, goal, ctx);
             }
             None => {
                 m.phase = MissionPhase::Done;
-                self.mode = NavMode::Arrived;
+                ctx.mode = Some(ModeRequest::Arrived);
             }
         }
         quantum.max(1)
@@ -746,8 +749,8 @@ impl Navigator {
     /// Target `i` at `goal` (`N`, m) becomes the planner's goal: the planner starts a new
     /// traverse (keeping its obstacles), the rover turns in place to face the goal and maps,
     /// and guidance gets the straight line until the first plan.
-    fn mission_goal(&mut self, i: usize, goal: [f64; 2]) {
-        let x = self.ekf.state();
+    fn mission_goal(&mut self, i: usize, goal: [f64; 2], ctx: &mut GoalCtx<'_>) {
+        let x = ctx.filter.state();
         let position = [x.p_n.x, x.p_n.y];
         let Some(h) = self.hazard.as_mut() else {
             self.mission.counters.errors = self.mission.counters.errors.saturating_add(1);
@@ -764,16 +767,16 @@ impl Navigator {
         }
         // A target under the rover: guidance's line would be refused; the arrival check
         // decides at the next cycle from the planner's verdict.
-        self.guidance = Path::<MAX_WAYPOINTS>::new(&[position, goal])
+        let line = Path::<MAX_WAYPOINTS>::new(&[position, goal])
             .ok()
-            .and_then(|p| Guidance::new(p, self.config.guidance).ok())
-            .or(self.guidance.take());
+            .and_then(|p| Guidance::new(p, ctx.drive.config().guidance).ok());
+        if let Some(g) = line {
+            ctx.drive.set_guidance(g);
+        }
         self.mission.phase = MissionPhase::Driving { target: i as u8 };
         self.mission.leg_start_xy = Some(position);
         self.mission.leg_travel_m = 0.0;
-        if self.mode == NavMode::Arrived {
-            self.mode = NavMode::Driving;
-        }
+        ctx.mode = Some(ModeRequest::Resume);
     }
 }
 
@@ -782,10 +785,16 @@ mod tests {
     //! MISSION-1..3: the sequencer in the navigator (issue 17).
     use super::*;
     use crate::estimation::CoreCov;
+    #[allow(unused_imports)]
+    use crate::estimation::NominalState;
+    #[allow(unused_imports)]
+    use crate::flight::nav::*;
+    #[allow(unused_imports)]
+    use crate::kinematics::ROCKY8;
 
     fn navigator(goal_directed: bool) -> Navigator {
         let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-        config.hazard_avoidance = goal_directed;
+        config.goal.hazard_avoidance = goal_directed;
         let mut nav = match Navigator::new(
             config,
             &[[0.0, 0.0], [5.0, 0.0]],
@@ -803,8 +812,8 @@ mod tests {
         let mut x = NominalState::at_rest(t_us);
         x.p_n = Vec3::new(xy[0], xy[1], 0.0);
         let p0 = CoreCov::identity() * 1e-4;
-        assert!(nav.ekf.reset(x, &p0).is_ok());
-        nav.ekf_running = true;
+        assert!(nav.filter.ekf_mut().reset(x, &p0).is_ok());
+        nav.filter.set_running();
         nav.mode = NavMode::Driving;
     }
 
@@ -848,48 +857,61 @@ mod tests {
         );
         let mut nav = navigator(true);
         assert_eq!(
-            nav.uplink_targets(&targets, m, budget(f64::NAN)),
+            nav.goal.uplink_targets(&targets, m, budget(f64::NAN)),
             Err(MissionError::BadBudget)
         );
         assert!(matches!(
-            nav.uplink_targets(&[target(f64::NAN, 0.0, 1)], m, budget(1e6)),
+            nav.goal
+                .uplink_targets(&[target(f64::NAN, 0.0, 1)], m, budget(1e6)),
             Err(MissionError::Sequencer(_))
         ));
-        assert_eq!(nav.uplink_targets(&targets, m, budget(1e6)), Ok(()));
-        assert_eq!(nav.mission_phase(), MissionPhase::Planning);
+        assert_eq!(nav.goal.uplink_targets(&targets, m, budget(1e6)), Ok(()));
+        assert_eq!(nav.goal.mission_phase(), MissionPhase::Planning);
         // No plan before the EKF runs; the rover holds.
         assert!(!nav.mission_replan_due());
         ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
-        assert_eq!(nav.mission_command(), Some(()));
+        assert_eq!(nav.goal.mission_command(&nav.filter), Some(()));
         assert!(nav.mission_replan_due());
         assert!(nav.mission_background(100) > 0);
-        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 0 });
-        assert_eq!(nav.mission_plan(), &[0, 1]);
-        assert_eq!(nav.mission_command(), None);
+        assert_eq!(
+            nav.goal.mission_phase(),
+            MissionPhase::Driving { target: 0 }
+        );
+        assert_eq!(nav.goal.mission_plan(), &[0, 1]);
+        assert_eq!(nav.goal.mission_command(&nav.filter), None);
         // Arrived: a 30 s dwell, held still, then visited and the next target planned.
         ekf_at(&mut nav, 60_000_000, [4.0, 0.0]);
-        assert!(nav.mission_arrived());
-        assert_eq!(nav.mission_phase(), MissionPhase::Dwelling { target: 0 });
+        assert!(nav.goal.mission_arrived(&nav.filter));
+        assert_eq!(
+            nav.goal.mission_phase(),
+            MissionPhase::Dwelling { target: 0 }
+        );
         ekf_at(&mut nav, 89_000_000, [4.0, 0.0]);
-        assert_eq!(nav.mission_command(), Some(()));
-        assert_eq!(nav.mission_phase(), MissionPhase::Dwelling { target: 0 });
+        assert_eq!(nav.goal.mission_command(&nav.filter), Some(()));
+        assert_eq!(
+            nav.goal.mission_phase(),
+            MissionPhase::Dwelling { target: 0 }
+        );
         ekf_at(&mut nav, 90_000_001, [4.0, 0.0]);
-        assert_eq!(nav.mission_command(), Some(()));
-        assert_eq!(nav.mission_phase(), MissionPhase::Planning);
+        assert_eq!(nav.goal.mission_command(&nav.filter), Some(()));
+        assert_eq!(nav.goal.mission_phase(), MissionPhase::Planning);
         nav.mission_background(100);
-        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 1 });
-        assert_eq!(nav.visit_order(), &[0]);
-        assert_eq!(nav.target_outcome(0), Some(TargetOutcome::Visited));
+        assert_eq!(
+            nav.goal.mission_phase(),
+            MissionPhase::Driving { target: 1 }
+        );
+        assert_eq!(nav.goal.visit_order(), &[0]);
+        assert_eq!(nav.goal.target_outcome(0), Some(TargetOutcome::Visited));
         // The planner gives up on target 1: dropped for good, the mission is done.
-        assert!(nav.mission_unreachable());
+        assert!(nav.goal.mission_unreachable());
         nav.mission_background(100);
-        assert_eq!(nav.target_outcome(1), Some(TargetOutcome::Unreachable));
-        assert_eq!(nav.mission_phase(), MissionPhase::Done);
+        assert_eq!(nav.goal.target_outcome(1), Some(TargetOutcome::Unreachable));
+        assert_eq!(nav.goal.mission_phase(), MissionPhase::Done);
         assert_eq!(nav.mode(), NavMode::Arrived);
-        let c = nav.mission_counters();
+        let c = nav.goal.mission_counters();
         assert_eq!((c.total, c.visited, c.dropped, c.unreachable), (2, 1, 1, 1));
         // Without targets the arrival and the planner's verdicts are the path drive's.
-        assert!(!path.mission_arrived() && !path.mission_unreachable());
+        assert!(!path.goal.mission_arrived(&path.filter) && !path.goal.mission_unreachable());
     }
 
     /// MISSION-2: V99 Fig. 3. The planner's way to the current target grows: the leg penalty
@@ -900,26 +922,35 @@ mod tests {
         let targets = [target(10.0, 0.0, 1), target(4.0, 10.0, 1)];
         let mut nav = navigator(true);
         let m = ResourceModel::rocky8();
-        assert_eq!(nav.uplink_targets(&targets, m, budget(1e7)), Ok(()));
+        assert_eq!(nav.goal.uplink_targets(&targets, m, budget(1e7)), Ok(()));
         ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
         nav.mission_background(100);
-        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 0 });
+        assert_eq!(
+            nav.goal.mission_phase(),
+            MissionPhase::Driving { target: 0 }
+        );
         // At (4, 2), blocked: a small bend (1 m) is below the trigger.
         ekf_at(&mut nav, 60_000_000, [4.0, 2.0]);
         let straight = libm::hypot(6.0, 2.0) * m.detour_factor;
-        nav.mission_leg([4.0, 2.0], straight + 1.0);
-        assert_eq!(nav.mission_counters().leg_triggers, 0);
+        nav.goal.mission_leg([4.0, 2.0], straight + 1.0);
+        assert_eq!(nav.goal.mission_counters().leg_triggers, 0);
         // 4.5 m travelled: the opportunity replan keeps target 0 (still the shorter plan).
-        assert_eq!(nav.mission_counters().travel_triggers, 1);
+        assert_eq!(nav.goal.mission_counters().travel_triggers, 1);
         nav.mission_background(100);
-        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 0 });
+        assert_eq!(
+            nav.goal.mission_phase(),
+            MissionPhase::Driving { target: 0 }
+        );
         assert!(!nav.mission_replan_due());
         // RoverBug's boundary following: 14 m more to target 0 from here.
-        nav.mission_leg([4.0, 2.0], straight + 14.0);
+        nav.goal.mission_leg([4.0, 2.0], straight + 14.0);
         assert!(nav.mission_replan_due());
         nav.mission_background(100);
-        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 1 });
-        let c = nav.mission_counters();
+        assert_eq!(
+            nav.goal.mission_phase(),
+            MissionPhase::Driving { target: 1 }
+        );
+        let c = nav.goal.mission_counters();
         assert_eq!((c.leg_triggers, c.goal_switches, c.reorders), (1, 1, 1));
     }
 
@@ -943,40 +974,43 @@ mod tests {
         assert!(probe.replan(&at_start).is_ok());
         let need = probe.timeline().last().map_or(0.0, |s| s.energy_j);
         assert_eq!(
-            nav.uplink_targets(&targets, m, budget(12_000.0 + need * 1.5)),
+            nav.goal
+                .uplink_targets(&targets, m, budget(12_000.0 + need * 1.5)),
             Ok(())
         );
         ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
         nav.mission_background(100);
-        assert_eq!(nav.mission_plan(), &[0, 1]);
-        assert_eq!(nav.mission_counters().power_missing, 0);
+        assert_eq!(nav.goal.mission_plan(), &[0, 1]);
+        assert_eq!(nav.goal.mission_counters().power_missing, 0);
         // 100 s driving: the model says 6 kJ; the power subsystem measures 12 kJ. Calibrated
         // (twice the powers), the plan needs 2 x `need` > 1.5 x `need` left: a replan drops
         // the lower priority.
         for k in 0..=1000u64 {
             ekf_at(&mut nav, 1_000_000 + k * 100_000, [0.0, 0.0]);
-            nav.last_wheel_rates = [1.0; 6];
-            nav.mission_book(true);
+            nav.goal.mission_book(true, &nav.filter);
         }
         nav.power(&reading(101_000_000, 1000.0 + 12_000.0));
         assert!(nav.mission_replan_due());
-        assert_eq!(nav.mission_counters().energy_triggers, 1);
+        assert_eq!(nav.goal.mission_counters().energy_triggers, 1);
         nav.mission_background(100);
-        let c = nav.mission_counters();
+        let c = nav.goal.mission_counters();
         assert!(
             (c.calibration_ratio - 2.0).abs() < 0.01,
             "{}",
             c.calibration_ratio
         );
         assert!((c.energy_used_j - 12_000.0).abs() < 1e-6);
-        assert_eq!(nav.target_outcome(1), Some(TargetOutcome::DroppedEnergy));
-        assert_eq!(nav.mission_plan(), &[0]);
+        assert_eq!(
+            nav.goal.target_outcome(1),
+            Some(TargetOutcome::DroppedEnergy)
+        );
+        assert_eq!(nav.goal.mission_plan(), &[0]);
         // A navigator whose power device never answered: the model's energy, counted.
         let mut blind = navigator(true);
         assert_eq!(blind.uplink_targets(&targets, m, budget(1e7)), Ok(()));
         ekf_at(&mut blind, 1_000_000, [0.0, 0.0]);
         blind.mission_background(100);
-        assert_eq!(blind.mission_counters().power_missing, 1);
+        assert_eq!(blind.goal.mission_counters().power_missing, 1);
     }
 
     /// MISSION-4: the two-power fit. Intervals of driving, standing and both, with the truth
@@ -987,7 +1021,7 @@ mod tests {
         let targets = [target(50.0, 0.0, 1)];
         let m = ResourceModel::rocky8();
         let mut nav = navigator(true);
-        assert_eq!(nav.uplink_targets(&targets, m, budget(1e9)), Ok(()));
+        assert_eq!(nav.goal.uplink_targets(&targets, m, budget(1e9)), Ok(()));
         ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
         nav.mission_background(100);
         let (mut t, mut e) = (1_000_000u64, 5_000.0);
@@ -998,14 +1032,14 @@ mod tests {
             for c in 0..100u64 {
                 t += 50_000;
                 ekf_at(&mut nav, t, [0.0, 0.0]);
-                nav.mission_book(c < drive_cycles);
+                nav.goal.mission_book(c < drive_cycles, &nav.filter);
             }
             let td = drive_cycles as f64 * 0.05;
             e += 100.0 * td + 90.0 * (5.0 - td);
             nav.power(&reading(t, e));
         }
         nav.mission_background(100);
-        let c = nav.mission_counters();
+        let c = nav.goal.mission_counters();
         assert!(c.power_fits >= 1);
         assert!((c.drive_power_w - 100.0).abs() < 1.0, "{}", c.drive_power_w);
         assert!((c.idle_power_w - 90.0).abs() < 1.0, "{}", c.idle_power_w);
@@ -1018,19 +1052,20 @@ mod tests {
         let targets = [target(5.0, 0.0, 1)];
         let m = ResourceModel::rocky8();
         let mut nav = navigator(true);
-        assert_eq!(nav.uplink_targets(&targets, m, budget(1e9)), Ok(()));
+        assert_eq!(nav.goal.uplink_targets(&targets, m, budget(1e9)), Ok(()));
         ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
         nav.mission_background(100);
         let before = nav
+            .goal
             .mission
             .sequencer
             .as_ref()
             .and_then(|s| s.timeline().first().copied())
             .map_or(0.0, |s| s.start_s);
-        nav.mission_localization_started();
+        nav.goal.mission_localization_started();
         assert!(nav.mission_replan_due());
         nav.mission_background(100);
-        let seq = nav.mission.sequencer.as_ref();
+        let seq = nav.goal.mission.sequencer.as_ref();
         assert_eq!(seq.map(|s| s.localization_due()), Some(true));
         let after = seq
             .and_then(|s| s.timeline().first().copied())
@@ -1039,10 +1074,10 @@ mod tests {
             (after - before - m.localization_s).abs() < 1e-6,
             "{before} {after}"
         );
-        assert_eq!(nav.mission_counters().localizations, 1);
+        assert_eq!(nav.goal.mission_counters().localizations, 1);
         // No stop in progress (localization off here): the next RG2 cycle marks it done.
-        nav.mission_book(false);
-        let seq = nav.mission.sequencer.as_ref();
+        nav.goal.mission_book(false, &nav.filter);
+        let seq = nav.goal.mission.sequencer.as_ref();
         assert_eq!(seq.map(|s| s.localization_due()), Some(false));
     }
 
@@ -1054,11 +1089,14 @@ mod tests {
         let targets = [target(6.0, 0.0, 1), target(6.0, 20.0, 1)];
         let m = ResourceModel::rocky8();
         let mut nav = navigator(true);
-        assert_eq!(nav.uplink_targets(&targets, m, budget(1e9)), Ok(()));
+        assert_eq!(nav.goal.uplink_targets(&targets, m, budget(1e9)), Ok(()));
         ekf_at(&mut nav, 1_000_000, [0.0, 0.0]);
-        nav.mission_book(false);
+        nav.goal.mission_book(false, &nav.filter);
         nav.mission_background(100);
-        assert_eq!(nav.mission_phase(), MissionPhase::Driving { target: 0 });
+        assert_eq!(
+            nav.goal.mission_phase(),
+            MissionPhase::Driving { target: 0 }
+        );
         // A dog-leg: 4.5 m east-north-east then back, 9 m of path in 100 s (RG2 at 20 Hz).
         let path = |k: u64| -> [f64; 2] {
             let s = k as f64 * 0.0045;
@@ -1070,16 +1108,16 @@ mod tests {
         };
         for k in 1..=2000u64 {
             ekf_at(&mut nav, 1_000_000 + k * 50_000, path(k));
-            nav.mission_book(true);
+            nav.goal.mission_book(true, &nav.filter);
         }
-        let c = nav.mission_counters();
+        let c = nav.goal.mission_counters();
         assert_eq!(
             (c.speed_m_s, c.detour_factor),
             (m.speed_m_s, m.detour_factor)
         );
-        assert!(nav.mission_arrived());
-        nav.mission_calibrate();
-        let c = nav.mission_counters();
+        assert!(nav.goal.mission_arrived(&nav.filter));
+        nav.goal.mission_calibrate();
+        let c = nav.goal.mission_counters();
         let travel: f64 = (1..=2000u64)
             .map(|k| {
                 let (a, b) = (path(k - 1), path(k));

@@ -4,8 +4,11 @@
 use super::vo_gate::{CaptureReason, VoGateVerdict};
 use super::*;
 use crate::estimation::CoreCov;
+use crate::estimation::NominalState;
 use crate::types::Mat6;
+use crate::types::RelativePose;
 use rover_hal::StereoCalibration;
+use rover_hal::{ImuSample, JointState};
 
 fn calibration() -> StereoCalibration {
     StereoCalibration {
@@ -44,8 +47,8 @@ fn start_ekf(nav: &mut Navigator, v_north: f64) {
     for (i, s) in sig.iter().enumerate() {
         p0[(i, i)] = s * s;
     }
-    assert!(nav.ekf.reset(x, &p0).is_ok());
-    nav.ekf_running = true;
+    assert!(nav.filter.ekf_mut().reset(x, &p0).is_ok());
+    nav.filter.set_running();
     nav.mode = NavMode::Driving;
 }
 
@@ -80,18 +83,26 @@ fn rel_pose(t1_us: u64, trans: [f64; 3], yaw_rad: f64, sigma: f64, rot_sigma: f6
 /// may say otherwise. Returns the capture time.
 fn slip_corrupted_prior(nav: &mut Navigator, record: bool) -> u64 {
     start_ekf(nav, 0.25);
-    let key = nav.ekf.clone_at(T0_US);
+    let key = nav.filter.ekf_mut().clone_at(T0_US);
     assert!(key.is_ok());
-    nav.key_clone = key.ok();
+    *nav.vo.key_clone_mut() = key.ok();
     let t1 = T0_US + 1_000_000;
     for k in 1..=200u64 {
-        assert!(nav.ekf.propagate(&imu(T0_US + 5_000 * k)).is_ok());
+        assert!(nav
+            .filter
+            .ekf_mut()
+            .propagate(&imu(T0_US + 5_000 * k))
+            .is_ok());
     }
     let kin = rel_pose(t1, [0.25, 0.0, 0.0], 0.0, 0.01, 1e-3);
-    assert!(nav.ekf.update_relative_pose(&kin, false).is_ok());
-    assert!(nav.ekf.clone_at(t1).is_ok());
+    assert!(nav
+        .filter
+        .ekf_mut()
+        .update_relative_pose(&kin, false)
+        .is_ok());
+    assert!(nav.filter.ekf_mut().clone_at(t1).is_ok());
     if record {
-        nav.recorder.begin(&nav.ekf);
+        nav.filter.begin_recording();
     }
     t1
 }
@@ -110,18 +121,18 @@ fn nav_vo_1_slip_is_accepted_by_the_gate() {
     let t1 = slip_corrupted_prior(&mut nav, false);
     let vo = rel_pose(t1, [0.15, 0.0, 0.0], 0.0, VO_SIGMA_M, VO_SIGMA_RAD);
     nav.vo_fuse(&vo);
-    let c = *nav.counters();
+    let c = nav.counters();
     assert_eq!((c.vo_fused, c.vo_rejected), (1, 0));
-    assert_eq!(nav.vo_gate().verdict, VoGateVerdict::Accepted);
-    assert!(nav.vo_gate().d2_pose < 5.0, "{:?}", nav.vo_gate());
+    assert_eq!(nav.vo.gate().verdict, VoGateVerdict::Accepted);
+    assert!(nav.vo.gate().d2_pose < 5.0, "{:?}", nav.vo.gate());
     // The slip is corrected: the EKF position follows VO.
-    let x = nav.ekf.state().p_n.x;
+    let x = nav.filter.ekf_mut().state().p_n.x;
     assert!((x - 0.15).abs() < 0.01, "EKF north {x}");
 
     // The same pose without the slip allowance: the EKF's own S does not contain the slip.
     let mut nav = navigator();
-    nav.config.vo_gate_slip_fraction = 0.0;
-    nav.config.vo_gate_slip_floor_m = 0.0;
+    nav.vo.config_mut().gate_slip_fraction = 0.0;
+    nav.vo.config_mut().gate_slip_floor_m = 0.0;
     let t1 = slip_corrupted_prior(&mut nav, false);
     nav.vo_fuse(&rel_pose(
         t1,
@@ -130,7 +141,7 @@ fn nav_vo_1_slip_is_accepted_by_the_gate() {
         VO_SIGMA_M,
         VO_SIGMA_RAD,
     ));
-    assert_eq!(nav.vo_gate().verdict, VoGateVerdict::RejectedPose);
+    assert_eq!(nav.vo.gate().verdict, VoGateVerdict::RejectedPose);
     assert_eq!(nav.counters().vo_rejected, 1);
 
     // Through the late path (recording since the capture, replayed): accepted too, and the
@@ -152,9 +163,9 @@ fn nav_vo_1_slip_is_accepted_by_the_gate() {
         nav.replay_step();
     }
     assert!(!nav.replaying());
-    let c = *nav.counters();
+    let c = nav.counters();
     assert_eq!((c.vo_fused, c.vo_replayed, c.vo_rejected), (1, 1, 0));
-    let x = nav.ekf.state().p_n.x;
+    let x = nav.filter.ekf_mut().state().p_n.x;
     assert!((x - (0.15 + 0.025)).abs() < 0.015, "EKF north {x}");
 }
 
@@ -181,8 +192,8 @@ fn nav_vo_2_gross_errors_are_rejected_and_counted() {
     ] {
         let mut nav = navigator();
         let t1 = slip_corrupted_prior(&mut nav, record);
-        let before = *nav.ekf.state();
-        let p_before = *nav.ekf.covariance();
+        let before = *nav.filter.ekf_mut().state();
+        let p_before = *nav.filter.ekf_mut().covariance();
         nav.vo_fuse(&rel_pose(
             t1,
             [trans, 0.0, 0.0],
@@ -190,16 +201,16 @@ fn nav_vo_2_gross_errors_are_rejected_and_counted() {
             VO_SIGMA_M,
             VO_SIGMA_RAD,
         ));
-        let c = *nav.counters();
-        assert_eq!(nav.vo_gate().verdict, reason, "{trans} {yaw}");
+        let c = nav.counters();
+        assert_eq!(nav.vo.gate().verdict, reason, "{trans} {yaw}");
         assert_eq!((c.vo_fused, c.vo_rejected, c.vo_forced), (0, 1, 0));
         let rot = u32::from(reason == VoGateVerdict::RejectedRotation);
         assert_eq!(c.vo_rejected_rotation, rot);
-        assert_eq!(*nav.ekf.state(), before);
-        assert_eq!(*nav.ekf.covariance(), p_before);
-        assert!(!nav.replaying() && !nav.recorder.active());
-        assert_eq!(nav.vo_gate().consecutive_rejections, 1);
-        assert!(!nav.vo_gate().streak);
+        assert_eq!(*nav.filter.ekf_mut().state(), before);
+        assert_eq!(*nav.filter.ekf_mut().covariance(), p_before);
+        assert!(!nav.replaying() && !nav.filter.recorder_mut().active());
+        assert_eq!(nav.vo.gate().consecutive_rejections, 1);
+        assert!(!nav.vo.gate().streak);
     }
 }
 
@@ -213,24 +224,24 @@ fn nav_vo_3_rejection_streak_forces_an_inflated_fusion() {
     let gross = rel_pose(t1, [0.75, 0.0, 0.0], 0.0, VO_SIGMA_M, VO_SIGMA_RAD);
     for k in 1..=3u32 {
         nav.vo_fuse(&gross);
-        assert_eq!(nav.vo_gate().consecutive_rejections, k);
-        assert_eq!(nav.vo_gate().streak, k == 3);
+        assert_eq!(nav.vo.gate().consecutive_rejections, k);
+        assert_eq!(nav.vo.gate().streak, k == 3);
     }
-    let c = *nav.counters();
+    let c = nav.counters();
     assert_eq!((c.vo_rejected, c.vo_reject_streaks, c.vo_fused), (3, 1, 0));
-    let x_before = nav.ekf.state().p_n.x;
+    let x_before = nav.filter.ekf_mut().state().p_n.x;
     nav.vo_fuse(&gross);
-    let c = *nav.counters();
+    let c = nav.counters();
     assert_eq!((c.vo_rejected, c.vo_forced, c.vo_fused), (3, 1, 1));
-    assert_eq!(nav.vo_gate().verdict, VoGateVerdict::Forced);
-    assert!(!nav.vo_gate().streak);
-    assert_eq!(nav.vo_gate().consecutive_rejections, 0);
+    assert_eq!(nav.vo.gate().verdict, VoGateVerdict::Forced);
+    assert!(!nav.vo.gate().streak);
+    assert_eq!(nav.vo.gate().consecutive_rejections, 0);
     // Pulled towards VO, but by far less than the 0.5 m a trusted fusion would move it.
-    let dx = nav.ekf.state().p_n.x - x_before;
+    let dx = nav.filter.ekf_mut().state().p_n.x - x_before;
     assert!(dx > 1e-4 && dx < 0.1, "forced fusion moved {dx} m");
     // The next gross pose starts a new count (rejected, not forced).
     nav.vo_fuse(&gross);
-    assert_eq!(nav.vo_gate().verdict, VoGateVerdict::RejectedPose);
+    assert_eq!(nav.vo.gate().verdict, VoGateVerdict::RejectedPose);
     assert_eq!(nav.counters().vo_forced, 1);
 }
 
@@ -241,29 +252,29 @@ fn nav_vo_3_rejection_streak_forces_an_inflated_fusion() {
 fn nav_vo_4_capture_by_distance_heading_and_time() {
     let mut nav = navigator();
     // H04's 25 cm (the flight default is 0.10 m, docs/vo.md "Capture policy").
-    nav.config.vo_capture_distance_m = 0.25;
-    assert_eq!(nav.config.vo_capture_angle_rad, 10.0_f64.to_radians());
-    assert_eq!(nav.config.vo_capture_max_interval_us, 10_000_000);
+    nav.vo.config_mut().capture_distance_m = 0.25;
+    assert_eq!(nav.vo.config_mut().capture_angle_rad, 10.0_f64.to_radians());
+    assert_eq!(nav.vo.config_mut().capture_max_interval_us, 10_000_000);
     nav.start_vo();
-    assert!(nav.vo.is_some(), "VO refused the test calibration");
+    assert!(nav.vo.built(), "VO refused the test calibration");
     assert_eq!(nav.capture_due(), None, "no capture before the EKF runs");
     start_ekf(&mut nav, 0.0);
     assert_eq!(nav.capture_due(), Some(CaptureReason::Time));
     assert!(nav.capture_started(T0_US, CaptureReason::Time));
     assert_eq!(nav.capture_due(), None, "capture in progress");
     // Pretend VO holds this capture as its keyframe and is idle again.
-    nav.key_clone = match nav.stereo {
+    *nav.vo.key_clone_mut() = match nav.stereo {
         StereoStage::Capturing { clone } => clone,
         _ => None,
     };
     nav.stereo = StereoStage::Idle;
-    nav.recorder.end();
+    nav.filter.recorder_mut().end();
     let set = |nav: &mut Navigator, dt_us: u64, north: f64, yaw_deg: f64| {
-        let mut x = *nav.ekf.state();
+        let mut x = *nav.filter.ekf_mut().state();
         x.t_us = T0_US + dt_us;
         x.p_n = Vec3::new(north, 0.0, 0.0);
         x.q_nr = Quat::from_euler_angles(0.0, 0.0, yaw_deg.to_radians());
-        nav.ekf.x = x;
+        nav.filter.ekf_mut().x = x;
     };
     set(&mut nav, 1_000_000, 0.24, 9.0);
     assert_eq!(nav.capture_due(), None);
@@ -277,20 +288,21 @@ fn nav_vo_4_capture_by_distance_heading_and_time() {
     assert_eq!(nav.capture_due(), Some(CaptureReason::Time));
     // A capture by distance becomes the new reference.
     set(&mut nav, 2_000_000, 0.26, 0.0);
-    nav.mark_capture(CaptureReason::Distance);
+    let x = *nav.filter.state();
+    nav.vo.capture_started(&x, CaptureReason::Distance);
     assert_eq!(nav.capture_due(), None);
     set(&mut nav, 3_000_000, 0.50, 0.0);
     assert_eq!(nav.capture_due(), None, "0.24 m since the last capture");
     set(&mut nav, 3_000_000, 0.52, 0.0);
     assert_eq!(nav.capture_due(), Some(CaptureReason::Distance));
-    let c = *nav.counters();
+    let c = nav.counters();
     assert_eq!(
         (c.captures_time, c.captures_distance, c.captures_heading),
         (1, 1, 0)
     );
     // Without a VO keyframe (VO failure) a capture is due after the 1 s retry interval,
     // whatever the motion.
-    nav.key_clone = None;
+    *nav.vo.key_clone_mut() = None;
     set(&mut nav, 2_900_000, 0.80, 0.0);
     assert_eq!(nav.capture_due(), None);
     set(&mut nav, 3_000_000, 0.26, 0.0);
@@ -336,8 +348,8 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
     let boresight = 3.3e-3;
     let run = |enabled: bool| {
         let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-        config.align_sun_wait_samples = 0;
-        config.vo_boresight.enabled = enabled;
+        config.align.sun_wait_samples = 0;
+        config.calibration.boresight.enabled = enabled;
         let calib = crate::vo::rocky8_hazcam();
         let mut nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calib) {
             Ok(n) => n,
@@ -366,11 +378,11 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
             straight_frame(&mut nav, k, [a, 0.0, -g], (x, v, r));
             nav.replay_step();
             if k == 20 * 200 {
-                yaw_20s = yaw_of(&nav.ekf.state().q_nr);
+                yaw_20s = yaw_of(&nav.filter.ekf_mut().state().q_nr);
             }
             // A capture every second once the filter runs.
             let idle = matches!(nav.stereo, StereoStage::Idle) && !nav.replaying();
-            if nav.ekf_running
+            if nav.filter.is_running()
                 && pending.is_none()
                 && idle
                 && t_us >= last_capture_us + 1_000_000
@@ -386,7 +398,7 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
                 let StereoStage::Capturing { clone } = nav.stereo else {
                     panic!("no capture pending");
                 };
-                if let Some(key) = nav.key_clone {
+                if let Some(key) = nav.vo.key_clone() {
                     let d = x_at[&t_cap] - x_at[&key.t_us()];
                     let mut covariance = Mat6::zeros();
                     for i in 0..3 {
@@ -410,17 +422,17 @@ fn nav_vo_5_vo_boresight_is_not_learnt_as_gyro_bias() {
                 let Some(clone) = clone else {
                     panic!("no capture clone");
                 };
-                let old = nav.key_clone.replace(clone);
-                nav.release(old);
+                let old = nav.vo.key_clone_mut().replace(clone);
+                nav.filter.release(old);
                 nav.stereo = StereoStage::Idle;
             }
         }
-        let c = *nav.counters();
+        let c = nav.counters();
         (
-            nav.ekf.state().b_g.z,
+            nav.filter.ekf_mut().state().b_g.z,
             // Heading change over the last 100 s (the truth keeps heading 0).
-            yaw_of(&nav.ekf.state().q_nr) - yaw_20s,
-            nav.vo_boresight(),
+            yaw_of(&nav.filter.ekf_mut().state().q_nr) - yaw_20s,
+            nav.cal.boresight(),
             c.vo_fused,
         )
     };
@@ -460,8 +472,8 @@ const SHOCK_TEST_G: f64 = 3.711;
 /// wheel radius (m).
 fn shock_test_drive() -> (Navigator, f64, f64) {
     let mut config = NavConfig::rocky8([0.0; 3], 0.0);
-    config.align_sun_wait_samples = 0;
-    config.vo_timeout_cycles = u32::MAX;
+    config.align.sun_wait_samples = 0;
+    config.vo.timeout_cycles = u32::MAX;
     let nav = match Navigator::new(config, &[[0.0, 0.0], [100.0, 0.0]], &calibration()) {
         Ok(n) => n,
         Err(e) => panic!("navigator refused: {e:?}"),
@@ -508,7 +520,7 @@ fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
             }
             straight_frame(&mut nav, k, [measured, 0.0, -SHOCK_TEST_G], (x, v, r));
             if i >= 0 && k % 20 == 0 {
-                errors.push((i, nav.ekf.state().v_n.x - v));
+                errors.push((i, nav.filter.ekf_mut().state().v_n.x - v));
             }
         }
         (errors, nav.counters().imu_shocks)
@@ -580,9 +592,9 @@ fn fp_9_a_series_of_shocks_is_reanchored_on_every_axis() {
             [ax, clipped[0], clipped[1] - SHOCK_TEST_G],
             (x, v, r),
         );
-        worst_sigma = worst_sigma.max(nav.horizontal_sigma_m());
+        worst_sigma = worst_sigma.max(nav.filter.horizontal_sigma_m());
         if k as i64 == shock_at[1] + 200 {
-            let s = nav.ekf.state();
+            let s = nav.filter.ekf_mut().state();
             last = (t, [s.v_n.x - v, s.v_n.y, s.v_n.z], worst_sigma);
         }
     }

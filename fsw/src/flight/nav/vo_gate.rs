@@ -17,20 +17,19 @@
 //!    whose covariance does not contain the slip; the allowance does. Threshold: chi-square
 //!    99.9 % for the observed components (22.46 for 6).
 //!
-//! A pose failing either test is not fused. After [`NavConfig::vo_reject_streak`]
+//! A pose failing either test is not fused. After [`super::VoAidingConfig::reject_streak`]
 //! consecutive rejections the next pose is fused anyway, with its covariance scaled by the
 //! smallest `4^n` (`n <= 10`) that passes both tests.
 //!
-//! **Capture policy** ([`Navigator::capture_due`]): a stereo capture is due when the EKF has
-//! travelled [`NavConfig::vo_capture_distance_m`] or rotated [`NavConfig::vo_capture_angle_rad`]
-//! since the last capture, or [`NavConfig::vo_capture_max_interval_us`] has passed (time
+//! **Capture policy** ([`super::VoAiding::capture_due`]): a stereo capture is due when the EKF has
+//! travelled [`super::VoAidingConfig::capture_distance_m`] or rotated [`super::VoAidingConfig::capture_angle_rad`]
+//! since the last capture, or [`super::VoAidingConfig::capture_max_interval_us`] has passed (time
 //! fallback); the first capture is due at once, and while VO has no keyframe (after a VO
-//! failure) a capture is due every [`NavConfig::vo_capture_retry_us`].
+//! failure) a capture is due every [`super::VoAidingConfig::capture_retry_us`].
 
-use super::*;
 use crate::estimation::gate::chi2_999;
 use crate::estimation::GateDecision;
-use crate::types::{Mat3, Mat6};
+use crate::types::{Mat3, Mat6, Quat, RelativePose, Vec3};
 
 /// Largest power `n` of the covariance scale `4^n` tried for a VO pose fused after a streak.
 pub const VO_FORCE_MAX_STEPS: u32 = 10;
@@ -64,7 +63,7 @@ pub struct VoGateStatus {
     pub d2_pose: f64,
     /// Consecutive rejections so far (0 after a fused pose).
     pub consecutive_rejections: u32,
-    /// A streak of [`NavConfig::vo_reject_streak`] rejections was reached: the next pose the
+    /// A streak of [`super::VoAidingConfig::reject_streak`] rejections was reached: the next pose the
     /// gate rejects is fused with inflated covariance ([`VoGateVerdict::Forced`]). Cleared by
     /// that forced fusion or by a pose that passes the gate.
     pub streak: bool,
@@ -147,80 +146,24 @@ pub fn vo_gate_test(
     })
 }
 
-/// Why a capture is due ([`Navigator::capture_due`]).
+/// Why a capture is due ([`super::Navigator::capture_due`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CaptureReason {
-    /// The EKF travelled [`NavConfig::vo_capture_distance_m`] since the last capture.
+    /// The EKF travelled [`super::VoAidingConfig::capture_distance_m`] since the last capture.
     Distance,
-    /// The EKF attitude turned [`NavConfig::vo_capture_angle_rad`] since the last capture.
+    /// The EKF attitude turned [`super::VoAidingConfig::capture_angle_rad`] since the last capture.
     Heading,
-    /// [`NavConfig::vo_capture_max_interval_us`] passed, or no capture yet.
+    /// [`super::VoAidingConfig::capture_max_interval_us`] passed, or no capture yet.
     Time,
 }
 
 /// The EKF pose and time of the last capture.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct CaptureMark {
+pub struct CaptureMark {
+    /// EKF time of the capture, us.
     pub t_us: u64,
+    /// EKF position, m, `N`.
     pub p_n: Vec3,
+    /// EKF attitude (`R` to `N`).
     pub q_nr: Quat,
-}
-
-impl Navigator {
-    /// RG3: whether a stereo capture is due now, and why (H04 sec. 2: VO images every 20-30 cm;
-    /// module doc). `None` when no capture may start ([`Self::wants_capture`]) or none is due.
-    pub fn capture_due(&self) -> Option<CaptureReason> {
-        if !self.wants_capture() {
-            return None;
-        }
-        let x = self.ekf.state();
-        // No capture yet: at once.
-        let Some(last) = self.last_capture else {
-            return Some(CaptureReason::Time);
-        };
-        // The rover stands waiting for a hazard map (hazard navigation): at once.
-        if self.map_wanted_now() {
-            return Some(CaptureReason::Time);
-        }
-        let elapsed = x.t_us.saturating_sub(last.t_us);
-        // VO lost its keyframe (failure, outage): the next VO pose needs a keyframe first, so
-        // the next capture is due after the retry interval, whatever the motion.
-        if self.key_clone.is_none() {
-            let due = elapsed >= self.config.vo_capture_retry_us;
-            return due.then_some(CaptureReason::Time);
-        }
-        let moved = (x.p_n - last.p_n).norm();
-        let turned = (last.q_nr.inverse() * x.q_nr).angle();
-        if moved >= self.config.vo_capture_distance_m {
-            Some(CaptureReason::Distance)
-        } else if turned >= self.config.vo_capture_angle_rad {
-            Some(CaptureReason::Heading)
-        } else if elapsed >= self.config.vo_capture_max_interval_us {
-            Some(CaptureReason::Time)
-        } else {
-            None
-        }
-    }
-
-    /// The VO gate's last verdict and streak state.
-    pub fn vo_gate(&self) -> VoGateStatus {
-        self.vo_gate
-    }
-
-    /// Marks a capture started at the current EKF pose and counts its `reason`.
-    pub(super) fn mark_capture(&mut self, reason: CaptureReason) {
-        let x = self.ekf.state();
-        self.last_capture = Some(CaptureMark {
-            t_us: x.t_us,
-            p_n: x.p_n,
-            q_nr: x.q_nr,
-        });
-        let c = &mut self.counters;
-        let counter = match reason {
-            CaptureReason::Distance => &mut c.captures_distance,
-            CaptureReason::Heading => &mut c.captures_heading,
-            CaptureReason::Time => &mut c.captures_time,
-        };
-        *counter = counter.saturating_add(1);
-    }
 }
