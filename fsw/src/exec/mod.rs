@@ -26,9 +26,11 @@
 //!
 //! Capacities are const generics: `G` rate groups, `T` tasks. Nothing allocates.
 
+mod sliced;
 mod stats;
 
 use rover_hal::Clock;
+pub use sliced::{step_frame_job, FrameJob, FrameKey, Progress};
 pub use stats::TimingStats;
 
 /// Background work in a quantum (ARCHITECTURE sec. 4: long work is a resumable pipeline
@@ -37,7 +39,7 @@ pub use stats::TimingStats;
 /// or an item returns a result, which is returned. `item` gives the cost of the work item it
 /// runs (units of about 10 000 rover-CPU instructions; 0 counts as 1, so at most `quantum`
 /// items run) and the pipeline's result when that item finished it. Used by the visual
-/// odometry and the hazard mapper.
+/// odometry, the hazard mapper and the rectification ([`step_frame_job`]).
 pub fn spend_quantum<R>(quantum: u32, mut item: impl FnMut() -> (u16, Option<R>)) -> Option<R> {
     let mut spent = 0u32;
     while spent < quantum.max(1) {

@@ -71,6 +71,7 @@ impl<P: Platform> Work<'_, P> {
     /// Background: rectify rows of the raw pair in the camera's buffers into the image
     /// memory ([`crate::rectify`]); when the pair is done the camera frame is released and VO
     /// (or the hazard mapper) starts on the rectified pair. Returns the units used.
+    #[inline(never)]
     fn rectify_step(&mut self, quantum: u32) -> u32 {
         let progress = match self.devices.camera.frame() {
             Ok(frame) => self
@@ -186,6 +187,7 @@ impl<P: Platform> Work<'_, P> {
     /// The camera reports the capture of `t_us` ready: a frame of the right time, size and
     /// order is counted good and handed to the rectification (raw pairs) or to VO; otherwise
     /// the capture is lost and the frame released.
+    #[inline(never)]
     fn capture_ready(&mut self, t_us: u64) {
         let health = &mut self.state.health[DeviceId::Camera as usize];
         self.state.capture_pending_t_us = None;

@@ -72,17 +72,9 @@ impl MapWork {
     }
 }
 
-/// What [`HazardMapper::step`] reports.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum MapProgress {
-    /// The map is not finished; call `step` again with the same frame.
-    Working {
-        /// Work items done so far.
-        items: u32,
-    },
-    /// The map is finished ([`HazardMapper::map`] holds it when `Ok`).
-    Finished(Result<(), PerceptionError>),
-}
+/// What [`HazardMapper::step`] reports ([`crate::exec::Progress`]: working, or finished; when
+/// `Ok` [`HazardMapper::map`] holds the map).
+pub type MapProgress = crate::exec::Progress<Result<(), PerceptionError>>;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -132,6 +124,31 @@ pub struct HazardMapper {
     work: MapCounts,
     map: HazardMap,
     map_valid: bool,
+}
+
+impl crate::exec::FrameJob for HazardMapper {
+    type Error = PerceptionError;
+    const NOT_STARTED: PerceptionError = PerceptionError::NotStarted;
+    const FRAME_CHANGED: PerceptionError = PerceptionError::FrameChanged;
+
+    fn running(&self) -> bool {
+        self.phase != Phase::Idle
+    }
+
+    fn frame(&self) -> crate::exec::FrameKey {
+        crate::exec::FrameKey {
+            capture_t_us: self.frame_t_us,
+            sequence: self.frame_sequence,
+        }
+    }
+
+    fn stop(&mut self) {
+        self.phase = Phase::Idle;
+    }
+
+    fn items(&self) -> u32 {
+        self.work.work_items
+    }
 }
 
 impl HazardMapper {
@@ -276,33 +293,23 @@ impl HazardMapper {
     /// must be the frame given to [`Self::start`] ([`PerceptionError::FrameChanged`] otherwise,
     /// which abandons the map).
     pub fn step(&mut self, frame: &StereoFrame, quantum: u32) -> MapProgress {
-        if self.phase == Phase::Idle {
-            return MapProgress::Finished(Err(PerceptionError::NotStarted));
-        }
-        let images = (Image::new(frame.left), Image::new(frame.right));
-        let (Ok(left), Ok(right)) = images else {
-            self.phase = Phase::Idle;
-            return MapProgress::Finished(Err(PerceptionError::FrameChanged));
-        };
-        if frame.capture_t_us != self.frame_t_us || frame.sequence != self.frame_sequence {
-            self.phase = Phase::Idle;
-            return MapProgress::Finished(Err(PerceptionError::FrameChanged));
-        }
-        let done = crate::exec::spend_quantum(quantum, || {
-            let cost = self
-                .next_work()
-                .and_then(|k| self.config.work_cost.get(k as usize).copied())
-                .unwrap_or(1);
-            self.work.work_items = self.work.work_items.saturating_add(1);
-            (cost, self.work_item(&left, &right))
-        });
-        if let Some(result) = done {
-            self.phase = Phase::Idle;
-            return MapProgress::Finished(result);
-        }
-        MapProgress::Working {
-            items: self.work.work_items,
-        }
+        crate::exec::step_frame_job(
+            self,
+            frame,
+            quantum,
+            || match (Image::new(frame.left), Image::new(frame.right)) {
+                (Ok(left), Ok(right)) => Some((left, right)),
+                _ => None,
+            },
+            |m, (left, right)| {
+                let cost = m
+                    .next_work()
+                    .and_then(|k| m.config.work_cost.get(k as usize).copied())
+                    .unwrap_or(1);
+                m.work.work_items = m.work.work_items.saturating_add(1);
+                (cost, m.work_item(left, right))
+            },
+        )
     }
 
     /// Upper bound of the work items of one map: image check, wedge candidates, one item per

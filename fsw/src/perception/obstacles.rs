@@ -490,6 +490,7 @@ fn add_shadow(grid: &TerrainGrid, i: usize, j: usize, shadow_cells: u8, out: &mu
 /// removed to fit [`MAX_POLYGON_VERTICES`]: hull, at most `MAX_POLYGON_VERTICES - GROW_SIDES`
 /// hull vertices, Minkowski sum with the regular [`GROW_SIDES`]-gon of inscribed radius
 /// `radius_m`. `None` for an empty component.
+#[inline(never)]
 pub fn component_polygon(component: &Component, radius_m: f64) -> Option<(ConvexPolygon, u16)> {
     let mut hull = [[0.0f64; 2]; 4 * (GRID_ROWS + 1)];
     let n = component.hull(&mut hull);

@@ -187,17 +187,9 @@ impl Default for RectifyConfig {
     }
 }
 
-/// Progress of [`Rectifier::step`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RectifyProgress {
-    /// Rows remain; `items` done so far for this pair.
-    Working {
-        /// Row items done.
-        items: u32,
-    },
-    /// The pair is rectified (`Ok`) or abandoned.
-    Finished(Result<(), RectifyError>),
-}
+/// Progress of [`Rectifier::step`] ([`crate::exec::Progress`]: rows remain, or the pair is
+/// rectified (`Ok`) or abandoned).
+pub type RectifyProgress = crate::exec::Progress<Result<(), RectifyError>>;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -219,6 +211,31 @@ pub struct Rectifier {
     frame_t_us: u64,
     frame_sequence: u32,
     items: u32,
+}
+
+impl crate::exec::FrameJob for Rectifier {
+    type Error = RectifyError;
+    const NOT_STARTED: RectifyError = RectifyError::NotStarted;
+    const FRAME_CHANGED: RectifyError = RectifyError::FrameChanged;
+
+    fn running(&self) -> bool {
+        self.phase != Phase::Idle
+    }
+
+    fn frame(&self) -> crate::exec::FrameKey {
+        crate::exec::FrameKey {
+            capture_t_us: self.frame_t_us,
+            sequence: self.frame_sequence,
+        }
+    }
+
+    fn stop(&mut self) {
+        self.phase = Phase::Idle;
+    }
+
+    fn items(&self) -> u32 {
+        self.items
+    }
 }
 
 impl Rectifier {
@@ -330,53 +347,44 @@ impl Rectifier {
         memory: &mut impl RectifyMemory,
         quantum: u32,
     ) -> RectifyProgress {
-        if self.phase == Phase::Idle {
-            return RectifyProgress::Finished(Err(RectifyError::NotStarted));
-        }
-        if frame.capture_t_us != self.frame_t_us || frame.sequence != self.frame_sequence {
-            self.phase = Phase::Idle;
-            return RectifyProgress::Finished(Err(RectifyError::FrameChanged));
-        }
-        let (map, left, right) = memory.parts();
         let cost = self.config.row_cost;
-        let done = crate::exec::spend_quantum(quantum, || {
-            let Phase::Rows { camera, row } = self.phase else {
-                return (cost, Some(Err(RectifyError::NotStarted)));
-            };
-            let (raw, out) = if camera == 0 {
-                (frame.left, &mut *left)
-            } else {
-                (frame.right, &mut *right)
-            };
-            let nodes = map
-                .get(usize::from(camera) * LATTICE_NODES..)
-                .and_then(|m| m.get(..LATTICE_NODES));
-            let start = usize::from(row) * W;
-            let (Some(nodes), Some(out_row)) = (nodes, out.get_mut(start..start + W)) else {
-                return (cost, Some(Err(RectifyError::Memory)));
-            };
-            rectify_row(nodes, usize::from(row), raw, out_row);
-            self.items = self.items.saturating_add(1);
-            let next = if usize::from(row) + 1 < H {
-                Phase::Rows {
-                    camera,
-                    row: row + 1,
-                }
-            } else if camera == 0 {
-                Phase::Rows { camera: 1, row: 0 }
-            } else {
-                Phase::Idle
-            };
-            self.phase = next;
-            (cost, (next == Phase::Idle).then_some(Ok(())))
-        });
-        match done {
-            Some(result) => {
-                self.phase = Phase::Idle;
-                RectifyProgress::Finished(result)
-            }
-            None => RectifyProgress::Working { items: self.items },
-        }
+        crate::exec::step_frame_job(
+            self,
+            frame,
+            quantum,
+            || Some(memory.parts()),
+            |r, (map, left, right)| {
+                let Phase::Rows { camera, row } = r.phase else {
+                    return (cost, Some(Err(RectifyError::NotStarted)));
+                };
+                let (raw, out) = if camera == 0 {
+                    (frame.left, &mut **left)
+                } else {
+                    (frame.right, &mut **right)
+                };
+                let nodes = map
+                    .get(usize::from(camera) * LATTICE_NODES..)
+                    .and_then(|m| m.get(..LATTICE_NODES));
+                let start = usize::from(row) * W;
+                let (Some(nodes), Some(out_row)) = (nodes, out.get_mut(start..start + W)) else {
+                    return (cost, Some(Err(RectifyError::Memory)));
+                };
+                rectify_row(nodes, usize::from(row), raw, out_row);
+                r.items = r.items.saturating_add(1);
+                let next = if usize::from(row) + 1 < H {
+                    Phase::Rows {
+                        camera,
+                        row: row + 1,
+                    }
+                } else if camera == 0 {
+                    Phase::Rows { camera: 1, row: 0 }
+                } else {
+                    Phase::Idle
+                };
+                r.phase = next;
+                (cost, (next == Phase::Idle).then_some(Ok(())))
+            },
+        )
     }
 
     /// Row items of one pair.

@@ -155,19 +155,9 @@ impl WorkKind {
     }
 }
 
-/// What [`VisualOdometry::step`] reports.
-// The result is returned by value: there is no heap to box it on.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Progress {
-    /// The update is not finished; call `step` again with the same frame.
-    Working {
-        /// Work items done so far in this update.
-        items: u32,
-    },
-    /// The update is finished (the pipeline is idle again).
-    Finished(Result<VoOutput, VoError>),
-}
+/// What [`VisualOdometry::step`] reports ([`crate::exec::Progress`]: working, or finished with
+/// the update's result; the pipeline is idle again then).
+pub type Progress = crate::exec::Progress<Result<VoOutput, VoError>>;
 
 /// Stereo visual odometry with all buffers preallocated for up to `N` features (H04 sec. 2).
 ///
@@ -232,6 +222,31 @@ fn rotation_and_translation_finite(prior: &RelativePose) -> bool {
     prior.rot_0_1.coords.iter().all(|v| v.is_finite())
         && prior.trans_0_1_m.iter().all(|v| v.is_finite())
         && (prior.rot_0_1.coords.norm() - 1.0).abs() < 1e-6
+}
+
+impl<const N: usize> crate::exec::FrameJob for VisualOdometry<N> {
+    type Error = VoError;
+    const NOT_STARTED: VoError = VoError::NotStarted;
+    const FRAME_CHANGED: VoError = VoError::FrameChanged;
+
+    fn running(&self) -> bool {
+        self.phase != Phase::Idle
+    }
+
+    fn frame(&self) -> crate::exec::FrameKey {
+        crate::exec::FrameKey {
+            capture_t_us: self.frame_t_us,
+            sequence: self.frame_sequence,
+        }
+    }
+
+    fn stop(&mut self) {
+        self.phase = Phase::Idle;
+    }
+
+    fn items(&self) -> u32 {
+        self.quality.work_items
+    }
 }
 
 impl<const N: usize> VisualOdometry<N> {
@@ -446,33 +461,23 @@ impl<const N: usize> VisualOdometry<N> {
     /// The items run depend only on the inputs, never on time. `frame` must be the frame given
     /// to [`Self::start`] ([`VoError::FrameChanged`] otherwise, which abandons the update).
     pub fn step(&mut self, frame: &StereoFrame, quantum: u32) -> Progress {
-        if self.phase == Phase::Idle {
-            return Progress::Finished(Err(VoError::NotStarted));
-        }
-        let images = (Image::new(frame.left), Image::new(frame.right));
-        let (Ok(left), Ok(right)) = images else {
-            self.phase = Phase::Idle;
-            return Progress::Finished(Err(VoError::FrameChanged));
-        };
-        if frame.capture_t_us != self.frame_t_us || frame.sequence != self.frame_sequence {
-            self.phase = Phase::Idle;
-            return Progress::Finished(Err(VoError::FrameChanged));
-        }
-        let done = crate::exec::spend_quantum(quantum, || {
-            let cost = self
-                .next_work()
-                .and_then(|k| self.config.work_cost.get(k as usize).copied())
-                .unwrap_or(1);
-            self.quality.work_items = self.quality.work_items.saturating_add(1);
-            (cost, self.work_item(&left, &right))
-        });
-        if let Some(result) = done {
-            self.phase = Phase::Idle;
-            return Progress::Finished(result);
-        }
-        Progress::Working {
-            items: self.quality.work_items,
-        }
+        crate::exec::step_frame_job(
+            self,
+            frame,
+            quantum,
+            || match (Image::new(frame.left), Image::new(frame.right)) {
+                (Ok(left), Ok(right)) => Some((left, right)),
+                _ => None,
+            },
+            |vo, (left, right)| {
+                let cost = vo
+                    .next_work()
+                    .and_then(|k| vo.config.work_cost.get(k as usize).copied())
+                    .unwrap_or(1);
+                vo.quality.work_items = vo.quality.work_items.saturating_add(1);
+                (cost, vo.work_item(left, right))
+            },
+        )
     }
 
     /// Runs a whole update ([`Self::start`], then [`Self::step`] until finished). For tests and

@@ -212,13 +212,15 @@ impl Bench {
         let p0 = CoreCov::identity() * 1e-4;
         let ekf = ekf_static(start, &p0)?;
         // The flight software's VO tuning (8 px tracking window with the EKF prior).
-        let vo_config = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0).vo;
+        let vo_config = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0)
+            .vo
+            .pipeline;
         let vo = vo_static(vo_config, &header.calibration)?;
         // The flight software's hazard-navigation settings (obstacle growth margin, clearance).
         let nav = fsw::flight::nav::NavConfig::rocky8([0.0; 3], 0.0);
-        let mapper = install_mapper(nav.perception, &header.calibration)?;
+        let mapper = install_mapper(nav.goal.perception, &header.calibration)?;
         let goal = header.waypoints().last().copied()?;
-        let planner = install_planner(nav.planner, goal)?;
+        let planner = install_planner(nav.goal.planner, goal)?;
         let loc = LocBench::install()?;
         let contacts = wheel_contact_points(&ROCKY8, &SuspensionState::default()).ok()?;
         let wheel_xy = contacts.map(|c| [c.x, c.y]);

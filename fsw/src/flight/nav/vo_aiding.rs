@@ -382,6 +382,7 @@ impl VoAiding {
     /// `heading_known`: the EKF heading has had its first sun update, or the drive has no sun
     /// sensor (the VO-only trajectory is anchored only then). Returns true when a pose was
     /// fused.
+    #[inline(never)]
     pub fn finished(
         &mut self,
         capture: Option<CloneHandle>,

@@ -446,11 +446,13 @@ impl Navigator {
 
     /// Background: start a hazard map on `frame` taken at `pose` (rotation `R -> N`, position
     /// in `N`, from the capture clone) when one is due. Returns true when it runs.
+    #[inline(never)]
     fn start_map(&mut self, frame: &StereoFrame, pose: Option<(Quat, Vec3)>) -> bool {
         let (goal, mut ctx) = self.goal_ctx();
         goal.start_map(frame, pose, &mut ctx)
     }
 
+    #[inline(never)]
     fn map_step(&mut self, frame: &StereoFrame, items: u32, quantum: u32) -> (u32, bool) {
         let (goal, mut ctx) = self.goal_ctx();
         let step = goal.map_step(frame, items, quantum, &mut ctx);
@@ -459,6 +461,7 @@ impl Navigator {
         step
     }
 
+    #[inline(never)]
     fn loc_step(&mut self, quantum: u32) -> (u32, bool) {
         let (goal, mut ctx) = self.goal_ctx();
         goal.loc_step(quantum, &mut ctx)
