@@ -228,6 +228,56 @@ pub(super) fn sweep_radius_of(
     crate::linalg::sqrt(reach * reach + w * w)
 }
 
+/// The wedge the planner gets for a map of visible wedge `w` (`N`): the planner keeps its path
+/// inside the wedge it is given, and the rover's body sweeps half its width to each side of
+/// the path, where a narrow hazcam wedge has not looked (a rock approached at 45 deg off the
+/// axis was never in view and was hit: SIL-HAZ-3). So the wedge is eroded by the half-width
+/// plus [`WEDGE_EROSION_MARGIN_M`]: the sector whose points are at least `d` inside both edges
+/// (apex moved forward by `d / sin(alpha)`) and `d` short of the far range.
+fn eroded_wedge(w: &crate::perception::Wedge) -> Wedge {
+    let d = crate::perception::ROVER_HALF_WIDTH_M + WEDGE_EROSION_MARGIN_M;
+    let s = libm::sin(w.half_angle_rad);
+    let shift = if s > 1e-3 { d / s } else { f64::INFINITY };
+    let (sh, ch) = libm::sincos(w.heading_rad);
+    Wedge {
+        apex: [w.apex_m[0] + shift * ch, w.apex_m[1] + shift * sh],
+        heading_rad: w.heading_rad,
+        half_angle_rad: w.half_angle_rad,
+        min_range_m: (w.min_range_m - shift).max(0.0),
+        max_range_m: w.max_range_m - shift - d,
+    }
+}
+
+/// The planner's estimate of the leg left to `goal` (`N`, m) from `position` when it drives a
+/// path (`status` [`PlanStatus::Driving`]) on `waypoints`: from the rover to the path, along
+/// it, then the straight line from the path's end (the sequencer's leg trigger), m.
+fn leg_left(
+    status: PlanStatus,
+    waypoints: Option<&[Point2]>,
+    goal: Option<[f64; 2]>,
+    position: Point2,
+) -> Option<f64> {
+    match (status, waypoints, goal) {
+        (PlanStatus::Driving, Some(w), Some(goal)) => {
+            let along = w
+                .windows(2)
+                .map(|s| match s {
+                    [a, b] => libm::hypot(b[0] - a[0], b[1] - a[1]),
+                    _ => 0.0,
+                })
+                .sum::<f64>();
+            let first = w
+                .first()
+                .map_or(0.0, |a| libm::hypot(a[0] - position[0], a[1] - position[1]));
+            let last = w
+                .last()
+                .map_or(0.0, |b| libm::hypot(goal[0] - b[0], goal[1] - b[1]));
+            Some(first + along + last)
+        }
+        _ => None,
+    }
+}
+
 impl HazardNav {
     /// A new traverse to `goal` (`N`, m; the sequencer's next target): the planner's goal
     /// (its obstacle memory kept), the verdict back to `Driving`. With `face_rad` (the bearing
@@ -462,29 +512,12 @@ impl GoalNav {
             return;
         };
         h.counters.last_obstacles = u32::try_from(map.obstacles.len()).unwrap_or(u32::MAX);
-        // The planner keeps its path inside the wedge it is given; the rover's body sweeps half
-        // its width to each side of the path, where a narrow hazcam wedge has not looked (a
-        // rock of the ring in `unreachable` approached at 45 deg off the axis was never in
-        // view and was hit). So the planner gets the wedge eroded by the half-width plus a
-        // margin: the sector whose points are at least `d` inside both edges (apex moved
-        // forward by `d / sin(alpha)`) and `d` short of the far range.
-        let w = map.wedge;
-        let view = (w.heading_rad, w.half_angle_rad);
-        let d = crate::perception::ROVER_HALF_WIDTH_M + WEDGE_EROSION_MARGIN_M;
-        let s = libm::sin(w.half_angle_rad);
-        let shift = if s > 1e-3 { d / s } else { f64::INFINITY };
-        let (sh, ch) = libm::sincos(w.heading_rad);
-        let wedge = Wedge {
-            apex: [w.apex_m[0] + shift * ch, w.apex_m[1] + shift * sh],
-            heading_rad: w.heading_rad,
-            half_angle_rad: w.half_angle_rad,
-            min_range_m: (w.min_range_m - shift).max(0.0),
-            max_range_m: w.max_range_m - shift - d,
-        };
+        let view = (map.wedge.heading_rad, map.wedge.half_angle_rad);
+        let wedge = eroded_wedge(&map.wedge);
         h.counters.plans = h.counters.plans.saturating_add(1);
         // The obstacles' polygons are built one at a time as the planner takes them (a whole
-        // map's, 16 x 440 B, no longer sits on the stack: issue 18). Polygons the planner did
-        // not take (input refused) are still built to count the refused ones.
+        // map's, 16 x 440 B, would sit on the stack otherwise). Polygons the planner did not take
+        // (input refused) are still built to count the refused ones.
         let mut refused = 0u32;
         let mut polygons =
             map.obstacles
@@ -512,35 +545,41 @@ impl GoalNav {
         let status = out.status;
         let gaze = out.gaze_heading_rad;
         let path = out.path;
-        // The planner's estimate of the leg left to the goal (the sequencer's leg trigger):
-        // its path from the rover, then the straight line from the path's end.
-        let leg_left = match (status, path.as_ref(), h.planner.goal()) {
-            (PlanStatus::Driving, Some(p), Some(goal)) => {
-                let w = p.waypoints();
-                let along = w
-                    .windows(2)
-                    .map(|s| match s {
-                        [a, b] => libm::hypot(b[0] - a[0], b[1] - a[1]),
-                        _ => 0.0,
-                    })
-                    .sum::<f64>();
-                let first = w
-                    .first()
-                    .map_or(0.0, |a| libm::hypot(a[0] - position[0], a[1] - position[1]));
-                let last = w
-                    .last()
-                    .map_or(0.0, |b| libm::hypot(goal[0] - b[0], goal[1] - b[1]));
-                Some(first + along + last)
-            }
-            _ => None,
-        };
+        let leg = leg_left(
+            status,
+            path.as_ref().map(|p| p.waypoints()),
+            h.planner.goal(),
+            position,
+        );
         h.last_output = Some(out);
         h.gaze_rad = None;
+        let waypoints = path.as_ref().map(|p| p.waypoints());
+        self.follow_plan(status, gaze, waypoints, (position, heading), view, ctx);
+        if let Some(remaining) = leg {
+            self.mission_leg(position, remaining);
+        }
+    }
+
+    /// The consequence of one RoverBug step with `status` (module doc): a new guidance path on
+    /// the planner's `waypoints`, a gaze towards `gaze` (rad from north) from the rover's
+    /// `pose` (`N` position m, heading rad) after a map of wedge `view` (axis heading,
+    /// half-angle, rad), the arrival on the line to the goal, or the verdict's stop.
+    fn follow_plan(
+        &mut self,
+        status: PlanStatus,
+        gaze: Option<f64>,
+        waypoints: Option<&[Point2]>,
+        pose: (Point2, f64),
+        view: (f64, f64),
+        ctx: &mut GoalCtx<'_>,
+    ) {
+        let (position, heading) = pose;
+        let Some(h) = self.hazard.as_mut() else {
+            return;
+        };
         match status {
             PlanStatus::Driving => {
-                let guidance = path
-                    .as_ref()
-                    .map(|p| p.waypoints())
+                let guidance = waypoints
                     .and_then(|w| Path::<MAX_WAYPOINTS>::new(w).ok())
                     .and_then(|p| Guidance::new(p, ctx.drive.config().guidance).ok());
                 match guidance {
@@ -590,9 +629,6 @@ impl GoalNav {
                     ctx.mode = Some(ModeRequest::Stop(FaultResponse::PlannerBlocked));
                 }
             }
-        }
-        if let Some(remaining) = leg_left {
-            self.mission_leg(position, remaining);
         }
     }
 
