@@ -1,5 +1,7 @@
 //! Estimator timing on the host: one IMU propagation step (with 3 live clones, the flight
 //! case) and one 5-dof kinematic relative-pose update.
+// A host tool, not flight code: the flight crate's lints for panics and docs do not apply.
+#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use fsw::estimation::{CoreCov, Ekf, EkfConfig, NominalState, MARS_GRAVITY_M_S2};

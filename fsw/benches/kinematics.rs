@@ -1,5 +1,7 @@
 //! Host benchmarks of the kinematics hot path: forward kinematics (eq. 15), inverse kinematics
 //! (eq. 16-25), contact points (eq. 12) and one odometry step.
+// A host tool, not flight code: the flight crate's lints for panics and docs do not apply.
+#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use fsw::kinematics::{

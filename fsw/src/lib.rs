@@ -35,19 +35,10 @@
 //!   (eq. 11), as a resumable pipeline with preallocated buffers.
 #![no_std]
 #![forbid(unsafe_code)]
-#![deny(missing_docs)]
-// No panic path in flight code (issue 18; the image's panic-site count is enforced by
-// `cargo xtask timing`); tests may unwrap.
+// The flight lints are the workspace's (`Cargo.toml`); tests may panic.
 #![cfg_attr(
-    not(test),
-    deny(
-        clippy::unwrap_used,
-        clippy::expect_used,
-        clippy::panic,
-        clippy::unreachable,
-        clippy::todo,
-        clippy::unimplemented
-    )
+    test,
+    allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::unreachable)
 )]
 
 #[cfg(test)]

@@ -25,20 +25,10 @@
 //! types let a device report a reading it knows to be bad without failing the whole call.
 #![no_std]
 // `unsafe` only in the FPU glue ([`fpu`]), where the lint is allowed on the one block.
-#![deny(unsafe_code)]
-#![deny(missing_docs)]
-// No panic path in flight code (issue 18; the image's panic-site count is enforced by
-// `cargo xtask timing`); tests may unwrap.
+// The flight lints are the workspace's (`Cargo.toml`); tests may panic.
 #![cfg_attr(
-    not(test),
-    deny(
-        clippy::unwrap_used,
-        clippy::expect_used,
-        clippy::panic,
-        clippy::unreachable,
-        clippy::todo,
-        clippy::unimplemented
-    )
+    test,
+    allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::unreachable)
 )]
 
 mod camera;
