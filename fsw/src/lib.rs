@@ -25,7 +25,7 @@
 //!   contact points, wheel Jacobians, forward/inverse kinematics, vehicle odometry, planar model.
 //! - [`planning`]: RoverBug path planning (V99 sec. 4): local tangent graph over convex obstacle
 //!   polygons, motion-to-goal and boundary following with virtual sliding and gaze control.
-//! - [`rectify`]: rectification of the raw wide-angle hazcam pair (issue 15 item 4): a
+//! - [`rectify`]: rectification of the raw wide-angle hazcam pair: a
 //!   fixed-point map built once from the lens calibration, applied in background work items.
 //! - [`types`]: shared math types ([`types::RelativePose`]).
 //! - [`guidance`]: carrot heading and slip-compensation loops (H04 sec. 5, H05 sec. V).
@@ -38,7 +38,12 @@
 // The flight lints are the workspace's (`Cargo.toml`); tests may panic.
 #![cfg_attr(
     test,
-    allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::unreachable)
+    allow(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::unreachable
+    )
 )]
 
 #[cfg(test)]

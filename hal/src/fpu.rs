@@ -3,7 +3,7 @@
 //! arithmetic on the caller's quantities.
 //!
 //! `libm::sqrt` is an integer emulation of the square root (about 75 instructions on the
-//! Cortex-M7, issue 18: 21 M instructions over the timing tape, most in the Cholesky factors of
+//! Cortex-M7: 21 M instructions over the timing tape, most in the Cholesky factors of
 //! the VO and the EKF). The Cortex-M7's double-precision FPU has `vsqrt.f64`. Both are
 //! correctly rounded (IEEE 754 requires it of the square root; musl's `sqrt`, which `libm`
 //! ports, is correctly rounded in round-to-nearest, the FPSCR's reset mode), so the host (which

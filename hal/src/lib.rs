@@ -28,7 +28,12 @@
 // The flight lints are the workspace's (`Cargo.toml`); tests may panic.
 #![cfg_attr(
     test,
-    allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::unreachable)
+    allow(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::unreachable
+    )
 )]
 
 mod camera;

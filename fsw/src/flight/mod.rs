@@ -107,7 +107,7 @@ impl FswConfig {
     /// default executive with 60 cost units of background work per minor frame (at most
     /// 0.6 M instructions plus one item; the largest frame measured with its slice takes 80 %
     /// of the 5 ms period at CPI 2.0, where 100 units took 133 %; a VO update with the
-    /// rectification of its pair about 14,000 units, 1.1 s; `docs/timing.md`).
+    /// rectification of its pair about 14,000 units, 1.1 s; `docs/results/timing.md`).
     pub fn rocky8(position: [f64; 3], yaw_rad: f64) -> Self {
         Self {
             exec: ExecConfig {

@@ -271,7 +271,7 @@ impl Platform for PowerPlatform {
         crate::rectify::ImageMemory<std::vec::Vec<crate::rectify::MapNode>, std::vec::Vec<u8>>;
 }
 
-/// HAL-2 (issue 17): the RG4 `power` task keeps and hands to the navigator only plausible
+/// HAL-2: the RG4 `power` task keeps and hands to the navigator only plausible
 /// readings. A decreasing energy, a NaN energy, a reading the device flags invalid, a negative
 /// or infinite bus power, an energy leap (1e300 J, faster than the largest bus power) are
 /// counted invalid, a backwards time stamp and a call error are counted as such, and none of
@@ -462,7 +462,7 @@ fn nav_1_alignment_drive_command_and_sensor_loss_hold() {
     assert!(matches!(nan, Err(NavError::BadConfig)));
 }
 
-/// NAV-2 (issue 14): an IMU worse than the filter is configured for. After alignment the
+/// NAV-2: an IMU worse than the filter is configured for. After alignment the
 /// accelerometer takes a 0.05 m/s^2 bias step along x (5 sigma of the configured turn-on
 /// bias, with the configured bias walk far too small to follow it); VO is off and the VO-loss
 /// fallback disabled, so only the gated kinematics corrects the filter. Without the streak
@@ -552,7 +552,7 @@ fn nav_2_rejection_streak_recovers_a_filter_tuned_too_tight() {
     );
 }
 
-/// NAV-3 (issue 14, RB): a rover slipping 30 % without VO (below the 40 % slip limit). The
+/// NAV-3 (RB): a rover slipping 30 % without VO (below the 40 % slip limit). The
 /// wheels turn for 0.1 m/s while the rover moves at 0.07 m/s; the IMU measures the true accelerations. Without the
 /// stop-and-go drive the VO-loss fallback fuses every kinematic interval (with its slip
 /// allowance) and the filter follows the wheels; with it the rover stops every metre of wheel
@@ -640,7 +640,7 @@ fn nav_3_stop_and_go_without_vo_measures_slip_with_the_imu() {
     );
 }
 
-/// FP-3 (issue 20): a finite but implausible IMU sample (1e6 m/s^2) is refused as invalid; a
+/// FP-3: a finite but implausible IMU sample (1e6 m/s^2) is refused as invalid; a
 /// stamp one hour ahead is refused as a time leap and does not poison the time base (the next
 /// normal readings are accepted); a leap that persists for `resync_readings` readings becomes
 /// the new time base (counted).
@@ -717,7 +717,7 @@ fn fp_3_implausible_values_and_time_leaps() {
     );
 }
 
-/// FP-4 (issue 20): after an accepted IMU time-base change the navigator re-anchors the
+/// FP-4: after an accepted IMU time-base change the navigator re-anchors the
 /// filter's timeline: the next samples of the new base propagate one frame each (no hour-long
 /// gap), the state stays where it was, and the drive goes on.
 #[test]
@@ -756,7 +756,7 @@ fn fp_4_imu_time_rebase_keeps_the_filter() {
     assert!(sigma < 0.5, "position sigma {sigma} m");
 }
 
-/// FP-5 (issue 20): a spike within the sensor's range during the alignment (3 m/s^2 in one of
+/// FP-5: a spike within the sensor's range during the alignment (3 m/s^2 in one of
 /// 400 samples) restarts the alignment instead of being averaged into the attitude; the next
 /// 400 clean samples align.
 #[test]
@@ -918,7 +918,7 @@ fn rect_6_lens_calibration_at_start_vo() {
     assert!(plain.nav().vo().built());
 }
 
-/// Issue 18: a used navigator initialised in place (`Navigator::init`, the rover CPU's way) runs
+/// NAV-4: a used navigator initialised in place (`Navigator::init`, the rover CPU's way) runs
 /// bit for bit as a new one: every field is rewritten, the filter, recorder and VO storage in
 /// place. The sequence: alignment at rest, kinematic intervals, guidance, an IMU gap.
 #[test]

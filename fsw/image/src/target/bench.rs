@@ -640,7 +640,7 @@ impl Bench {
     }
 
     /// A hazard map of `frame` at the EKF pose of its capture clone (work item by work item,
-    /// the sum is the map's cost) and the RoverBug step on it (issue 16).
+    /// the sum is the map's cost) and the RoverBug step on it.
     fn hazard_map_and_plan(&mut self, meter: &mut Meter, f: &FrameInfo, capture: CloneHandle) {
         let Self {
             ekf,

@@ -30,7 +30,7 @@ const MARS_GRAVITY_M_S2: f64 = 3.711;
 /// Minor-frame period, microseconds (simulated sensor time advances by this per SysTick).
 const FRAME_US: u64 = 5_000;
 /// Bus power of the rover standing awake, W: the host simulator's awake power (its truth energy
-/// model, `docs/simulator.md` "Energy model": a standing rover draws nothing for its motors),
+/// model, `docs/simulator.md` "Energy model (`energy.rs`)": a standing rover draws nothing for its motors),
 /// rounded to 0.01 W.
 const STILL_BUS_POWER_W: f64 = 98.37;
 
@@ -349,7 +349,7 @@ impl Clock for SystickClock {
             if before == after && current <= first {
                 // A pending tick counts only once the value has reloaded: QEMU can also raise
                 // the pending bit while the value still reads the end of the period (seen as an
-                // RG2 release one 125,000-count period long in `docs/timing.md`, session 19).
+                // RG2 release one 125,000-count period long in the timing page).
                 // The handler runs within a few instructions of the reload, so a pending tick
                 // with the value in the second half of the period is the reload still to come.
                 let reloaded = into_frame < u64::from(self.reload / 2);
@@ -359,7 +359,7 @@ impl Clock for SystickClock {
                 // instructions after the counter has reloaded: a read in that window sees the
                 // reloaded value without the pending tick, one period behind (it showed as
                 // isolated calls of about 5 M instructions, one 125,000-count period, in
-                // `docs/timing.md`). A reading behind the last one is that window.
+                // `docs/results/timing.md`). A reading behind the last one is that window.
                 if value < self.last {
                     value += u64::from(self.reload);
                 }

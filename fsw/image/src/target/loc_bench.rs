@@ -1,4 +1,4 @@
-//! The terrain-map localization (issue 17, V99 sec. 5; `fsw::localization`) measured on a
+//! The terrain-map localization (V99 sec. 5; `fsw::localization`) measured on a
 //! synthetic rock field, since the tape's scene (a sand slope) has no rocks to match.
 //!
 //! A deterministic field (xorshift64, fixed seed) of [`ROCKS`] rocks, 0.1 to 0.4 m in radius,
@@ -77,7 +77,7 @@ impl LocBench {
         })
     }
 
-    /// [`TRIALS`] replans of the on-board sequencer (issue 17, V99 sec. 3) on random problems
+    /// [`TRIALS`] replans of the on-board sequencer (V99 sec. 3) on random problems
     /// of [`MAX_TARGETS`] targets over 30 m with random priorities, windows, dwells and energy
     /// (the largest plans it takes), each after a leg penalty and, every other one, a
     /// localization request, committed to one target as the navigator's replans are (into

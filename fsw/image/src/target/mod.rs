@@ -76,7 +76,7 @@ fn install_new_fsw(
         ));
         return None;
     }
-    // Terrain-map localization's storage (issue 17, about 82 KB): in external RAM, like the
+    // Terrain-map localization's storage (about 82 KB): in external RAM, like the
     // image buffers (the replayed configuration leaves localization off; the storage is
     // there for a drive that enables it).
     if let Some(store) = take_static!(

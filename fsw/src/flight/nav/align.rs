@@ -230,7 +230,7 @@ impl Aligner {
             return None;
         }
         let n = f64::from(a.count);
-        // Dispersion test (issue 20): a rover that moved, a shock or a spike within the sensor's
+        // Dispersion test (FP-5): a rover that moved, a shock or a spike within the sensor's
         // range would be averaged into the attitude and the gyro bias; restart instead.
         let std = |sum: &[f64; 3], sq: &[f64; 3]| {
             (0..3).fold(0.0_f64, |m, k| {

@@ -1,4 +1,4 @@
-//! Online estimate of the VO translation boresight in yaw (issue 14, "honest estimation").
+//! Online estimate of the VO translation boresight in yaw.
 //!
 //! VO (H04 sec. 2-3, eq. 11) measures the camera's motion and turns it into the rover frame `R`
 //! with the nominal camera-to-rover rotation of the ground calibration. A mounting error of the
@@ -61,10 +61,7 @@ pub struct BoresightConfig {
 }
 
 impl Default for BoresightConfig {
-    /// On (`docs/estimation.md`, "VO boresight learnt as a gyro bias"; it was off while a
-    /// divergence on `cul-de-sac` seed 2 with the lens model was open: that run no longer
-    /// diverges since the replay recording was split by kind, and with the gyro bias walk of
-    /// issue 14 it reaches its goal on seeds 1-3). Window 50 samples (about 50 s at one VO pose per 10 cm), 5 cm
+    /// On (why: note 0018). Window 50 samples (about 50 s at one VO pose per 10 cm), 5 cm
     /// minimum travel, cross slope below 3 deg, roll and pitch under 2 mrad per kinematic
     /// interval, bound 1 deg (ten times the 0.1 deg mounting tolerance class of a surveyed
     /// head), samples within 1 deg of the estimate.

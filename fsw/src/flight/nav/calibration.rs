@@ -14,7 +14,7 @@
 //! [`Calibration::interrupt`]); [`super::VoAiding`] marks the captures
 //! ([`Calibration::capture`]), corrects its poses ([`Calibration::correct`]) and teaches both
 //! from the poses its gate accepted ([`Calibration::learn`]). Why two radius scales:
-//! NOTE(two-radius-scales).
+//! note 0021.
 
 use super::boresight::{Boresight, BoresightConfig};
 use super::radius::{CaptureScale, RadiusScaleConfig};

@@ -113,7 +113,7 @@ impl KinAidingConfig {
             // for the gate and the EKF. The contact-angle estimator (V99 sec. 6) runs as the
             // translation of the 3D kinematic dead reckoning (`contact_translation`) only:
             // its step takes the gyro rotation as an input and its covariance does not
-            // describe its residuals (NOTE(contact-angle-odometry)). The rough-terrain
+            // describe its residuals (note 0029). The rough-terrain
             // inverse kinematics gets the angles estimated over 10 mm windows of travel
             // (`ContactConfig::window_travel_m`).
             odometry: OdometryConfig {
@@ -195,7 +195,7 @@ impl DriveConfig {
             imu_timeout_frames: 20,
             joints_timeout_cycles: 10,
             vo_start_timeout_cycles: 600,
-            // Rough-terrain IK on (NOTE(rough-terrain-ik)).
+            // Rough-terrain IK on (note 0031).
             ik_contact_angles: true,
             ik_contact_max_angle_rad: 1.0,
             ik_contact_min_angle_rad: 0.1,
@@ -210,7 +210,7 @@ impl GoalConfig {
             hazard_avoidance: false,
             // The hazard cells of a rock end where its flank is still below the step and
             // slope limits; its skirt reaches about 0.1 m further, so the margin over the
-            // half-width is 0.3 m (NOTE(obstacle-growth)).
+            // half-width is 0.3 m (note 0034).
             perception: crate::perception::PerceptionConfig {
                 grow_margin_m: 0.3,
                 ..crate::perception::PerceptionConfig::default()

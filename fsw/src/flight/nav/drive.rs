@@ -7,7 +7,7 @@
 //! motor stall, position uncertainty, arrival check, sensor loss), the wait for VO's first
 //! keyframe at the start, and the stop-and-go drive without VO (RB sec. 5, H04 sec. 2): stops
 //! every [`DriveConfig::blind_stop_interval_m`] of wheel travel so that zero-velocity updates
-//! re-anchor the IMU velocity. Why stop-and-go: NOTE(stop-and-go).
+//! re-anchor the IMU velocity. Why stop-and-go: note 0024.
 //!
 //! [`super::Navigator::guidance_cycle`] wires it: the sensor and protection checks first
 //! ([`Drive::protect`]), then the goal-directed navigation's say, then guidance
@@ -58,14 +58,14 @@ pub struct DriveConfig {
     /// windowed contact angles (V99 sec. 6, relative to their mean;
     /// [`crate::kinematics::inverse_kinematics_contact`], Tarokh and McDermott 2005) instead of
     /// contacts below the axles (eq. 16-25); a failing rough-terrain solve falls back to eq.
-    /// 16-25 for that cycle. Why: NOTE(rough-terrain-ik).
+    /// 16-25 for that cycle. Why: note 0031.
     pub ik_contact_angles: bool,
     /// Contact angles at or beyond this magnitude (rad) are taken as 0 by the rough-terrain
     /// inverse kinematics ([`ContactAngles::new`]).
     pub ik_contact_max_angle_rad: f64,
     /// Contact angles below this magnitude (rad) are taken as 0 by the rough-terrain inverse
     /// kinematics, and turns in place always use eq. 16-25 (on flat ground the estimated
-    /// angles are noise). Why: NOTE(rough-terrain-ik).
+    /// angles are noise). Why: note 0031.
     pub ik_contact_min_angle_rad: f64,
 }
 

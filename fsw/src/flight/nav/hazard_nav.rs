@@ -215,7 +215,8 @@ pub fn turn_sweep_radius(geometry: &RoverGeometry) -> f64 {
 
 /// [`turn_sweep_radius`] from the nominal contact points `points` (m, `R`, zero suspension
 /// state) already evaluated (the navigator keeps them: `Trajectories::nominal_points`), so the
-/// RG2 guidance cycle does not run the D-H chain again (issue 18); 0.5 m of reach without them.
+/// navigator computes the sweep once at its initialisation, not in the RG2 guidance cycle; 0.5 m
+/// of reach without them.
 pub(super) fn sweep_radius_of(
     points: Option<[crate::types::Vec3; rover_hal::WHEEL_COUNT]>,
     geometry: &RoverGeometry,

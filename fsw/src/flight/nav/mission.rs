@@ -782,7 +782,7 @@ impl GoalNav {
 
 #[cfg(test)]
 mod tests {
-    //! MISSION-1..3: the sequencer in the navigator (issue 17).
+    //! MISSION-1..6: the sequencer in the navigator.
     use super::*;
     use crate::estimation::CoreCov;
     #[allow(unused_imports)]

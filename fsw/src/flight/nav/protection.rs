@@ -1,4 +1,4 @@
-//! Fault protection of the drive (issue 20; MER-style safe stops): the checks that stop the
+//! Fault protection of the drive (MER-style safe stops): the checks that stop the
 //! rover when going on would be dishonest or unsafe, each a documented response with telemetry.
 //!
 //! | response | trigger | action |

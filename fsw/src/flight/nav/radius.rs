@@ -1,5 +1,4 @@
-//! Online estimate of the effective wheel-radius scale (issue 14 item 3, "estimated scale
-//! states"): the ratio of the EKF's travel to the wheels' travel over intervals the gate
+//! Online estimate of the effective wheel-radius scale (an estimated scale state): the ratio of the EKF's travel to the wheels' travel over intervals the gate
 //! accepted while VO anchors the EKF. On firm ground that is the wheels' effective radius over
 //! the nominal one (manufacturing, wear, sinkage); the kinematic translation is multiplied by
 //! it before the gate and the fusion, so that a systematic radius error is not read as slip.

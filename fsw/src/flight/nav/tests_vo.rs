@@ -333,7 +333,7 @@ fn straight_frame(nav: &mut Navigator, k: u64, accel_m_s2: [f64; 3], (x, v, r): 
     }
 }
 
-/// NAV-VO-5 (issue 14, the learnt gyro bias): a rover driving straight north at 0.1 m/s on
+/// NAV-VO-5 (the learnt gyro bias): a rover driving straight north at 0.1 m/s on
 /// firm level ground with a perfect IMU (no bias) and perfect wheels, VO every second (0.3 s
 /// latency, replayed at capture time), VO exact except that its translation is rotated by
 /// 3.3 mrad (0.19 deg) in yaw, as a camera mounting and principal-point error makes it
@@ -491,7 +491,7 @@ fn shock_test_ramp(t: f64) -> f64 {
     }
 }
 
-/// FP-8 (issue 14, `cul-de-sac` seed 2): an IMU shock whose largest sample the accelerometer
+/// FP-8 (`cul-de-sac` seed 2): an IMU shock whose largest sample the accelerometer
 /// clips at its range leaves 0.39 m/s in the filter's velocity (the shock's samples no longer
 /// sum to the true change). Without the response the kinematic gate reads the difference as
 /// slip, refuses every interval and the velocity error stays; with [`Navigator::imu_shock`]
@@ -547,10 +547,10 @@ fn fp_8_imu_shock_is_reanchored_by_the_kinematics() {
     assert!(at(&with, 780).abs() < 0.005);
 }
 
-/// FP-9 (session 21, `rock-field-crawl` seed 1): a series of IMU shocks, each with samples
+/// FP-9 (`rock-field-crawl` seed 1): a series of IMU shocks, each with samples
 /// clipped on the lateral and the vertical axes, leaves more than 1 m/s in the filter's
 /// velocity, more than one kinematic interval can correct at the shocks' inflated covariance.
-/// With a grace of the two intervals that span the shock (until session 21) the third
+/// With a grace of only the two intervals that span the shock the third
 /// interval's rejection started a slip hold, the hold kept the accepted intervals out of the
 /// filter, and the position sigma grew to the 1 m fault-protection stop; the vertical, which
 /// the kinematics did not observe with VO alive, was never re-anchored. Required: the drive

@@ -16,7 +16,7 @@
 //!   lost after [`VoAidingConfig::timeout_cycles`] (the kinematic aiding then fuses without
 //!   VO, the drive stops and goes).
 //!
-//! Why the VO gate and its forced fusion: NOTE(vo-gate).
+//! Why the VO gate and its forced fusion: note 0002.
 
 use super::calibration::Calibration;
 use super::diagnostics::Trajectories;

@@ -1,7 +1,7 @@
 //! # VO gate and capture policy (H04 sec. 2 and eq. 46)
 //!
 //! **Gate.** Each VO relative pose between two capture clones is tested before it is fused
-//! (`docs/estimation.md`, "VO gate"), on the filter it is applied to (the recorder's snapshot at
+//! (`docs/estimation.md` "In the navigator"; why: note 0002), on the filter it is applied to (the recorder's snapshot at
 //! capture time when the result is replayed, the live filter otherwise), with the innovation
 //! `r = [r_theta; r_p]` and `S = H P H' + R_vo` of eq. 42/46 ([`crate::estimation::Ekf::gate_relative_pose`]):
 //!

@@ -23,8 +23,8 @@
 //! dead reckoning ([`Trajectories`]).
 //!
 //! The reasons and measured effects of the policy's rules are in the design notes
-//! (`docs/notes/`): NOTE(slip-hold), NOTE(crab-allowance), NOTE(shock-grace),
-//! NOTE(vo-loss-fusion), NOTE(stop-and-go).
+//! (`docs/notes/`): notes 0016 (slip hold), 0017 (crab allowance), 0022 (shock grace), 0023
+//! (fusion without VO), 0024 (stop-and-go).
 
 mod policy;
 mod types;
@@ -221,7 +221,7 @@ impl KinAiding {
     /// [`policy::SHOCK_GRACE_INTERVALS`], until [`policy::SHOCK_SETTLED_INTERVALS`] in a row
     /// are accepted): gated at that covariance without a slip hold (a hold in progress ends),
     /// their rejections not counted as slip. Counted in [`KinCounters::imu_shocks`]. Why:
-    /// NOTE(shock-grace).
+    /// note 0022.
     pub fn imu_shock(&mut self, velocity_sigma_m_s: f64, filter: &mut NavFilter) {
         self.counters.imu_shocks = self.counters.imu_shocks.saturating_add(1);
         self.shock_grace = policy::SHOCK_GRACE_INTERVALS;

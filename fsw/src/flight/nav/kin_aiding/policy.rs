@@ -18,7 +18,7 @@ use crate::types::RelativePose;
 /// cross slope (`W sin(cross slope)`), so the allowance scales with it: 0.5 gives `tan 5 deg`
 /// on a 10 deg cross slope, half the crab a Rocky 8 class rover shows there on sand (H05
 /// Fig. 9: about 9 deg), and nothing on level ground, where the wheels' lateral constraint
-/// holds. Measured with the rigid-wheel simulator, seed 1 (`docs/estimation.md`):
+/// holds. Measured with the rigid-wheel simulator, seed 1 (note 0017):
 /// `slope-10-faults` EKF error 10.3 %, 0.45 m cross-track and goal missed without the
 /// allowance, 0.55 %, 0.05 m and goal reached with it; the gate's false alarms on `flat-firm`
 /// without slip 7.8 % without, 8.4 % with it (10.3 % with a constant `tan 5 deg`).
@@ -56,7 +56,7 @@ pub(super) fn slip_holding(config: &KinAidingConfig, reject_history: u32) -> boo
 /// Most kinematic intervals after an IMU shock whose rejections are not slip
 /// ([`KinAiding::imu_shock`]): 20 intervals (1 s of RG2), one slip-hold window of the flight
 /// configuration. The grace ends earlier once [`SHOCK_SETTLED_INTERVALS`] intervals in a row
-/// were accepted (and fused): the velocity is anchored again. Why: NOTE(shock-grace).
+/// were accepted (and fused): the velocity is anchored again. Why: note 0022.
 pub(super) const SHOCK_GRACE_INTERVALS: u8 = 20;
 
 /// Intervals accepted in a row that end an IMU shock's grace: two, so that the interval after

@@ -12,11 +12,11 @@ pub struct KinAidingConfig {
     /// this many RG2 cycles even when the gate accepts them (a slipping rover produces some
     /// intervals whose slip is within the noise; fusing them would teach the filter the crab
     /// angle as a heading error). Their slip vector is zero (H04: no slip when the gate
-    /// accepts); they count in [`KinCounters::kin_held`]. Why: NOTE(slip-hold).
+    /// accepts); they count in [`KinCounters::kin_held`]. Why: note 0016.
     pub slip_hold_cycles: u32,
     /// Statistical trigger of the slip hold: the hold starts only when at least this many of
     /// the last [`Self::slip_hold_cycles`] tested intervals (at most 32) were rejected. Flight
-    /// default 1: any rejection holds. Why: NOTE(slip-hold).
+    /// default 1: any rejection holds. Why: note 0016.
     pub slip_hold_rejections: u32,
     /// Slip allowance of the fusion without VO, as a fraction of the kinematic step.
     pub vo_loss_slip_fraction: f64,
@@ -30,7 +30,7 @@ pub struct KinAidingConfig {
     /// is fused with `(crab_allowance * |sin cross slope| * step)^2` added to its variance
     /// (m^2; `step` the interval's translation, m; the cross slope from the EKF attitude), after
     /// the gate tested the interval at its own covariance. `f64::INFINITY` does not fuse the
-    /// lateral part on a slope at all. Why: NOTE(crab-allowance).
+    /// lateral part on a slope at all. Why: note 0017.
     pub crab_allowance: f64,
     /// Gate rejections in a row, with no VO fused meanwhile, after which the filter's velocity
     /// covariance is inflated (RG2 cycles; [`policy`]'s streak recovery).

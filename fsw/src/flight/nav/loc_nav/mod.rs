@@ -1,4 +1,4 @@
-//! Terrain-map localization in the navigator (V99 sec. 5, issue 17): hazard maps of the
+//! Terrain-map localization in the navigator (V99 sec. 5): hazard maps of the
 //! hazcam pair, accumulated into a local map, are matched against the uplinked global map
 //! ([`crate::localization`]) and the fix is fused into the EKF as an absolute pose at its
 //! capture time (`Ekf::update_absolute_pose`, gated by eq. 46).
@@ -31,7 +31,7 @@ use crate::localization::{GlobalMap, LocalScan, LocalizationError, Localizer, Lo
 use crate::perception::GridFrame;
 
 /// Cost units (10,000 rover-CPU instructions) of one node expansion of the search: up to 8
-/// children of up to [`MAX_POINTS`] point terms (about 60 instructions each, `docs/timing.md`).
+/// children of up to [`MAX_POINTS`] point terms (about 60 instructions each, `docs/results/timing.md`).
 pub const LOC_NODE_COST_UNITS: u32 = 12;
 
 /// Settings of terrain-map localization in the navigator.
