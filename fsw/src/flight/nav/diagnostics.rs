@@ -24,24 +24,24 @@ const DR_MAX_GAP_US: u64 = 50_000;
 pub struct Trajectories {
     /// 3D kinematics: the contact-angle translation (eq. 15 without it) rotated by the EKF
     /// attitude at each interval start, its vertical from the track memory.
-    pub kin3d: PoseEstimate,
+    kin3d: PoseEstimate,
     /// The front axles' remembered paths for `kin3d`'s heave ([`crate::kinematics::track`]).
-    pub track: TrackMemory,
+    track: TrackMemory,
     /// Planar wheel odometry `[north m, east m, yaw rad]`.
-    pub kin2d: [f64; 3],
+    kin2d: [f64; 3],
     /// Dead reckoning: gyro attitude with the wheel odometry step (RB's comparison baseline).
-    pub dr: PoseEstimate,
+    dr: PoseEstimate,
     /// Gyro bias removed by the dead reckoning (the alignment's estimate, held), rad/s.
     dr_bias: Vec3,
     /// Time of the last gyro sample integrated into `dr`, us.
     dr_t_us: Option<u64>,
     /// Samples whose rotation the dead reckoning could not integrate (gap, non-finite).
-    pub dr_gaps: u32,
+    dr_gaps: u32,
     /// VO-only: VO relative poses chained from the EKF pose of the first keyframe.
-    pub vo: Option<PoseEstimate>,
+    vo: Option<PoseEstimate>,
     /// The planar model's wheel contact points (m, `R`, zero suspension state), evaluated once
     /// at initialisation for [`Self::wheel_step`]'s increments; `None` if the geometry has none.
-    pub nominal_points: Option<[Vec3; WHEEL_COUNT]>,
+    nominal_points: Option<[Vec3; WHEEL_COUNT]>,
 }
 
 impl Trajectories {
@@ -157,6 +157,33 @@ impl Trajectories {
         if let Some(axles) = axles_r_m {
             self.track.record(&self.kin3d.p_n, &r_now, axles);
         }
+    }
+
+    /// 3D kinematics: the contact-angle translation rotated by the EKF attitude at each
+    /// interval start, its vertical from the track memory (`N`).
+    pub fn kin3d(&self) -> PoseEstimate {
+        self.kin3d
+    }
+
+    /// Planar wheel odometry `[north m, east m, yaw rad]`.
+    pub fn kin2d(&self) -> [f64; 3] {
+        self.kin2d
+    }
+
+    /// Dead reckoning: gyro attitude with the wheel odometry step (`N`).
+    pub fn dead_reckoning(&self) -> PoseEstimate {
+        self.dr
+    }
+
+    /// The VO-only pose, once started.
+    pub fn vo(&self) -> Option<PoseEstimate> {
+        self.vo
+    }
+
+    /// Steps of the 3D dead reckoning whose vertical the track memory corrected, and steps
+    /// without a match.
+    pub fn track_steps(&self) -> (u32, u32) {
+        (self.track.matched_steps, self.track.unmatched_steps)
     }
 
     /// The planar model's wheel contact points (zero suspension state, m, `R`).

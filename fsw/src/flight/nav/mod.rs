@@ -337,26 +337,26 @@ impl Navigator {
     /// Dead reckoning with the rocker-bogie kinematic translation rotated by the estimator's
     /// attitude at each interval start ("3D kinematics"), `N`.
     pub fn kin3d(&self) -> PoseEstimate {
-        self.diag.kin3d
+        self.diag.kin3d()
     }
 
     /// Planar wheel odometry `[north m, east m, yaw rad]` with its own heading from the wheels,
     /// ignoring the suspension and the terrain ("2D kinematics").
     pub fn kin2d(&self) -> [f64; 3] {
-        self.diag.kin2d
+        self.diag.kin2d()
     }
 
     /// Dead reckoning (RB sec. 6 baseline): the planar wheel-odometry step rotated by the gyro
     /// attitude, integrated from the aligned attitude with the alignment's gyro bias; no
     /// filter, no sun, no VO. `N`, m.
     pub fn dead_reckoning(&self) -> PoseEstimate {
-        self.diag.dr
+        self.diag.dead_reckoning()
     }
 
     /// The VO-only pose: VO relative poses chained from the EKF pose of the first keyframe
     /// after the start or after a VO outage; `None` before the first VO update.
     pub fn vo_pose(&self) -> Option<PoseEstimate> {
-        self.diag.vo
+        self.diag.vo()
     }
 
     /// The EKF pose, or the configured start pose before alignment.
@@ -378,6 +378,7 @@ impl Navigator {
         let v = self.vo.counters();
         let s = self.sun.counters();
         let d = self.drive.counters();
+        let (track_matched, track_unmatched) = self.diag.track_steps();
         NavCounters {
             kin_tested: k.kin_tested,
             kin_rejected: k.kin_rejected,
@@ -416,8 +417,8 @@ impl Navigator {
             blind_stops: d.blind_stops,
             kin_imu_carried: k.kin_imu_carried,
             imu_shocks: k.imu_shocks,
-            track_matched: self.diag.track.matched_steps,
-            track_unmatched: self.diag.track.unmatched_steps,
+            track_matched,
+            track_unmatched,
         }
     }
 

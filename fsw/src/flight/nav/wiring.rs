@@ -203,7 +203,7 @@ impl Navigator {
             };
             (pose, self.kin.slip())
         } else {
-            (self.diag.kin3d, SlipVector::default())
+            (self.diag.kin3d(), SlipVector::default())
         };
         let pose = Pose2 {
             x_m: nav_pose.p_n.x,
