@@ -3,10 +3,10 @@
 //! compensation and prints the comparison.
 
 use clap::{Parser, Subcommand};
-use sim_host::hal_devices::CounterMode;
+use sim_host::closed_loop::{run, RunOptions};
+use sim_host::devices::world::CounterMode;
 use sim_host::output::summary::Summary;
 use sim_host::scenario::Scenario;
-use sim_host::sim::{run, RunOptions};
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -139,7 +139,7 @@ enum Command {
         no_render: bool,
     },
     /// Monte Carlo campaigns: plan, run, gather, local, slurm (docs/campaigns.md).
-    Campaign(sim_host::campaign::cli::CampaignArgs),
+    Campaign(sim_host::commands::campaign::CampaignArgs),
     /// Replay a call tape through the flight software and print per-frame digest lines;
     /// fails unless every frame matches the recording.
     Replay {
@@ -160,9 +160,9 @@ fn record(
 ) -> anyhow::Result<()> {
     let scenario = Scenario::load(&path)?;
     let start = std::time::Instant::now();
-    let recording = sim_host::record::record(
+    let recording = sim_host::commands::record::record(
         &scenario,
-        sim_host::record::RecordOptions {
+        sim_host::commands::record::RecordOptions {
             seconds,
             seed,
             render: !no_render,
@@ -186,7 +186,7 @@ fn record(
 
 fn replay(path: PathBuf, digests: Option<PathBuf>) -> anyhow::Result<()> {
     let tape = std::fs::read(&path)?;
-    let outcome = sim_host::replay::replay(&tape)?;
+    let outcome = sim_host::commands::replay::replay(&tape)?;
     print!("{}", outcome.text);
     if let Some(file) = digests {
         let lines: String = outcome
@@ -203,7 +203,7 @@ fn replay(path: PathBuf, digests: Option<PathBuf>) -> anyhow::Result<()> {
 }
 
 fn still(frames: u64) -> anyhow::Result<()> {
-    let summary = sim_host::run::run_still(frames)?;
+    let summary = sim_host::commands::still::run_still(frames)?;
     println!(
         "sim-host: {} frames, {:.2} s simulated, {} stereo frames, {} cycle slips, {} device faults",
         summary.frames,
@@ -341,7 +341,7 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
     let figure = out.join("fig9-top-view.svg");
     std::fs::write(
         &figure,
-        sim_host::report::compare_figure(&results[0].3, &results[1].3)?,
+        sim_host::output::report::compare_figure(&results[0].3, &results[1].3)?,
     )?;
     println!(
         "  H05 Fig. 9 figure (both runs on one equal-scale top view): {}",
@@ -351,7 +351,7 @@ fn compare(path: PathBuf, seed: Option<u64>, out: Option<PathBuf>) -> anyhow::Re
 }
 
 /// Run one scenario, write its outputs; returns the summary and the run.
-fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunResult)> {
+fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::closed_loop::RunResult)> {
     let RunRequest {
         path,
         seed,
@@ -389,14 +389,15 @@ fn run_scenario(req: RunRequest) -> anyhow::Result<(Summary, sim_host::sim::RunR
         Some(other) => anyhow::bail!("unknown slip model {other:?} (lumped, terramechanics)"),
     }
     let seed_used = seed.unwrap_or(scenario.seed);
-    let renderer: Option<Box<dyn sim_host::camera::StereoRenderer>> = (!no_render).then(|| {
-        let sun = scenario.site.sun_w(0.0);
-        Box::new(sim_host::camera::TexturedRenderer::new(
-            sim_host::devices::hazcam_calibration(),
-            seed_used,
-            [sun.x, sun.y, sun.z],
-        )) as Box<dyn sim_host::camera::StereoRenderer>
-    });
+    let renderer: Option<Box<dyn sim_host::devices::renderer::StereoRenderer>> =
+        (!no_render).then(|| {
+            let sun = scenario.site.sun_w(0.0);
+            Box::new(sim_host::devices::renderer::TexturedRenderer::new(
+                sim_host::devices::hazcam_calibration(),
+                seed_used,
+                [sun.x, sun.y, sun.z],
+            )) as Box<dyn sim_host::devices::renderer::StereoRenderer>
+        });
     let out = out.unwrap_or_else(|| PathBuf::from(format!("out/{}-{seed_used}", scenario.name)));
     let bar = (!json && scenario.duration_s > 30.0).then(|| {
         let bar = indicatif::ProgressBar::new(1000);
@@ -587,11 +588,11 @@ fn sil(out: PathBuf, scenarios: PathBuf, summaries: Option<PathBuf>) -> anyhow::
     use rayon::prelude::*;
     println!(
         "sim-host sil: {} cases with rendered stereo, in parallel",
-        sim_host::sil::CASES.len()
+        sim_host::commands::sil::CASES.len()
     );
-    let results: Vec<_> = sim_host::sil::CASES
+    let results: Vec<_> = sim_host::commands::sil::CASES
         .par_iter()
-        .map(|c| sim_host::sil::run_case(*c, &scenarios))
+        .map(|c| sim_host::commands::sil::run_case(*c, &scenarios))
         .collect::<anyhow::Result<_>>()?;
     if let Some(dir) = &summaries {
         std::fs::create_dir_all(dir)?;
@@ -600,7 +601,7 @@ fn sil(out: PathBuf, scenarios: PathBuf, summaries: Option<PathBuf>) -> anyhow::
             std::fs::write(dir.join(format!("{}.json", r.case.id)), json + "\n")?;
         }
     }
-    let page = sim_host::sil::markdown(&results);
+    let page = sim_host::commands::sil::markdown(&results);
     std::fs::write(&out, &page)?;
     print!("{page}");
     println!("written to {}", out.display());
@@ -612,7 +613,7 @@ fn sil(out: PathBuf, scenarios: PathBuf, summaries: Option<PathBuf>) -> anyhow::
 }
 
 fn detection(out: PathBuf, figure: PathBuf, scenarios: PathBuf) -> anyhow::Result<()> {
-    use sim_host::detection;
+    use sim_host::commands::detection;
     let n = detection::jobs().len();
     println!("sim-host detection: {n} runs with rendered stereo, 2 at a time");
     let study = detection::run_study(&scenarios)?;
@@ -697,8 +698,8 @@ fn main() -> anyhow::Result<()> {
         }) => record(scenario, seconds, seed, out, no_render),
         Some(Command::Replay { tape, digests }) => replay(tape, digests),
         Some(Command::Campaign(args)) => {
-            if !sim_host::campaign::cli::main(args)? {
-                std::process::exit(sim_host::campaign::cli::EXIT_NOT_PASSED);
+            if !sim_host::commands::campaign::main(args)? {
+                std::process::exit(sim_host::commands::campaign::EXIT_NOT_PASSED);
             }
             Ok(())
         }

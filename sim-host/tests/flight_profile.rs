@@ -6,8 +6,8 @@
 use fsw::estimation::ephemeris::SunEphemeris;
 use fsw::estimation::EkfConfig;
 use fsw::flight::FswConfig;
+use sim_host::closed_loop::{flight_config, DriveOptions};
 use sim_host::scenario::Scenario;
-use sim_host::sim::{flight_config, DriveOptions};
 use sim_host::world::World;
 
 fn scenarios() -> Vec<Scenario> {

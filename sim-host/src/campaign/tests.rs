@@ -96,7 +96,7 @@ fn campaign_plan_draws_are_deterministic_and_per_index() {
     assert_eq!(short.entries[..], a.entries[..10]);
     // Bounds, apply modes and the recorded parameters.
     let base = scenario("slope-10-cross");
-    let phi0 = crate::terramechanics::Soil::ishigami_regolith_simulant()
+    let phi0 = crate::soil::terramechanics::Soil::ishigami_regolith_simulant()
         .phi_rad
         .to_degrees();
     let gyro0 = base.sensors.imu.gyro_noise_rad_s;
@@ -232,8 +232,8 @@ fn campaign_world_start_offset_and_seeds() {
     assert!((p1.yaw_rad - p0.yaw_rad - 2f64.to_radians()).abs() < 1e-3);
     // The flight software is given the planned start, not the offset one.
     assert_eq!(
-        crate::sim::Mission::plan(&base),
-        crate::sim::Mission::plan(&off)
+        crate::closed_loop::Mission::plan(&base),
+        crate::closed_loop::Mission::plan(&off)
     );
     // A fixed terrain seed keeps the rocks; a fixed calibration seed keeps the rover unit.
     let rocks = |w: &crate::world::World| w.terrain.rocks().to_vec();

@@ -4,7 +4,7 @@
 //! estimate and the truth over the run.
 
 use super::tum::Trajectory;
-use crate::sim::RunResult;
+use crate::closed_loop::RunResult;
 use serde::Serialize;
 
 /// Five flight estimates.
@@ -536,7 +536,7 @@ pub fn summarise(run: &RunResult) -> Summary {
         }),
         localization: run.localization.as_ref().map(|l| {
             let n = l.checks.len();
-            let mean = |f: &dyn Fn(&crate::sim::LocCheck) -> f64| {
+            let mean = |f: &dyn Fn(&crate::closed_loop::LocCheck) -> f64| {
                 (n > 0).then(|| l.checks.iter().map(f).sum::<f64>() / n as f64)
             };
             LocalizationSummary {

@@ -9,7 +9,7 @@
 //! markers) is evaluated per pixel, independently of the mesh resolution, and lands exactly where
 //! the pinhole model puts it. Pixel `(i, j)` has its centre at `u = i, v = j`.
 
-use super::lens::quantize;
+use super::lens_rig::quantize;
 use super::mesh::Mesh;
 use super::noise::{floor_i64, hash3, mix64, GaussTable, GAUSS_TABLE_LEN};
 use super::RenderSettings;

@@ -7,7 +7,7 @@
 //! contact `c` of wheel `i` has the three rows of [`contact_rows`], normal `a_n`, rolling
 //! tangent `a_t` and lateral `a_l`, which give the velocity of the wheel's material contact
 //! point before its own spin; its **slip velocity** beyond what the soil's slip model
-//! ([`crate::slip`], [`crate::slip_lumped`]) already gives is
+//! ([`crate::soil::per_wheel_slip`], [`crate::soil::lumped_slip`]) already gives is
 //! `u_c = (a_t x - b_t,i, a_l x - b_l,i)`, with `b_t,i` the wheel's ground speed (its rim speed
 //! `r_i theta_dot_i` less the soil slip) and `b_l,i` its sideways slip velocity.
 //!

@@ -1,4 +1,5 @@
-//! Stereo camera device: renders a pair at each trigger from the true camera pose.
+//! The image source of the world's stereo camera ([`crate::devices::world::WorldStereo`]): it
+//! renders a pair at each trigger from the true camera pose.
 //!
 //! The images come from a [`StereoRenderer`]. [`FlatGreyRenderer`] is the renderer used when no
 //! terrain renderer is plugged in: it fills both images with a uniform grey (plus nothing else),
@@ -64,7 +65,7 @@ impl StereoRenderer for FlatGreyRenderer {
 ///
 /// Each frame is drawn with the calibration passed to [`StereoRenderer::render`] (the simulated
 /// camera passes its true head) and the sun of the last [`StereoRenderer::set_sun`]; with
-/// lenses ([`StereoRenderer::set_lens`]) as raw images through [`crate::render::lens::LensRig`]
+/// lenses ([`StereoRenderer::set_lens`]) as raw images through [`crate::render::lens_rig::LensRig`]
 /// (the head's mounting and baseline from the calibration, the intrinsics from the lenses).
 ///
 /// A render error (which only a degenerate pose or calibration can cause) gives black images,
@@ -73,7 +74,7 @@ pub struct TexturedRenderer {
     inner: std::cell::RefCell<crate::render::StereoRenderer>,
     /// Lenses of [`StereoRenderer::set_lens`], and their rig (built at the first frame).
     lens: std::cell::Cell<Option<rover_hal::LensCalibration>>,
-    rig: std::cell::RefCell<Option<crate::render::lens::LensRig>>,
+    rig: std::cell::RefCell<Option<crate::render::lens_rig::LensRig>>,
     texture: std::sync::Arc<crate::render::AlbedoTexture>,
     sun: std::cell::Cell<crate::render::Sun>,
     errors: std::cell::Cell<u64>,
@@ -153,7 +154,7 @@ impl StereoRenderer for TexturedRenderer {
                 let mut rig = self.rig.borrow_mut();
                 if rig.as_ref().map(|r| *r.lens()) != Some(lens) {
                     let settings = *self.inner.borrow().settings();
-                    *rig = crate::render::lens::LensRig::new(lens, calib, settings).ok();
+                    *rig = crate::render::lens_rig::LensRig::new(lens, calib, settings).ok();
                 }
                 match rig.as_mut() {
                     Some(r) => {

@@ -106,12 +106,12 @@ pub fn replay(tape: &[u8]) -> anyhow::Result<ReplayOutcome> {
 #[cfg(test)]
 mod tests {
     use super::replay;
-    use crate::record::{record, RecordOptions};
+    use crate::commands::record::{record, RecordOptions};
     use crate::scenario::Scenario;
     use rover_replay::tape::{decode_record, encode_record, HEADER_BYTES, MAX_RECORD_BYTES};
     use rover_replay::{Call, CallKind, Divergence, Record};
 
-    fn recording(seconds: f64) -> crate::record::Recording {
+    fn recording(seconds: f64) -> crate::commands::record::Recording {
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../scenarios/slope-10-cross.toml"

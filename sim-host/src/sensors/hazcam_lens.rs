@@ -29,11 +29,11 @@
 //! own coefficients and intrinsics. The raw cameras are aligned with the rectified frame
 //! (`R_AK = I`; EuRoC's relative rotation of 0.2 deg is left out: the rendered head keeps its
 //! parallel cameras). With this lens the raw field is wider than the rectified one (barrel
-//! distortion): the rectified 640 x 480 pinhole image of [`super::camera_model`] lies inside
+//! distortion): the rectified 640 x 480 pinhole image of [`super::hazcam`] lies inside
 //! both raw images with at least 8 px to spare (the right camera's bottom edge), and the raw corners see about 54 deg off axis.
 //!
 //! # Per-unit errors (the real lens against its calibration)
-//! - The head's focal-length and principal-point errors of [`super::camera_model`]
+//! - The head's focal-length and principal-point errors of [`super::hazcam`]
 //!   (0.2 %, 0.5 px 1-sigma) apply to both raw cameras alike (as they did to the rectified pair).
 //! - Each camera's distortion coefficients get their own error: each of `k1, k2, k3, p1, p2`
 //!   with the 1-sigma that moves the corner of the rectified field by
@@ -58,13 +58,13 @@ const EUROC_HEIGHT_PX: f64 = 480.0;
 
 /// One EuRoC camera carried over to the 640 x 480 sensor (module doc).
 fn euroc_scaled(f: [f64; 2], c: [f64; 2], d: [f64; 4]) -> RawCamera {
-    let s = super::camera_model::WIDTH_PX / EUROC_WIDTH_PX;
+    let s = super::hazcam::WIDTH_PX / EUROC_WIDTH_PX;
     let centre = |n: f64| 0.5 * (n - 1.0);
     RawCamera {
         fx_px: f[0] * s,
         fy_px: f[1] * s,
-        cx_px: centre(super::camera_model::WIDTH_PX) + s * (c[0] - centre(EUROC_WIDTH_PX)),
-        cy_px: centre(super::camera_model::HEIGHT_PX) + s * (c[1] - centre(EUROC_HEIGHT_PX)),
+        cx_px: centre(super::hazcam::WIDTH_PX) + s * (c[0] - centre(EUROC_WIDTH_PX)),
+        cy_px: centre(super::hazcam::HEIGHT_PX) + s * (c[1] - centre(EUROC_HEIGHT_PX)),
         k1: d[0],
         k2: d[1],
         k3: 0.0,
@@ -288,7 +288,7 @@ pub fn unit_ray(c: &RawCamera, u: f64, v: f64) -> Option<Vector3<f64>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sensors::camera_model::nominal_hazcam;
+    use crate::sensors::hazcam::nominal_hazcam;
     use rand::SeedableRng;
 
     /// SIM-LENS-1: distortion and its inverse round-trip within 0.01 px over the whole raw

@@ -6,12 +6,12 @@
 //! Every case renders the stereo images (the flight VO runs on them) and uses the simulated
 //! time as the execution counter, so the figures are deterministic for a scenario and seed.
 
-use crate::camera::{StereoRenderer, TexturedRenderer};
+use crate::closed_loop::{run, RunOptions};
 use crate::devices::hazcam_calibration;
-use crate::hal_devices::CounterMode;
+use crate::devices::renderer::{StereoRenderer, TexturedRenderer};
+use crate::devices::world::CounterMode;
 use crate::output::summary::{summarise, Summary};
 use crate::scenario::Scenario;
-use crate::sim::{run, RunOptions};
 use std::path::Path;
 
 /// How a measured value is compared with its threshold.

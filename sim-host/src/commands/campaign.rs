@@ -1,6 +1,6 @@
 //! The `campaign` subcommand of `sim-host`: `plan`, `run`, `gather`, `local`, `slurm`.
 
-use super::{exec, html, plan, slurm, stats};
+use crate::campaign::{exec, html, plan, slurm, stats};
 use clap::{Args, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 

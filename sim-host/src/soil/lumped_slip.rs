@@ -2,8 +2,8 @@
 //! angle for the whole vehicle from the slope along and across it, applied to every wheel on
 //! the ground by the rolling solve. Its lateral constant `k_lat` was chosen so that 10 deg of
 //! sand gives the drift of H05 Fig. 9, and its contact patch is a fixed assumption; the
-//! default per-wheel terramechanics model ([`crate::slip`], `slip_model = "terramechanics"`,
-//! the rigid-wheel law of [`crate::rigid_wheel`]) derives both from published soil values
+//! default per-wheel terramechanics model ([`crate::soil::per_wheel_slip`], `slip_model = "terramechanics"`,
+//! the rigid-wheel law of [`crate::soil::rigid_wheel`]) derives both from published soil values
 //! (see `docs/simulator.md`). This model is kept for comparison with earlier results.
 //!
 //! What follows is the model: how much the rover's ground velocity falls short of
@@ -32,7 +32,7 @@
 //! slips carry an Ornstein-Uhlenbeck perturbation (standard deviation `noise`, correlation time
 //! `noise_tau_s`), drawn from the simulator's slip random stream.
 
-use crate::slip::SlipState;
+use crate::soil::per_wheel_slip::SlipState;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};

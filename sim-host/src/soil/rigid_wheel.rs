@@ -3,7 +3,7 @@
 //! *Mobile Robots in Rough Terrain*, Springer 2004; Ishigami, Miwa, Nagatani, Yoshida,
 //! J. Field Robotics 24(3), 2007). See `docs/terramechanics.md` for the equations, parameters
 //! and simplifications; the conventions (slip ratio, slip angle) are those of
-//! [`crate::terramechanics`].
+//! [`crate::soil::terramechanics`].
 //!
 //! Angles `theta` are measured on the rim from the vertical through the axle, positive towards
 //! the front; the soil touches the rim from the exit angle `theta_2 <= 0` to the entry angle
@@ -31,7 +31,7 @@
 //! angle when a run starts, so the six wheels at 200 Hz cost a few table look-ups each; tests
 //! check the table against the exact functions.
 
-use crate::terramechanics::{Soil, Wheel};
+use crate::soil::terramechanics::{Soil, Wheel};
 
 /// Number of bisection iterations (interval width / 2^40).
 const BISECTION_ITERATIONS: usize = 40;
@@ -596,7 +596,7 @@ impl WheelTable {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::terramechanics::{MARS_GRAVITY, ROCKY8_MASS_KG};
+    use crate::soil::terramechanics::{MARS_GRAVITY, ROCKY8_MASS_KG};
 
     fn soils() -> [(&'static str, Soil); 4] {
         [
@@ -895,7 +895,9 @@ mod tests {
 #[cfg(test)]
 mod figures {
     use super::*;
-    use crate::terramechanics::{rocker_bogie_loads, LoadInput, MARS_GRAVITY, ROCKY8_MASS_KG};
+    use crate::soil::terramechanics::{
+        rocker_bogie_loads, LoadInput, MARS_GRAVITY, ROCKY8_MASS_KG,
+    };
 
     /// Largest slope a single wheel of `wheel` carrying the weight share `w` can climb: the
     /// largest `theta` at which the drawbar pull at 100 % slip under `w cos theta` still

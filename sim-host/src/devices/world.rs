@@ -1,7 +1,7 @@
 //! The `rover-hal` devices of the simulated rover, reading the shared [`World`] and applying
 //! the scenario's injected faults. The flight software sees only these readings.
 
-use crate::camera::StereoRenderer;
+use crate::devices::renderer::StereoRenderer;
 use crate::devices::CaptureProtocol;
 use crate::sensors::faults::{FaultDevice, FaultKind};
 use crate::world::World;
@@ -354,7 +354,7 @@ impl Power for WorldPower {
 }
 
 /// Stereo camera device: renders the pair at the trigger from the true camera pose with the
-/// true head (the world's [`crate::sensors::camera_model::HazcamModel::truth`], this seed's
+/// true head (the world's [`crate::sensors::hazcam::HazcamModel::truth`], this seed's
 /// calibration errors included) and the sun at the trigger time, and completes
 /// `latency_polls` polls later. [`StereoCamera::calibration`] gives the nominal head (what the
 /// ground calibration file says), never the true one; with lenses the images are raw (through
@@ -522,7 +522,7 @@ impl StereoCamera for WorldStereo {
     }
 }
 
-/// The telemetry faults of `world` as a [`CountingTelemetry`] refusal hook: `refuse` answers
+/// The telemetry faults of `world` as a [`crate::devices::CountingTelemetry`] refusal hook: `refuse` answers
 /// `ErrorKind::Busy`, `dropout` `ErrorKind::Timeout`, inside their windows.
 pub fn telemetry_faults(world: SharedWorld) -> crate::devices::TelemetryRefusal {
     Box::new(move || {

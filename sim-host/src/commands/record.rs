@@ -9,13 +9,13 @@
 //! recorder writes the frame's digest ([`fsw_image::flight_replay::frame_digest`]), so a replay
 //! on any CPU can check itself frame by frame.
 
-use crate::camera::{StereoRenderer, TexturedRenderer};
-use crate::devices::{hazcam_calibration, CountingTelemetry};
-use crate::hal_devices::{
+use crate::closed_loop::{run_with, RunHooks, RunOptions, WorldPlatform};
+use crate::devices::renderer::{StereoRenderer, TexturedRenderer};
+use crate::devices::world::{
     CounterMode, WorldClock, WorldImu, WorldMobility, WorldPower, WorldStereo, WorldSun,
 };
+use crate::devices::{hazcam_calibration, CountingTelemetry};
 use crate::scenario::Scenario;
-use crate::sim::{run_with, RunHooks, RunOptions, WorldPlatform};
 use crate::world::FRAME_US;
 use fsw::flight::{Devices, Fsw, Platform};
 use fsw_image::flight_replay::frame_digest;
@@ -371,7 +371,8 @@ fn header(scenario: &Scenario, seed: u64, frames: u64) -> anyhow::Result<TapeHea
     if scenario.waypoints.len() > MAX_WAYPOINTS {
         anyhow::bail!("a tape holds at most {MAX_WAYPOINTS} waypoints");
     }
-    let config = crate::sim::flight_config(scenario, crate::sim::DriveOptions::default());
+    let config =
+        crate::closed_loop::flight_config(scenario, crate::closed_loop::DriveOptions::default());
     let nav = &config.nav;
     let mut waypoints = [[0.0; 2]; MAX_WAYPOINTS];
     for (dst, src) in waypoints.iter_mut().zip(&scenario.waypoints) {
@@ -388,7 +389,7 @@ fn header(scenario: &Scenario, seed: u64, frames: u64) -> anyhow::Result<TapeHea
         seed,
         calibration: hazcam_calibration(),
         // The camera reports the nominal lenses unless the scenario has ideal ones.
-        lens: (!scenario.sensors.ideal_lens).then(crate::sensors::lens::nominal_lens),
+        lens: (!scenario.sensors.ideal_lens).then(crate::sensors::hazcam_lens::nominal_lens),
         // The planned start (the flight configuration's), not the truth.
         start_pose: [
             nav.initial_position_n_m[0],

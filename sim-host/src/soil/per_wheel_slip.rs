@@ -20,7 +20,7 @@
 //! 3. **Per-wheel slip.** Wheel `i` carries `N_i = lambda w_i W` and must deliver the drawbar
 //!    pull `T_i = mu w_i W` (the rigid-wheel drawbar pull already contains the wheel's own
 //!    compaction resistance) and the side force `Y_i = nu w_i W`. Its slip ratio and slip angle
-//!    invert the Wong-Reece / Ishigami rigid-wheel model of [`crate::rigid_wheel`] (through a
+//!    invert the Wong-Reece / Ishigami rigid-wheel model of [`crate::soil::rigid_wheel`] (through a
 //!    per-wheel [`WheelTable`] built when the run starts) under its own load: the slip ratio at
 //!    zero slip angle, the slip angle at that slip ratio, then both once more (the shear moduli
 //!    and the lateral shear depend on both); so the six wheels slip differently. A wheel that
@@ -34,8 +34,8 @@
 //! Per seed the soil parameters (`c`, `phi`, `K`, `K_y`, `k_phi`) are scaled by
 //! `1 + N(0, sigma)` with `sigma` = 5 % (an assumption on soil variability between sites).
 
-use crate::rigid_wheel::WheelTable;
-use crate::terramechanics::{
+use crate::soil::rigid_wheel::WheelTable;
+use crate::soil::terramechanics::{
     rocker_bogie_loads, LoadInput, Soil, Wheel, MARS_GRAVITY, ROCKY8_MASS_KG, WONG_REECE_SAND_A0,
     WONG_REECE_SAND_A1,
 };
@@ -133,7 +133,7 @@ pub struct WheelGround {
 pub struct WheelSlip {
     /// Normal load, N.
     pub load_n: f64,
-    /// Longitudinal slip ratio (`[-1, 1]`, see [`crate::terramechanics`]).
+    /// Longitudinal slip ratio (`[-1, 1]`, see [`crate::soil::terramechanics`]).
     pub slip_ratio: f64,
     /// Slip angle, rad (positive: sliding towards the wheel's `+y`).
     pub slip_angle_rad: f64,

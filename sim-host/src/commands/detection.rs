@@ -11,12 +11,12 @@
 //! ([`RunOptions::configure`]). It writes `docs/slip-detection.md` and
 //! `docs/figures/slip-detection.svg`.
 
-use crate::camera::{StereoRenderer, TexturedRenderer};
+use crate::closed_loop::{run, RunOptions, RunResult};
 use crate::devices::hazcam_calibration;
-use crate::hal_devices::CounterMode;
+use crate::devices::renderer::{StereoRenderer, TexturedRenderer};
+use crate::devices::world::CounterMode;
 use crate::output::summary::{summarise, Summary};
 use crate::scenario::Scenario;
-use crate::sim::{run, RunOptions, RunResult};
 use crate::terrain::BaseShape;
 use std::fmt::Write as _;
 use std::path::Path;

@@ -1,9 +1,9 @@
-//! Run the flight software on the simulated devices and summarise the executive's statistics.
+//! `sim-host still`: the flight software on the devices of a rover standing still ([`crate::devices::standing`]), and the executive's statistics per rate group.
 
-use crate::devices::{
-    ConstantPower, CountingTelemetry, FixedSun, GreyStereo, SimClock, SimTime, StillImu,
-    StillMobility,
+use crate::devices::standing::{
+    ConstantPower, FixedSun, GreyStereo, SimClock, SimTime, StillImu, StillMobility,
 };
+use crate::devices::CountingTelemetry;
 use fsw::exec::ExecConfig;
 use fsw::flight::{Devices, Fsw, FswConfig, Platform};
 

@@ -24,7 +24,7 @@
 //! | mounting angles of the head (roll, pitch, yaw about `x_R`, `y_R`, `z_R`) | 0.1 deg | simulator assumption (camera-to-body alignment after a fiducial survey) |
 //! | mounting position of the head (per axis of `R`) | 2 mm | simulator assumption, the same figure as the vehicle dimension errors and the total-station accuracy of H04 (2 mm) |
 //!
-//! With the wide-angle lenses ([`super::lens`], the default) the focal-length and
+//! With the wide-angle lenses ([`super::hazcam_lens`], the default) the focal-length and
 //! principal-point errors move to the two raw cameras (alike), and each camera's lens gets its
 //! own distortion-coefficient errors; the flight software rectifies with the nominal lenses.
 //! Not modelled: a relative rotation between the raw cameras.
@@ -178,21 +178,21 @@ pub struct HazcamModel {
     pub truth: StereoCalibration,
     /// Truth minus nominal.
     pub errors: CameraErrors,
-    /// The raw cameras' lenses ([`super::lens`]); `None`: ideal lenses, the camera delivers the
+    /// The raw cameras' lenses ([`super::hazcam_lens`]); `None`: ideal lenses, the camera delivers the
     /// rectified pinhole pair (the model before the lenses, kept for comparison).
-    pub lens: Option<super::lens::LensModel>,
+    pub lens: Option<super::hazcam_lens::LensModel>,
 }
 
 impl HazcamModel {
     /// The head of one seed: errors drawn from `rng` with `tol` when `enabled`, else none;
-    /// wide-angle lenses ([`super::lens`]) unless `ideal_lens`, their per-camera errors drawn
+    /// wide-angle lenses ([`super::hazcam_lens`]) unless `ideal_lens`, their per-camera errors drawn
     /// with `lens_tol` when `enabled`. The draws are taken in every case (the lens draws after
     /// the head's) so that switching the errors or the lenses off changes nothing else.
     pub fn new(
         enabled: bool,
         tol: &CameraTolerances,
         ideal_lens: bool,
-        lens_tol: &super::lens::LensTolerances,
+        lens_tol: &super::hazcam_lens::LensTolerances,
         rng: &mut ChaCha8Rng,
     ) -> Self {
         let nominal = nominal_hazcam();
@@ -202,8 +202,8 @@ impl HazcamModel {
         } else {
             CameraErrors::default()
         };
-        let lens_nominal = super::lens::nominal_lens();
-        let lens_drawn = super::lens::draw_truth(
+        let lens_nominal = super::hazcam_lens::nominal_lens();
+        let lens_drawn = super::hazcam_lens::draw_truth(
             &lens_nominal,
             &nominal,
             errors.focal_rel,
@@ -211,7 +211,7 @@ impl HazcamModel {
             lens_tol,
             rng,
         );
-        let lens = (!ideal_lens).then_some(super::lens::LensModel {
+        let lens = (!ideal_lens).then_some(super::hazcam_lens::LensModel {
             nominal: lens_nominal,
             truth: if enabled { lens_drawn } else { lens_nominal },
         });

@@ -1,9 +1,9 @@
-//! Raw images through the wide-angle lenses ([`crate::sensors::lens`]).
+//! Raw images through the wide-angle lenses ([`crate::sensors::hazcam_lens`]).
 //!
 //! Method: the pinhole pair is rendered (without noise) at a size that covers the whole raw
 //! field of both cameras, with the focal length of the raw cameras' centre (so the image centre
 //! is sampled at the raw density); then each raw pixel `(i, j)` of camera `c` takes the value
-//! of its ray there: the ray is `lens::ray(c, i, j)` (the lens model inverted by Newton's
+//! of its ray there: the ray is `hazcam_lens::ray(c, i, j)` (the lens model inverted by Newton's
 //! method, once per head: a map of pinhole coordinates per raw pixel), the pinhole image is
 //! interpolated bilinearly at the ray's projection, and the image noise is added per raw
 //! pixel (the same Gaussian table and hashing as the pinhole renderer), rounded half up and
@@ -11,7 +11,7 @@
 
 use super::noise::{hash3, mix64};
 use super::{CameraPose, FilteredAlbedo, RenderError, RenderSettings, RenderStats, Sun};
-use crate::sensors::lens;
+use crate::sensors::hazcam_lens;
 use rayon::prelude::*;
 use rover_hal::{LensCalibration, RawCamera, StereoCalibration, IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX};
 
@@ -79,7 +79,7 @@ impl CoverImage {
                 .flat_map(|i| [(i, 0), (i, h - 1)])
                 .chain((0..h).flat_map(|j| [(0, j), (w - 1, j)]));
             for (i, j) in border {
-                let r = lens::ray(c, i as f64, j as f64)?;
+                let r = hazcam_lens::ray(c, i as f64, j as f64)?;
                 if r[2] <= 1e-6 {
                     return None;
                 }
@@ -144,7 +144,7 @@ impl LensRig {
                 .into_par_iter()
                 .map(|n| {
                     let (i, j) = (n % IMAGE_WIDTH_PX, n / IMAGE_WIDTH_PX);
-                    match lens::ray(c, i as f64, j as f64) {
+                    match hazcam_lens::ray(c, i as f64, j as f64) {
                         Some(r) if r[2] > 1e-6 => [
                             (cover.c_px[0] + cover.f_px * r[0] / r[2]) as f32,
                             (cover.c_px[1] + cover.f_px * r[1] / r[2]) as f32,

@@ -1,5 +1,5 @@
 //! `report.html`: one self-contained page of a run with figures drawn by `plotters`
-//! ([`crate::plot`]): the top view at equal scale (path, truth, EKF, VO, kinematics, rocks),
+//! ([`crate::figure`]): the top view at equal scale (path, truth, EKF, VO, kinematics, rocks),
 //! the cross-track error, the EKF position and heading errors with the filter's own 3-sigma
 //! bounds, the slip (flight estimate against truth), the slip gate (decisions over time, NIS
 //! against the chi-square threshold), the flight slip vector, the VO relative-pose errors,
@@ -9,9 +9,9 @@
 //! [`compare_figure`] draws the main command's figure in the style of H05 Fig. 9: the runs with
 //! and without slip compensation on one equal-scale top view with the path.
 
+use crate::closed_loop::{Estimates, Record, RunResult};
+use crate::figure::{render, Figure, Layer, Mark, Stroke, YLabels, FIG_W};
 use crate::output::summary::Summary;
-use crate::plot::{render, Figure, Layer, Mark, Stroke, YLabels, FIG_W};
-use crate::sim::{Estimates, Record, RunResult};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::fmt::Write as _;

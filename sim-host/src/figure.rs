@@ -1,4 +1,5 @@
-//! Report figures drawn with `plotters` (SVG backend, no font rendering: the SVG carries
+//! The SVG figures of the run reports, the campaign report and the generated results pages,
+//! drawn with `plotters` (SVG backend, no font rendering: the SVG carries
 //! `<text>` elements the browser lays out).
 //!
 //! A [`Figure`] is one chart: line, point, band, bar and disc layers, its title above, the

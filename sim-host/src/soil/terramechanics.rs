@@ -1,7 +1,7 @@
 //! Soil and wheel parameters, and the quasi-static wheel loads of a rocker-bogie: ground-truth
 //! building blocks for the vehicle model (see `docs/terramechanics.md` for the equations, the
 //! parameter sources and the simplifications). The wheel-soil force law is in
-//! [`crate::rigid_wheel`].
+//! [`crate::soil::rigid_wheel`].
 //!
 //! **Conventions.**
 //! - Units are SI: m, N, Pa, rad. The soil's friction angle is stored in **radians**
@@ -23,7 +23,7 @@ use nalgebra::{Matrix6, Vector3, Vector6};
 pub const MARS_GRAVITY: f64 = 3.711;
 
 /// Pressure-sinkage (Bekker), shear (Mohr-Coulomb / Janosi-Hanamoto) and stress-distribution
-/// (Wong-Reece) parameters of a soil, as the rigid-wheel model of [`crate::rigid_wheel`] uses
+/// (Wong-Reece) parameters of a soil, as the rigid-wheel model of [`crate::soil::rigid_wheel`] uses
 /// them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Soil {
