@@ -19,7 +19,7 @@ use crate::output::summary::{summarise, Summary};
 use crate::scenario::Scenario;
 use crate::terrain::BaseShape;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Seeds of every run (not the scenario's seed 1, which the other tests and docs use).
 pub const SEEDS: [u64; 2] = [21, 22];
@@ -782,6 +782,44 @@ pub fn svg(study: &Study) -> anyhow::Result<String> {
 
 fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow::anyhow!("plot: {e:?}")
+}
+
+/// `sim-host detection [OPTIONS]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct DetectionArgs {
+    /// Results page to write.
+    #[arg(long, default_value = "docs/slip-detection.md")]
+    pub out: PathBuf,
+    /// Figure to write (SVG).
+    #[arg(long, default_value = "docs/figures/slip-detection.svg")]
+    pub figure: PathBuf,
+    /// Directory of the scenario files.
+    #[arg(long, default_value = "scenarios")]
+    pub scenarios: PathBuf,
+}
+
+/// Run `sim-host detection`: the study, its page (written and printed) and its figure.
+pub fn main(args: DetectionArgs) -> anyhow::Result<()> {
+    let n = jobs().len();
+    println!("sim-host detection: {n} runs with rendered stereo, 2 at a time");
+    let study = run_study(&args.scenarios)?;
+    let page = markdown(&study, READING);
+    let svg = svg(&study)?;
+    for path in [&args.out, &args.figure] {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)?;
+        }
+    }
+    std::fs::write(&args.out, &page)?;
+    std::fs::write(&args.figure, &svg)?;
+    print!("{page}");
+    println!(
+        "written to {} and {} ({:.0} s wall time)",
+        args.out.display(),
+        args.figure.display(),
+        study.wall_time_s
+    );
+    Ok(())
 }
 
 #[cfg(test)]

@@ -1,8 +1,10 @@
 //! The subcommands of the main command (`sim-host <command>`), one module each: its options
-//! (`clap`), what it runs and what it prints or writes.
+//! (`clap`), what it runs and what it prints or writes. `main.rs` only dispatches.
 //!
-//! - `run` and `compare` (in `main.rs`): one scenario in closed loop; a scenario with and
-//!   without slip compensation, compared.
+//! - [`run`]: one scenario in closed loop, its outputs and summary table; [`run::RunFlags`] are
+//!   the options of a run, shared with [`compare`].
+//! - [`compare`]: the main command's default: a scenario with and without slip compensation,
+//!   compared, with the H05 Fig. 9 top view.
 //! - [`still`]: the flight executive on a rover standing still (per-rate-group timing).
 //! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
 //! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
@@ -13,8 +15,10 @@
 //! - [`campaign`]: Monte Carlo campaigns (plan, run, gather, local, slurm; [`crate::campaign`]).
 
 pub mod campaign;
+pub mod compare;
 pub mod detection;
 pub mod record;
 pub mod replay;
+pub mod run;
 pub mod sil;
 pub mod still;

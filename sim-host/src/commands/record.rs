@@ -30,6 +30,7 @@ use rover_replay::tape::{
 use rover_replay::TapeHeader;
 use rover_replay::{Call, Digest, FrameInfo, FrameOutputs, ImagesRef, MobilityOutput, Record};
 use std::cell::RefCell;
+use std::path::PathBuf;
 use std::rc::Rc;
 
 /// The tape being written, shared by the recording devices.
@@ -404,4 +405,52 @@ fn header(scenario: &Scenario, seed: u64, frames: u64) -> anyhow::Result<TapeHea
         waypoint_count: scenario.waypoints.len() as u8,
         scenario: name,
     })
+}
+
+/// `sim-host record SCENARIO --out TAPE [OPTIONS]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RecordArgs {
+    /// Scenario file (TOML).
+    pub scenario: PathBuf,
+    /// Simulated seconds to record.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Seed (default: the scenario's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Tape file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Uniform grey images instead of rendered ones.
+    #[arg(long)]
+    pub no_render: bool,
+}
+
+/// Run `sim-host record`: write the tape and print what it holds.
+pub fn main(args: RecordArgs) -> anyhow::Result<()> {
+    let scenario = Scenario::load(&args.scenario)?;
+    let start = std::time::Instant::now();
+    let recording = record(
+        &scenario,
+        RecordOptions {
+            seconds: args.seconds,
+            seed: args.seed,
+            render: !args.no_render,
+        },
+    )?;
+    let out = args.out;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    std::fs::write(&out, &recording.tape)?;
+    println!(
+        "sim-host record {}: {} frames, {} stereo pairs, {} bytes in {} ({:.1} s)",
+        scenario.name,
+        recording.digests.len(),
+        recording.image_pairs,
+        recording.tape.len(),
+        out.display(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
 }

@@ -12,6 +12,7 @@ use rover_replay::devices::{
 use rover_replay::tape::SliceSource;
 use rover_replay::{Divergence, Player};
 use std::cell::RefCell;
+use std::path::PathBuf;
 use std::rc::Rc;
 
 type Tape = Rc<RefCell<Player>>;
@@ -101,6 +102,36 @@ pub fn replay(tape: &[u8]) -> anyhow::Result<ReplayOutcome> {
         divergence: replay.divergence(),
         text,
     })
+}
+
+/// `sim-host replay TAPE [--digests FILE]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ReplayArgs {
+    /// Tape file written by `record`.
+    pub tape: PathBuf,
+    /// Also write the digest of every frame, one hex value per line, to this file.
+    #[arg(long)]
+    pub digests: Option<PathBuf>,
+}
+
+/// Run `sim-host replay`: print the digest lines; fails unless every frame matches the
+/// recording.
+pub fn main(args: ReplayArgs) -> anyhow::Result<()> {
+    let tape = std::fs::read(&args.tape)?;
+    let outcome = replay(&tape)?;
+    print!("{}", outcome.text);
+    if let Some(file) = args.digests {
+        let lines: String = outcome
+            .digests
+            .iter()
+            .map(|d| format!("{d:016x}\n"))
+            .collect();
+        std::fs::write(file, lines)?;
+    }
+    if !outcome.passed() {
+        anyhow::bail!("the replay does not reproduce the recording");
+    }
+    Ok(())
 }
 
 #[cfg(test)]

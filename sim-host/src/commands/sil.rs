@@ -12,7 +12,7 @@ use crate::devices::renderer::{StereoRenderer, TexturedRenderer};
 use crate::devices::world::CounterMode;
 use crate::output::summary::{summarise, Summary};
 use crate::scenario::Scenario;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// How a measured value is compared with its threshold.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -1398,4 +1398,48 @@ pub fn markdown(results: &[CaseResult]) -> String {
         );
     }
     s
+}
+
+/// `sim-host sil [OPTIONS]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SilArgs {
+    /// Results page to write.
+    #[arg(long, default_value = "docs/sil-results.md")]
+    pub out: PathBuf,
+    /// Directory of the scenario files.
+    #[arg(long, default_value = "scenarios")]
+    pub scenarios: PathBuf,
+    /// Also write each case's `summary.json` into this directory, as `<case id>.json`.
+    #[arg(long)]
+    pub summaries: Option<PathBuf>,
+}
+
+/// Run `sim-host sil`: every case in parallel, the results page (written and printed), and
+/// the summaries; fails when a requirement fails.
+pub fn main(args: SilArgs) -> anyhow::Result<()> {
+    use rayon::prelude::*;
+    println!(
+        "sim-host sil: {} cases with rendered stereo, in parallel",
+        CASES.len()
+    );
+    let results: Vec<_> = CASES
+        .par_iter()
+        .map(|c| run_case(*c, &args.scenarios))
+        .collect::<anyhow::Result<_>>()?;
+    if let Some(dir) = &args.summaries {
+        std::fs::create_dir_all(dir)?;
+        for r in &results {
+            let json = serde_json::to_string_pretty(&r.summary)?;
+            std::fs::write(dir.join(format!("{}.json", r.case.id)), json + "\n")?;
+        }
+    }
+    let page = markdown(&results);
+    std::fs::write(&args.out, &page)?;
+    print!("{page}");
+    println!("written to {}", args.out.display());
+    if results.iter().all(|r| r.passed()) {
+        Ok(())
+    } else {
+        anyhow::bail!("a SIL requirement failed")
+    }
 }

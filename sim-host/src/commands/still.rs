@@ -109,3 +109,35 @@ pub fn run_still(frames: u64) -> anyhow::Result<RunSummary> {
         device_faults: state.health.iter().map(|h| h.faults()).sum(),
     })
 }
+
+/// `sim-host still [--frames N]`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StillArgs {
+    /// Number of 5 ms minor frames.
+    #[arg(long, default_value_t = 2000)]
+    pub frames: u64,
+}
+
+/// Run `sim-host still` and print the per-rate-group counts and execution times.
+pub fn main(args: StillArgs) -> anyhow::Result<()> {
+    let summary = run_still(args.frames)?;
+    println!(
+        "sim-host: {} frames, {:.2} s simulated, {} stereo frames, {} cycle slips, {} device faults",
+        summary.frames,
+        summary.sim_time_s,
+        summary.stereo_frames,
+        summary.cycle_slips,
+        summary.device_faults
+    );
+    println!(
+        "{:<6} {:>8} {:>10} {:>10} {:>9}",
+        "group", "runs", "max_us", "mean_us", "overruns"
+    );
+    for g in &summary.groups {
+        println!(
+            "{:<6} {:>8} {:>10} {:>10} {:>9}",
+            g.name, g.runs, g.max_us, g.mean_us, g.overruns
+        );
+    }
+    Ok(())
+}
