@@ -432,3 +432,57 @@ pub(super) fn record<P: Platform>(w: &World, path: &[[f64; 2]], fsw: &Fsw<P>) ->
         est: estimates(fsw),
     }
 }
+
+/// Per-rate-group timing of the flight executive at the end of a run.
+pub(super) fn group_timing<const G: usize, const T: usize>(
+    exec: &fsw::exec::Executive<G, T>,
+) -> Vec<GroupTiming> {
+    exec.groups()
+        .iter()
+        .enumerate()
+        .map(|(g, state)| GroupTiming {
+            name: state.config.name.to_string(),
+            runs: state.runs,
+            max_us: state.timing.max_us,
+            mean_us: state.timing.mean_us(),
+            overruns: exec
+                .tasks()
+                .iter()
+                .filter(|t| t.config.group == g)
+                .map(|t| t.timing.overruns)
+                .sum(),
+        })
+        .collect()
+}
+
+/// What terrain-map localization did, from the navigator at the end of a run.
+pub(super) fn localization_run(
+    nav: &fsw::flight::nav::Navigator,
+    map: &crate::descent_map::DescentMap,
+    inserted: usize,
+    checks: Vec<LocCheck>,
+) -> LocalizationRun {
+    LocalizationRun {
+        counters: nav.localization_counters(),
+        map_points: inserted,
+        map_features: map.features_mapped,
+        checks,
+        last_error: nav.last_localization_error().map(|e| format!("{e:?}")),
+    }
+}
+
+/// What the hazard maps and the planner did on a drive from `a` to the goal `b`, from the
+/// navigator at the end of a run.
+pub(super) fn planner_run(
+    nav: &fsw::flight::nav::Navigator,
+    a: [f64; 2],
+    b: [f64; 2],
+) -> PlannerRun {
+    PlannerRun {
+        verdict: nav.planner_verdict(),
+        hazard: nav.hazard_counters(),
+        planner: nav.planner_counters(),
+        straight_line_m: (b[0] - a[0]).hypot(b[1] - a[1]),
+        last_status: nav.planner_output().map(|o| format!("{:?}", o.status)),
+    }
+}

@@ -18,26 +18,24 @@
 use crate::scenario::SlipModelKind;
 use crate::scenario::{Scenario, Site};
 use crate::sensors::encoders::EncoderParams;
-use crate::sensors::faults::{FaultDevice, FaultKind, Faults};
+use crate::sensors::faults::Faults;
 use crate::sensors::hazcam::HazcamModel;
 use crate::sensors::imu::ImuModel;
 use crate::sensors::sun::SunParams;
 use crate::soil::lumped_slip::LumpedSlip;
-use crate::soil::per_wheel_slip::centre_of_mass;
-use crate::soil::per_wheel_slip::{SlipModel, SlipState, WheelGround, WheelSlip};
+use crate::soil::per_wheel_slip::SlipModel;
 use crate::soil::terramechanics::{Wheel, ROCKY8_MASS_KG};
 use crate::surface::TerrainSurface;
 use crate::terrain::Terrain;
-use crate::vehicle::contact::{face_contact, ground_contact_below, WheelContact, EDGE_PROBE_M};
-use crate::vehicle::forces::{solve_quasi_static, ForceContact, Friction, QuasiStatic, Weight};
+use crate::vehicle::contact::WheelContact;
+use crate::vehicle::forces::{ForceContact, Friction, QuasiStatic};
 use crate::vehicle::geometry::{rocky8, TruthGeometry, VehicleGeometry, WheelPose, WHEELS};
 use crate::vehicle::motors::MotorParams;
 use crate::vehicle::placement::{
-    place, place_cached, BodyPose, JointLimits, Placement, PlacementJacobian, Suspension,
-    LIFTED_ANGLE_RAD,
+    place, BodyPose, JointLimits, Placement, PlacementJacobian, Suspension,
 };
-use crate::vehicle::rolling::{RollingContact, CONTACT_TOLERANCE_M};
-use nalgebra::{Rotation3, Vector3};
+use crate::vehicle::rolling::RollingContact;
+use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -229,13 +227,6 @@ pub struct World {
 /// Nominal wheel radius of the averaged wheel odometry, m (the published Rocky 8 figure).
 const NOMINAL_WHEEL_RADIUS_M: f64 = 0.10;
 
-/// Two contacts of one wheel are distinct when their normals differ by more than about 10 deg
-/// (cosine below this).
-const DISTINCT_COS: f64 = 0.985;
-/// A wheel whose contact is more than this off the vertical below its axle (on an edge or a
-/// face) is also searched for the ground below, up to this much short of that contact, rad.
-const BELOW_ANGLE_RAD: f64 = 0.35;
-
 /// Friction of the wheel contacts for the force model, from the soil of the slip model:
 /// Coulomb `mu = tan(phi)` of the soil's friction angle (Wong, *Theory of Ground Vehicles*,
 /// Table 2.3, as the soil presets give it) and the creep slip `2 K / L` of the Janosi-Hanamoto
@@ -274,11 +265,12 @@ fn friction_of(slip: &Slip) -> Friction {
     }
 }
 
-impl World {
-    /// Build the world of `scenario` for `seed`.
-    pub fn new(scenario: &Scenario, seed: u64) -> anyhow::Result<Self> {
+impl Streams {
+    /// Streams for `seed`; with `unit` (a rover unit's calibration seed) its calibration and
+    /// manufacturing errors come from that seed instead.
+    fn for_unit(seed: u64, unit: Option<u64>) -> Self {
         let mut streams = Streams::new(seed);
-        if let Some(unit) = scenario.calibration_seed {
+        if let Some(unit) = unit {
             // One rover unit: its calibration and manufacturing errors from their own seed.
             let cal = Streams::new(unit);
             streams.geometry = cal.geometry;
@@ -286,35 +278,94 @@ impl World {
             streams.imu_calibration = cal.imu_calibration;
             streams.wheel_radius = cal.wheel_radius;
         }
+        streams
+    }
+}
+
+/// The truth vehicle geometry: Rocky 8's published dimensions with this seed's dimension
+/// errors and the wheels' individual radius errors (each from its own stream).
+fn truth_geometry(scenario: &Scenario, streams: &mut Streams) -> TruthGeometry {
+    let sigma = scenario.sensors.dimension_error_m;
+    let sigma_wheel = scenario.sensors.wheel_radius_error_m;
+    rocky8()
+        .perturbed(|_| {
+            let n: f64 = StandardNormal.sample(&mut streams.geometry);
+            sigma * n
+        })
+        .with_wheel_radius_errors(|_| {
+            let n: f64 = StandardNormal.sample(&mut streams.wheel_radius);
+            sigma_wheel * n
+        })
+}
+
+/// The slip model of `scenario` with the per-seed soil draw.
+fn slip_of(
+    scenario: &Scenario,
+    geometry: &TruthGeometry,
+    streams: &mut Streams,
+) -> anyhow::Result<Slip> {
+    Ok(match scenario.slip_model {
+        SlipModelKind::Lumped => Slip::Lumped(LumpedSlip::new(
+            scenario.soil.lumped()?,
+            scenario.slip,
+            &mut streams.slip,
+        )),
+        SlipModelKind::Terramechanics => Slip::Terramechanics(SlipModel::new(
+            scenario.soil.bekker()?,
+            geometry.wheel_radius_m,
+            scenario.slip,
+            &mut streams.slip,
+        )),
+    })
+}
+
+/// The start placement: the planned start plus the scenario's start offset (0 by default),
+/// each wheel set on the ground.
+fn start_placement(
+    scenario: &Scenario,
+    terrain: &Terrain,
+    geometry: &TruthGeometry,
+    limits: &JointLimits,
+) -> Placement {
+    let [planned, next] = [scenario.waypoints[0], scenario.waypoints[1]];
+    // The true start: the planned one plus the scenario's start offset (0 by default).
+    let offset = scenario.start_offset;
+    let start = [planned[0] + offset.north_m, planned[1] + offset.east_m];
+    let yaw = (next[1] - planned[1]).atan2(next[0] - planned[0]) + offset.yaw_deg.to_radians();
+    // Start height for the placement, which then sets each wheel on the ground.
+    let r = geometry.mean_wheel_radius_m();
+    let pose = BodyPose {
+        pos_m: [
+            start[0],
+            start[1],
+            -(terrain.height_m(start[0], start[1]) + r),
+        ],
+        yaw_rad: yaw,
+        pitch_rad: 0.0,
+        roll_rad: 0.0,
+    };
+    let steer = [0.0; WHEELS];
+    place(
+        geometry,
+        terrain,
+        &pose,
+        &Suspension::default(),
+        &steer,
+        limits,
+    )
+}
+
+impl World {
+    /// Build the world of `scenario` for `seed`.
+    pub fn new(scenario: &Scenario, seed: u64) -> anyhow::Result<Self> {
+        let mut streams = Streams::for_unit(seed, scenario.calibration_seed);
         let terrain = Terrain::new(
             scenario.terrain.clone(),
             scenario.terrain_seed.unwrap_or(seed),
             &scenario.waypoints,
         );
-        let sigma = scenario.sensors.dimension_error_m;
-        let sigma_wheel = scenario.sensors.wheel_radius_error_m;
-        let geometry = rocky8()
-            .perturbed(|_| {
-                let n: f64 = StandardNormal.sample(&mut streams.geometry);
-                sigma * n
-            })
-            .with_wheel_radius_errors(|_| {
-                let n: f64 = StandardNormal.sample(&mut streams.wheel_radius);
-                sigma_wheel * n
-            });
-        let slip = match scenario.slip_model {
-            SlipModelKind::Lumped => Slip::Lumped(LumpedSlip::new(
-                scenario.soil.lumped()?,
-                scenario.slip,
-                &mut streams.slip,
-            )),
-            SlipModelKind::Terramechanics => Slip::Terramechanics(SlipModel::new(
-                scenario.soil.bekker()?,
-                geometry.wheel_radius_m,
-                scenario.slip,
-                &mut streams.slip,
-            )),
-        };
+        let geometry = truth_geometry(scenario, &mut streams);
+        let slip = slip_of(scenario, &geometry, &mut streams)?;
         let energy = crate::energy::EnergyMeter::new(crate::energy::EnergyModel::for_slip(&slip));
         let imu = ImuModel::new(
             scenario.sensors.imu,
@@ -328,33 +379,8 @@ impl World {
             &scenario.sensors.lens_tolerances,
             &mut streams.camera,
         );
-        let [planned, next] = [scenario.waypoints[0], scenario.waypoints[1]];
-        // The true start: the planned one plus the scenario's start offset (0 by default).
-        let offset = scenario.start_offset;
-        let start = [planned[0] + offset.north_m, planned[1] + offset.east_m];
-        let yaw = (next[1] - planned[1]).atan2(next[0] - planned[0]) + offset.yaw_deg.to_radians();
-        // Start height for the placement, which then sets each wheel on the ground.
-        let r = geometry.mean_wheel_radius_m();
-        let pose = BodyPose {
-            pos_m: [
-                start[0],
-                start[1],
-                -(terrain.height_m(start[0], start[1]) + r),
-            ],
-            yaw_rad: yaw,
-            pitch_rad: 0.0,
-            roll_rad: 0.0,
-        };
         let limits = JointLimits::rocky8();
-        let steer = [0.0; WHEELS];
-        let p = place(
-            &geometry,
-            &terrain,
-            &pose,
-            &Suspension::default(),
-            &steer,
-            &limits,
-        );
+        let p = start_placement(scenario, &terrain, &geometry, &limits);
         let mut world = Self {
             sim_overhead_ns: std::cell::Cell::new(0),
             terrain,
@@ -433,363 +459,6 @@ impl World {
         match self.wheels {
             Some(p) => p.map(|w| [w.axle_m.x, w.axle_m.y]),
             None => [[0.0; 2]; WHEELS],
-        }
-    }
-
-    /// Advance the world by one minor frame.
-    pub fn step(&mut self) {
-        let dt = FRAME_US as f64 * 1e-6;
-        let t = &mut self.truth;
-        for i in 0..WHEELS {
-            t.steer_rad[i] =
-                self.steer_motor
-                    .step(t.steer_rad[i], self.command.steer_angle_rad[i], dt);
-            t.wheel_rate_rad_s[i] =
-                self.drive_motor
-                    .step(t.wheel_rate_rad_s[i], self.command.wheel_rate_rad_s[i], dt);
-            // A stalled motor does not turn its wheel whatever the command (the vehicle drags
-            // the wheel: its rim speed is zero in the rolling solve below).
-            if self
-                .faults
-                .active_wheel(FaultDevice::Motors, FaultKind::Stall, t.t_us, i)
-                .is_some()
-            {
-                t.wheel_rate_rad_s[i] = 0.0;
-            }
-            t.wheel_angle_rad[i] += t.wheel_rate_rad_s[i] * dt;
-        }
-        // Contacts of the last placement, in R, with the current steering.
-        self.update_wheels();
-        let Some(wheels) = self.wheels else {
-            return;
-        };
-        let pose0 = self.truth.pose;
-        let rot = pose0.rot_w_from_r();
-        let rot_inv = rot.inverse();
-        let contacts: [RollingContact; WHEELS] = std::array::from_fn(|i| {
-            RollingContact::new(
-                self.truth.clearance_m[i] < CONTACT_TOLERANCE_M,
-                rot_inv * self.contacts[i].normal_w,
-                wheels[i].spin_axis,
-            )
-        });
-        // Every contact of every wheel for the force model: the placement's contact, and on
-        // terrain with vertical faces also a step face within the edge probe (ahead or behind)
-        // and the ground below a wheel whose contact is on a face or edge (a wheel standing on
-        // the ground and pressed against a face touches both).
-        let p0 = Vector3::from(pose0.pos_m);
-        let mut all_contacts: Vec<ForceContact> = Vec::with_capacity(3 * WHEELS);
-        // The same contacts in `W` (for the placement).
-        let mut world_contacts: Vec<WheelContact> = Vec::with_capacity(3 * WHEELS);
-        let mut primary_index = [0; WHEELS];
-        for i in 0..WHEELS {
-            primary_index[i] = all_contacts.len();
-            all_contacts.push(ForceContact {
-                wheel: i,
-                contact: contacts[i],
-            });
-            world_contacts.push(self.contacts[i]);
-            if !self.terrain.has_edges() {
-                continue;
-            }
-            let c = p0 + rot * wheels[i].axle_m;
-            let spin = rot * wheels[i].spin_axis;
-            let r_wheel = self.geometry.wheel_radius_m(i);
-            let primary = self.contacts[i];
-            let mut extra = |k: &WheelContact| {
-                let distinct = all_contacts
-                    .iter()
-                    .filter(|f| f.wheel == i)
-                    .all(|f| f.contact.normal.dot(&(rot_inv * k.normal_w)) < DISTINCT_COS);
-                if distinct {
-                    world_contacts.push(*k);
-                    all_contacts.push(ForceContact {
-                        wheel: i,
-                        contact: RollingContact::new(
-                            true,
-                            rot_inv * k.normal_w,
-                            wheels[i].spin_axis,
-                        ),
-                    });
-                }
-            };
-            for direction in [1.0, -1.0] {
-                if let Some(k) = face_contact(&self.terrain, &c, &spin, r_wheel, direction) {
-                    if k.clearance_m < EDGE_PROBE_M {
-                        extra(&k);
-                    }
-                }
-            }
-            if primary.angle_rad.abs() > BELOW_ANGLE_RAD {
-                let below = ground_contact_below(
-                    &self.terrain,
-                    &c,
-                    &spin,
-                    r_wheel,
-                    primary.angle_rad.abs() - BELOW_ANGLE_RAD,
-                );
-                if below.clearance_m < CONTACT_TOLERANCE_M {
-                    extra(&below);
-                }
-            }
-        }
-        // Per-wheel slip from the loads and the soil. A wheel's rim speed is its own radius
-        // times its rate.
-        let r = self.geometry.wheel_radius_m;
-        let ground: [WheelGround; WHEELS] = std::array::from_fn(|i| WheelGround {
-            touching: contacts[i].touching,
-            point: rot_inv * (self.contacts[i].point_w - Vector3::from(pose0.pos_m)),
-            normal: contacts[i].normal,
-            tangent: contacts[i].tangent,
-            spin: contacts[i].spin,
-            rim_speed_m_s: r[i] * self.truth.wheel_rate_rad_s[i],
-        });
-        let gravity_r = rot_inv * Vector3::z();
-        let (wheel_slip, slip) = match &mut self.slip {
-            Slip::Terramechanics(m) => m.wheel_slips(
-                &self.geometry,
-                self.truth.suspension.rocker_rad,
-                &ground,
-                &gravity_r,
-            ),
-            Slip::Lumped(m) => {
-                // Slopes along the motion and across the body, from gravity in R.
-                let forward: f64 = ground.iter().map(|g| g.rim_speed_m_s).sum();
-                let dir = if forward >= 0.0 { 1.0 } else { -1.0 };
-                let slope_along = (-gravity_r.x * dir).clamp(-1.0, 1.0).asin();
-                let slope_cross = gravity_r.y.clamp(-1.0, 1.0).asin();
-                let state = m.step(slope_along, slope_cross, dt, &mut self.streams.slip);
-                (lumped_wheels(&ground, &state), state)
-            }
-        };
-        // Slip override (fault `ground`/`slip`): the wheel's ground speed is `1 - value` of its
-        // rim speed whatever the soil (value 1: the wheel spins in place).
-        let (mut wheel_slip, mut slip) = (wheel_slip, slip);
-        let mut overridden = 0;
-        for i in 0..WHEELS {
-            if let Some(f) =
-                self.faults
-                    .active_wheel(FaultDevice::Ground, FaultKind::Slip, self.truth.t_us, i)
-            {
-                let s = f.value();
-                let w = &mut wheel_slip[i];
-                w.ground_speed_m_s = (1.0 - s) * ground[i].rim_speed_m_s;
-                w.lateral_m_s *= 1.0 - s;
-                w.slip_ratio = s;
-                overridden += 1;
-            }
-        }
-        if overridden == WHEELS {
-            slip.slip_ratio = wheel_slip.iter().map(|w| w.slip_ratio).sum::<f64>() / WHEELS as f64;
-        }
-        let ground_speed = wheel_slip.map(|w| w.ground_speed_m_s);
-        let slip_factor: [f64; WHEELS] = std::array::from_fn(|i| {
-            let rim = ground[i].rim_speed_m_s;
-            if rim.abs() > 1e-9 {
-                ground_speed[i] / rim
-            } else {
-                1.0
-            }
-        });
-        let lateral = wheel_slip.map(|w| w.lateral_m_s);
-        let s0 = self.truth.suspension;
-        let quasi = solve_quasi_static(
-            &self.geometry,
-            &wheels,
-            s0.rocker_rad,
-            s0.bogie_rad,
-            &all_contacts,
-            &ground_speed,
-            &slip_factor,
-            &lateral,
-            &self.friction,
-            &Weight {
-                weight_n: ROCKY8_MASS_KG * MARS_GRAVITY_M_S2,
-                centre_of_mass_m: centre_of_mass(),
-                gravity_r,
-            },
-        );
-        // A quasi-static rover cannot move faster than its wheels drive it. When the placement
-        // of the last step did not converge the force balance can become singular and return an
-        // absurd twist (km/s, seen once on a dense rock field); such a step falls back to the
-        // kinematic least squares of all contacts (`solve_rolling`) and is counted.
-        let max_rim = ground
-            .iter()
-            .map(|g| g.rim_speed_m_s.abs())
-            .fold(0.0, f64::max);
-        let plausible = |t: &crate::vehicle::rolling::Twist| {
-            let finite = t.v.iter().chain(t.w.iter()).all(|x| x.is_finite())
-                && t.suspension_rad_s.iter().all(|x| x.is_finite());
-            finite
-                && t.v.norm() <= 3.0 * max_rim + 0.05
-                && t.w.norm() <= 15.0 * max_rim + 0.25
-                && t.suspension_rad_s
-                    .iter()
-                    .all(|x| x.abs() <= 15.0 * max_rim + 0.25)
-        };
-        let twist = if plausible(&quasi.twist) {
-            quasi.twist
-        } else {
-            self.force_fallbacks += 1;
-            crate::vehicle::rolling::solve_rolling(
-                &self.geometry,
-                &wheels,
-                s0.rocker_rad,
-                s0.bogie_rad,
-                &contacts,
-                &ground_speed,
-                &slip_factor,
-                &lateral,
-            )
-        };
-        // The quasi-static balance has no inertia: where it has no static solution (a wheel
-        // whose contact switches on a steep flank, a rover turning in place on 20 deg sand) it
-        // returned a twist of several m/s for a step or two (14 steps of `dunes-long`, up to
-        // 6 m/s and an IMU spike of 1,000 m/s^2). A body's acceleration is bounded by the
-        // forces that can act on it: gravity plus Coulomb friction at the contacts,
-        // `|a| <= g (1 + mu)`, and its angular acceleration by that over the half track. The
-        // twist's change per step is limited to those bounds (counted in `inertia_limits`).
-        let twist = {
-            let mut t = twist;
-            // The kinematic fallback has no bound of its own (it follows the contacts, which
-            // can be inconsistent after a placement that did not converge): the plausible
-            // bounds above cap it.
-            let (v_cap, w_cap) = (3.0 * max_rim + 0.05, 15.0 * max_rim + 0.25);
-            if t.v.norm() > v_cap || t.w.norm() > w_cap {
-                self.twist_caps += 1;
-                if t.v.norm() > v_cap {
-                    t.v *= v_cap / t.v.norm();
-                }
-                if t.w.norm() > w_cap {
-                    t.w *= w_cap / t.w.norm();
-                }
-            }
-            let a_max = MARS_GRAVITY_M_S2 * (1.0 + self.friction.mu.max(0.0));
-            let alpha_max = a_max / 0.31;
-            let v_w = rot * t.v;
-            let w_w = rot * t.w;
-            if let Some((v0, w0)) = self.prev_twist_w {
-                let (dv, dw) = (v_w - v0, w_w - w0);
-                let (kv, kw) = (
-                    (a_max * dt / dv.norm().max(1e-12)).min(1.0),
-                    (alpha_max * dt / dw.norm().max(1e-12)).min(1.0),
-                );
-                if kv < 1.0 || kw < 1.0 {
-                    self.inertia_limits += 1;
-                    t.v = rot.inverse() * (v0 + dv * kv);
-                    t.w = rot.inverse() * (w0 + dw * kw);
-                }
-            }
-            self.prev_twist_w = Some((rot * t.v, rot * t.w));
-            t
-        };
-        // A wheel the force balance carries on a step face or edge only (no contact near the
-        // bottom of its rim carries load: it has been lifted off the ground below) climbs that
-        // face: the placement follows the face contact (measured along the rim's normals)
-        // instead of setting the wheel back on the ground.
-        let mut lifted = [false; WHEELS];
-        for i in 0..WHEELS {
-            let carrying = || {
-                (0..all_contacts.len()).filter(|&c| all_contacts[c].wheel == i && quasi.active[c])
-            };
-            let on_ground =
-                carrying().any(|c| world_contacts[c].angle_rad.abs() <= LIFTED_ANGLE_RAD);
-            let on_face = carrying()
-                .filter(|&c| world_contacts[c].angle_rad.abs() > LIFTED_ANGLE_RAD)
-                .max_by(|&a, &b| quasi.normal_n[a].total_cmp(&quasi.normal_n[b]));
-            if let (false, Some(c)) = (on_ground, on_face) {
-                self.contacts[i] = world_contacts[c];
-                self.truth.clearance_m[i] = world_contacts[c].clearance_m.max(0.0);
-                lifted[i] = true;
-            }
-        }
-        // Integrate the body pose and the suspension over the step.
-        let rot_int = rot * Rotation3::from_scaled_axis(twist.w * dt);
-        let v_w = rot * twist.v;
-        let (roll, pitch, yaw) = rot_int.euler_angles();
-        let pose = BodyPose {
-            pos_m: [
-                pose0.pos_m[0] + v_w.x * dt,
-                pose0.pos_m[1] + v_w.y * dt,
-                pose0.pos_m[2] + v_w.z * dt,
-            ],
-            yaw_rad: yaw,
-            pitch_rad: pitch,
-            roll_rad: roll,
-        };
-        let q = twist.suspension_rad_s;
-        let guess = Suspension {
-            rocker_rad: s0.rocker_rad + q[0] * dt,
-            bogie_rad: [s0.bogie_rad[0] + q[1] * dt, s0.bogie_rad[1] + q[2] * dt],
-        };
-        let placed: Placement = place_cached(
-            &self.geometry,
-            &self.terrain,
-            &pose,
-            &guess,
-            &self.truth.steer_rad,
-            &self.limits,
-            &mut self.jacobian,
-            Some(&self.contacts),
-            true,
-            &lifted,
-        );
-        self.placement_iterations += u64::from(placed.iterations);
-        self.contacts = placed.contacts;
-        let t = &mut self.truth;
-        let moved = [
-            placed.pose.pos_m[0] - pose0.pos_m[0],
-            placed.pose.pos_m[1] - pose0.pos_m[1],
-        ];
-        t.distance_m += (moved[0] * moved[0] + moved[1] * moved[1]).sqrt();
-        t.pose = placed.pose;
-        t.suspension = placed.suspension;
-        t.clearance_m = placed.clearance_m;
-        t.contact_angle_rad = placed.contacts.map(|c| c.angle_rad);
-        t.wheel_slip_ratio = wheel_slip.map(|w| w.slip_ratio);
-        t.wheel_load_n = quasi.wheel_load_n;
-        self.forces = Some((all_contacts, quasi));
-        t.suspension_rate_rad_s = [
-            (placed.suspension.rocker_rad - s0.rocker_rad) / dt,
-            (placed.suspension.bogie_rad[0] - s0.bogie_rad[0]) / dt,
-            (placed.suspension.bogie_rad[1] - s0.bogie_rad[1]) / dt,
-        ];
-        t.slip = slip;
-        t.velocity_r_m_s = [twist.v.x, twist.v.y];
-        t.t_us = t.t_us.saturating_add(FRAME_US);
-        self.steps += 1;
-        self.account_scrub(
-            &wheels,
-            &contacts,
-            &s0,
-            &pose0,
-            &ground_speed,
-            &slip_factor,
-            dt,
-        );
-        self.update_wheels();
-        // Energy: the power of this step's truth state (motor rates, pitch, motion) over it.
-        let (theta_up, rim_speed) =
-            crate::energy::drive_state(&self.truth, &self.geometry.wheel_radius_m);
-        self.energy.step(theta_up, rim_speed, dt);
-        // Sensors.
-        let rot1 = self.truth.pose.rot_w_from_r();
-        let p0 = Vector3::from(pose0.pos_m);
-        let p1 = Vector3::from(self.truth.pose.pos_m);
-        let velocity_w = (p1 - p0) / dt;
-        let accel_w = (velocity_w - self.prev_velocity_w) / dt;
-        self.prev_velocity_w = velocity_w;
-        // The rotation over the step as a unit quaternion: `Rotation3::scaled_axis` takes the
-        // acos of `(trace - 1) / 2`, which rounding can push above 1 for a rover at rest (NaN).
-        let delta = nalgebra::UnitQuaternion::from_rotation_matrix(&(rot_inv * rot1));
-        let gyro = delta.scaled_axis() / dt;
-        let specific_force = rot1.inverse() * (accel_w - Vector3::new(0.0, 0.0, MARS_GRAVITY_M_S2));
-        self.sample_imu(gyro, specific_force, dt);
-        if self.steps % self.encoder_every == 0 {
-            self.sample_joints();
-        }
-        if self.steps % self.sun_every == 0 {
-            self.sample_sun();
         }
     }
 
@@ -911,30 +580,6 @@ impl World {
     }
 }
 
-/// Every wheel on the ground gets the vehicle's slip ratio and slip angle (the lumped model):
-/// the axle moves at `(1 - s)` times its rim speed (`1 - max(s, 0)` backwards) and sideways at
-/// `tan(alpha)` times that, towards the rover's right for a positive angle.
-fn lumped_wheels(ground: &[WheelGround; WHEELS], state: &SlipState) -> [WheelSlip; WHEELS] {
-    std::array::from_fn(|i| {
-        let g = &ground[i];
-        let rim = g.rim_speed_m_s;
-        let s = state.slip_ratio;
-        let speed = if rim >= 0.0 {
-            (1.0 - s) * rim
-        } else {
-            (1.0 - s.max(0.0)) * rim
-        };
-        WheelSlip {
-            load_n: 0.0,
-            slip_ratio: s,
-            slip_angle_rad: state.slip_angle_rad,
-            saturated: false,
-            ground_speed_m_s: speed,
-            lateral_m_s: speed.abs() * state.slip_angle_rad.tan() * g.spin.y.signum(),
-        }
-    })
-}
-
 /// Wrap an angle to `(-pi, pi]`.
 pub fn wrap_pi(a: f64) -> f64 {
     let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
@@ -945,5 +590,6 @@ pub fn wrap_pi(a: f64) -> f64 {
     }
 }
 
+mod step;
 #[cfg(test)]
 mod tests;
