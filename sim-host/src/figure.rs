@@ -393,15 +393,277 @@ fn legend_width(fig: &Figure) -> u32 {
     (widest + 64.0).max(MIN_LEGEND_W).ceil() as u32
 }
 
+/// A chart of a figure: `f64` coordinates on an SVG drawing area.
+type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The chart of `area` over the ranges `x`, `y` with a y label area of `ylab` pixels.
+fn build_chart<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    x: (f64, f64),
+    y: (f64, f64),
+    ylab: u32,
+) -> anyhow::Result<Chart<'a, 'b>> {
+    ChartBuilder::on(area)
+        .margin_top(MARGIN_TOP)
+        .margin_right(MARGIN_RIGHT)
+        .margin_left(MARGIN_LEFT)
+        .margin_bottom(MARGIN_BOTTOM)
+        .x_label_area_size(X_LABEL_AREA)
+        .y_label_area_size(ylab)
+        .build_cartesian_2d(x.0..x.1, y.0..y.1)
+        .map_err(plot_err)
+}
+
+/// Width and height of the plotting area of `chart`, px.
+fn plot_size(chart: &Chart) -> (f64, f64) {
+    let (px, py) = chart.plotting_area().get_pixel_range();
+    (f64::from(px.end - px.start), f64::from(py.end - py.start))
+}
+
+/// The ranges of an equal-scale chart of the data bounds `b` on a plotting area of `pw` x `ph`
+/// pixels: centred on the data, a metre as many pixels in x as in y.
+fn equal_scale_ranges(b: (f64, f64, f64, f64), pw: f64, ph: f64) -> ((f64, f64), (f64, f64)) {
+    let (bx0, bx1, by0, by1) = b;
+    let s = ((bx1 - bx0) / pw).max((by1 - by0) / ph);
+    let (cx, cy) = (0.5 * (bx0 + bx1), 0.5 * (by0 + by1));
+    (
+        (cx - 0.5 * s * pw, cx + 0.5 * s * pw),
+        (cy - 0.5 * s * ph, cy + 0.5 * s * ph),
+    )
+}
+
+/// The chart of `fig` on `area` with its final ranges and y label area.
+///
+/// Building a chart draws nothing (no caption): build, read the plotting area, adjust the
+/// ranges and the y label area, build again.
+fn settled_chart<'a, 'b>(
+    fig: &Figure,
+    area: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    bounds: (f64, f64, f64, f64),
+    ylab: u32,
+) -> anyhow::Result<(Chart<'a, 'b>, (f64, f64), (f64, f64))> {
+    let (bx0, bx1, by0, by1) = bounds;
+    let mut ylab = ylab;
+    let (mut xr, mut yr) = ((bx0, bx1), (by0, by1));
+    let mut chart = build_chart(area, xr, yr, ylab)?;
+    for _ in 0..4 {
+        let (pw, ph) = plot_size(&chart);
+        if fig.equal_scale {
+            (xr, yr) = equal_scale_ranges(bounds, pw, ph);
+        }
+        let need = y_label_area(yr.0, yr.1, ph, fig.y_labels);
+        let stable = need == ylab;
+        ylab = need;
+        chart = build_chart(area, xr, yr, ylab)?;
+        if stable && !fig.equal_scale {
+            break;
+        }
+        if stable {
+            // Ranges of an equal-scale chart depend on its plotting area: one more pass
+            // with the final label area settles them.
+            let (pw, ph) = plot_size(&chart);
+            (xr, yr) = equal_scale_ranges(bounds, pw, ph);
+            chart = build_chart(area, xr, yr, ylab)?;
+            break;
+        }
+    }
+    Ok((chart, xr, yr))
+}
+
+/// The plotting area's background, the grid, the ticks and their labels, the axis titles.
+fn draw_mesh(
+    chart: &mut Chart,
+    fig: &Figure,
+    xr: (f64, f64),
+    yr: (f64, f64),
+) -> anyhow::Result<()> {
+    let (pw, ph) = plot_size(chart);
+    let y_kind = fig.y_labels;
+    let nx = tick_count(xr.0, xr.1, pw, YLabels::Plain, true);
+    let ny = tick_count(yr.0, yr.1, ph, y_kind, false);
+    let x_dec = decimals_for_step(step_of(&ticks(xr.0, xr.1, nx)));
+    let y_dec = decimals_for_step(step_of(&ticks(yr.0, yr.1, ny)));
+    let x_fmt = move |v: &f64| label(*v, YLabels::Plain, x_dec);
+    let y_fmt = move |v: &f64| label(*v, y_kind, y_dec);
+    chart
+        .plotting_area()
+        .fill(&RGBColor(252, 252, 252))
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_labels(nx)
+        .y_labels(ny)
+        .max_light_lines(4)
+        .x_label_formatter(&x_fmt)
+        .y_label_formatter(&y_fmt)
+        .x_desc(fig.x_desc.as_str())
+        .y_desc(fig.y_desc.as_str())
+        .label_style(font(TICK_PX))
+        .axis_desc_style(font(DESC_PX))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .light_line_style(RGBColor(240, 240, 240))
+        .axis_style(RGBColor(90, 90, 90))
+        .draw()
+        .map_err(plot_err)?;
+    Ok(())
+}
+
+/// The layers of `fig`: areas first (pass 0), then lines (1), then points (2).
+fn draw_layers(
+    chart: &mut Chart,
+    fig: &Figure,
+    xr: (f64, f64),
+    yr: (f64, f64),
+) -> anyhow::Result<()> {
+    let (pw, _) = plot_size(chart);
+    let mpp_x = (xr.1 - xr.0) / pw;
+    for pass in 0..3 {
+        for l in &fig.layers {
+            let c = l.color;
+            match (&l.mark, pass) {
+                (Mark::Discs(d), 0) => {
+                    let inside = |&&(x, y, r): &&(f64, f64, f64)| {
+                        x - r >= xr.0 && x + r <= xr.1 && y - r >= yr.0 && y + r <= yr.1
+                    };
+                    chart
+                        .draw_series(d.iter().filter(inside).map(|&(x, y, r)| {
+                            let rp = (r / mpp_x).round().max(1.0) as i32;
+                            Circle::new((x, y), rp, c.mix(0.55).filled())
+                        }))
+                        .map_err(plot_err)?;
+                }
+                (Mark::Band { x, lo, hi }, 0) => {
+                    let mut poly: Vec<(f64, f64)> =
+                        x.iter().copied().zip(hi.iter().copied()).collect();
+                    poly.extend(x.iter().copied().zip(lo.iter().copied()).rev());
+                    poly.retain(|p| p.0.is_finite() && p.1.is_finite());
+                    let poly = decimate(&poly);
+                    chart
+                        .draw_series(std::iter::once(Polygon::new(poly, c.mix(0.22).filled())))
+                        .map_err(plot_err)?;
+                }
+                (Mark::Bars(r), 0) => {
+                    chart
+                        .draw_series(
+                            r.iter()
+                                .map(|b| Rectangle::new([(b[0], b[2]), (b[1], b[3])], c.filled())),
+                        )
+                        .map_err(plot_err)?;
+                }
+                (
+                    Mark::Line {
+                        points,
+                        width,
+                        stroke,
+                    },
+                    1,
+                ) => draw_line(chart, points, c.stroke_width(*width), *stroke)?,
+                (Mark::Points { points, radius }, 2) => {
+                    chart
+                        .draw_series(
+                            points
+                                .iter()
+                                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                                .map(|&p| Circle::new(p, *radius, c.filled())),
+                        )
+                        .map_err(plot_err)?;
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(())
+}
+
+/// One line layer (decimated) with its stroke.
+fn draw_line(
+    chart: &mut Chart,
+    points: &[(f64, f64)],
+    style: ShapeStyle,
+    stroke: Stroke,
+) -> anyhow::Result<()> {
+    let pts = decimate(points);
+    match stroke {
+        Stroke::Solid => {
+            chart
+                .draw_series(LineSeries::new(pts, style))
+                .map_err(plot_err)?;
+        }
+        Stroke::Dashed => {
+            chart
+                .draw_series(DashedLineSeries::new(pts, 6, 4, style))
+                .map_err(plot_err)?;
+        }
+        Stroke::Dotted => {
+            chart
+                .draw_series(DashedLineSeries::new(pts, 2, 3, style))
+                .map_err(plot_err)?;
+        }
+    }
+    Ok(())
+}
+
+/// The legend in its own strip, its first entry `top` pixels below the strip's top.
+fn draw_legend(
+    legend_area: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    fig: &Figure,
+    top: i32,
+) -> anyhow::Result<()> {
+    for (k, (name, c, mark)) in legend_entries(fig).into_iter().enumerate() {
+        let y = top + LEGEND_STEP * k as i32;
+        let (x0, x1) = (10, 40);
+        match mark {
+            Mark::Line { width, stroke, .. } => {
+                let style = c.stroke_width(*width);
+                let segments: Vec<(i32, i32)> = match stroke {
+                    Stroke::Solid => vec![(x0, x1)],
+                    Stroke::Dashed => {
+                        vec![(x0, x0 + 6), (x0 + 10, x0 + 16), (x0 + 20, x0 + 26)]
+                    }
+                    Stroke::Dotted => (0..6).map(|i| (x0 + 5 * i, x0 + 5 * i + 2)).collect(),
+                };
+                for (a, b) in segments {
+                    legend_area
+                        .draw(&PathElement::new(vec![(a, y), (b, y)], style))
+                        .map_err(plot_err)?;
+                }
+            }
+            Mark::Points { radius, .. } => {
+                legend_area
+                    .draw(&Circle::new((25, y), (*radius).max(3), c.filled()))
+                    .map_err(plot_err)?;
+            }
+            Mark::Band { .. } | Mark::Discs(_) => {
+                legend_area
+                    .draw(&Rectangle::new(
+                        [(x0, y - 5), (x1, y + 5)],
+                        c.mix(0.3).filled(),
+                    ))
+                    .map_err(plot_err)?;
+            }
+            Mark::Bars(_) => {
+                legend_area
+                    .draw(&Rectangle::new([(x0, y - 5), (x1, y + 5)], c.filled()))
+                    .map_err(plot_err)?;
+            }
+        }
+        let style = font(LEGEND_PX).pos(Pos::new(HPos::Left, VPos::Center));
+        legend_area
+            .draw(&Text::new(name.to_string(), (x1 + 8, y), style))
+            .map_err(plot_err)?;
+    }
+    Ok(())
+}
+
 /// The SVG text of `fig`.
 pub fn render(fig: &Figure) -> anyhow::Result<String> {
-    let (bx0, bx1, by0, by1) = data_bounds(fig);
+    let bounds = data_bounds(fig);
+    let (bx0, bx1, by0, by1) = bounds;
     let legend_w = legend_width(fig);
     let chart_w = FIG_W - legend_w;
     let legend_h = legend_entries(fig).len() as f64 * LEGEND_STEP as f64 + 12.0;
     // Plotting-area height: equal-scale figures follow the aspect of the data.
-    let y_kind = fig.y_labels;
-    let mut ylab = y_label_area(by0, by1, fig.plot_height as f64, y_kind);
+    let ylab = y_label_area(by0, by1, fig.plot_height as f64, fig.y_labels);
     let pw_est = f64::from(chart_w - MARGIN_LEFT - MARGIN_RIGHT) - f64::from(ylab);
     let ph = if fig.equal_scale {
         (pw_est * (by1 - by0) / (bx1 - bx0)).clamp(MIN_PLOT_H, MAX_PLOT_H)
@@ -417,203 +679,14 @@ pub fn render(fig: &Figure) -> anyhow::Result<String> {
         root.fill(&WHITE).map_err(plot_err)?;
         let body = root.titled(&fig.title, font(TITLE_PX)).map_err(plot_err)?;
         let (chart_area, legend_area) = body.split_horizontally(chart_w);
-        let build = |x: (f64, f64), y: (f64, f64), ylab: u32| {
-            ChartBuilder::on(&chart_area)
-                .margin_top(MARGIN_TOP)
-                .margin_right(MARGIN_RIGHT)
-                .margin_left(MARGIN_LEFT)
-                .margin_bottom(MARGIN_BOTTOM)
-                .x_label_area_size(X_LABEL_AREA)
-                .y_label_area_size(ylab)
-                .build_cartesian_2d(x.0..x.1, y.0..y.1)
-                .map_err(plot_err)
-        };
-        let (mut xr, mut yr) = ((bx0, bx1), (by0, by1));
-        // Building a chart draws nothing (no caption): build, read the plotting area, adjust
-        // the ranges and the y label area, build again.
-        let mut chart = build(xr, yr, ylab)?;
-        for _ in 0..4 {
-            let (px, py) = chart.plotting_area().get_pixel_range();
-            let (pw, ph) = (f64::from(px.end - px.start), f64::from(py.end - py.start));
-            if fig.equal_scale {
-                let s = ((bx1 - bx0) / pw).max((by1 - by0) / ph);
-                let (cx, cy) = (0.5 * (bx0 + bx1), 0.5 * (by0 + by1));
-                xr = (cx - 0.5 * s * pw, cx + 0.5 * s * pw);
-                yr = (cy - 0.5 * s * ph, cy + 0.5 * s * ph);
-            }
-            let need = y_label_area(yr.0, yr.1, ph, y_kind);
-            let stable = need == ylab;
-            ylab = need;
-            chart = build(xr, yr, ylab)?;
-            if stable && !fig.equal_scale {
-                break;
-            }
-            if stable {
-                // Ranges of an equal-scale chart depend on its plotting area: one more pass
-                // with the final label area settles them.
-                let (px, py) = chart.plotting_area().get_pixel_range();
-                let (pw, ph) = (f64::from(px.end - px.start), f64::from(py.end - py.start));
-                let s = ((bx1 - bx0) / pw).max((by1 - by0) / ph);
-                let (cx, cy) = (0.5 * (bx0 + bx1), 0.5 * (by0 + by1));
-                xr = (cx - 0.5 * s * pw, cx + 0.5 * s * pw);
-                yr = (cy - 0.5 * s * ph, cy + 0.5 * s * ph);
-                chart = build(xr, yr, ylab)?;
-                break;
-            }
-        }
+        let (mut chart, xr, yr) = settled_chart(fig, &chart_area, bounds, ylab)?;
         let (px, py) = chart.plotting_area().get_pixel_range();
-        let (pw, ph) = (f64::from(px.end - px.start), f64::from(py.end - py.start));
         geometry = (px.clone(), py.clone(), xr, yr);
-        let nx = tick_count(xr.0, xr.1, pw, YLabels::Plain, true);
-        let ny = tick_count(yr.0, yr.1, ph, y_kind, false);
-        let x_dec = decimals_for_step(step_of(&ticks(xr.0, xr.1, nx)));
-        let y_dec = decimals_for_step(step_of(&ticks(yr.0, yr.1, ny)));
-        let x_fmt = move |v: &f64| label(*v, YLabels::Plain, x_dec);
-        let y_fmt = move |v: &f64| label(*v, y_kind, y_dec);
-        chart
-            .plotting_area()
-            .fill(&RGBColor(252, 252, 252))
-            .map_err(plot_err)?;
-        chart
-            .configure_mesh()
-            .x_labels(nx)
-            .y_labels(ny)
-            .max_light_lines(4)
-            .x_label_formatter(&x_fmt)
-            .y_label_formatter(&y_fmt)
-            .x_desc(fig.x_desc.as_str())
-            .y_desc(fig.y_desc.as_str())
-            .label_style(font(TICK_PX))
-            .axis_desc_style(font(DESC_PX))
-            .bold_line_style(RGBColor(215, 215, 215))
-            .light_line_style(RGBColor(240, 240, 240))
-            .axis_style(RGBColor(90, 90, 90))
-            .draw()
-            .map_err(plot_err)?;
-        let mpp_x = (xr.1 - xr.0) / pw;
-        // Areas first, then lines, then points.
-        for pass in 0..3 {
-            for l in &fig.layers {
-                let c = l.color;
-                match (&l.mark, pass) {
-                    (Mark::Discs(d), 0) => {
-                        let inside = |&&(x, y, r): &&(f64, f64, f64)| {
-                            x - r >= xr.0 && x + r <= xr.1 && y - r >= yr.0 && y + r <= yr.1
-                        };
-                        chart
-                            .draw_series(d.iter().filter(inside).map(|&(x, y, r)| {
-                                let rp = (r / mpp_x).round().max(1.0) as i32;
-                                Circle::new((x, y), rp, c.mix(0.55).filled())
-                            }))
-                            .map_err(plot_err)?;
-                    }
-                    (Mark::Band { x, lo, hi }, 0) => {
-                        let mut poly: Vec<(f64, f64)> =
-                            x.iter().copied().zip(hi.iter().copied()).collect();
-                        poly.extend(x.iter().copied().zip(lo.iter().copied()).rev());
-                        poly.retain(|p| p.0.is_finite() && p.1.is_finite());
-                        let poly = decimate(&poly);
-                        chart
-                            .draw_series(std::iter::once(Polygon::new(poly, c.mix(0.22).filled())))
-                            .map_err(plot_err)?;
-                    }
-                    (Mark::Bars(r), 0) => {
-                        chart
-                            .draw_series(
-                                r.iter().map(|b| {
-                                    Rectangle::new([(b[0], b[2]), (b[1], b[3])], c.filled())
-                                }),
-                            )
-                            .map_err(plot_err)?;
-                    }
-                    (
-                        Mark::Line {
-                            points,
-                            width,
-                            stroke,
-                        },
-                        1,
-                    ) => {
-                        let pts = decimate(points);
-                        let style = c.stroke_width(*width);
-                        match stroke {
-                            Stroke::Solid => {
-                                chart
-                                    .draw_series(LineSeries::new(pts, style))
-                                    .map_err(plot_err)?;
-                            }
-                            Stroke::Dashed => {
-                                chart
-                                    .draw_series(DashedLineSeries::new(pts, 6, 4, style))
-                                    .map_err(plot_err)?;
-                            }
-                            Stroke::Dotted => {
-                                chart
-                                    .draw_series(DashedLineSeries::new(pts, 2, 3, style))
-                                    .map_err(plot_err)?;
-                            }
-                        }
-                    }
-                    (Mark::Points { points, radius }, 2) => {
-                        chart
-                            .draw_series(
-                                points
-                                    .iter()
-                                    .filter(|p| p.0.is_finite() && p.1.is_finite())
-                                    .map(|&p| Circle::new(p, *radius, c.filled())),
-                            )
-                            .map_err(plot_err)?;
-                    }
-                    _ => {}
-                }
-            }
-        }
+        draw_mesh(&mut chart, fig, xr, yr)?;
+        draw_layers(&mut chart, fig, xr, yr)?;
         // Legend in its own strip, aligned with the top of the plotting area.
         let (_, lpy) = legend_area.get_pixel_range();
-        let top = py.start - lpy.start + 8;
-        for (k, (name, c, mark)) in legend_entries(fig).into_iter().enumerate() {
-            let y = top + LEGEND_STEP * k as i32;
-            let (x0, x1) = (10, 40);
-            match mark {
-                Mark::Line { width, stroke, .. } => {
-                    let style = c.stroke_width(*width);
-                    let segments: Vec<(i32, i32)> = match stroke {
-                        Stroke::Solid => vec![(x0, x1)],
-                        Stroke::Dashed => {
-                            vec![(x0, x0 + 6), (x0 + 10, x0 + 16), (x0 + 20, x0 + 26)]
-                        }
-                        Stroke::Dotted => (0..6).map(|i| (x0 + 5 * i, x0 + 5 * i + 2)).collect(),
-                    };
-                    for (a, b) in segments {
-                        legend_area
-                            .draw(&PathElement::new(vec![(a, y), (b, y)], style))
-                            .map_err(plot_err)?;
-                    }
-                }
-                Mark::Points { radius, .. } => {
-                    legend_area
-                        .draw(&Circle::new((25, y), (*radius).max(3), c.filled()))
-                        .map_err(plot_err)?;
-                }
-                Mark::Band { .. } | Mark::Discs(_) => {
-                    legend_area
-                        .draw(&Rectangle::new(
-                            [(x0, y - 5), (x1, y + 5)],
-                            c.mix(0.3).filled(),
-                        ))
-                        .map_err(plot_err)?;
-                }
-                Mark::Bars(_) => {
-                    legend_area
-                        .draw(&Rectangle::new([(x0, y - 5), (x1, y + 5)], c.filled()))
-                        .map_err(plot_err)?;
-                }
-            }
-            let style = font(LEGEND_PX).pos(Pos::new(HPos::Left, VPos::Center));
-            legend_area
-                .draw(&Text::new(name.to_string(), (x1 + 8, y), style))
-                .map_err(plot_err)?;
-        }
+        draw_legend(&legend_area, fig, py.start - lpy.start + 8)?;
         root.present().map_err(plot_err)?;
     }
     let (px, py, xr, yr) = geometry;

@@ -515,9 +515,20 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 
 /// The results page `docs/slip-detection.md`.
 pub fn markdown(study: &Study, reading: &str) -> String {
-    let lat = study.lateral_bins();
-    let lon = study.longitudinal_bins();
     let mut s = String::new();
+    intro(&mut s, study);
+    false_alarms(&mut s, study);
+    sweeps(&mut s, study);
+    per_run(&mut s, study);
+    slip_hold(&mut s, study);
+    if !reading.is_empty() {
+        let _ = writeln!(s, "## Reading\n\n{reading}");
+    }
+    s
+}
+
+/// The title, what was run, what is counted, the binning and the figure.
+fn intro(s: &mut String, study: &Study) {
     let _ = writeln!(s, "# Slip detection probability against slip magnitude\n");
     let _ = writeln!(
         s,
@@ -569,7 +580,10 @@ pub fn markdown(study: &Study, reading: &str) -> String {
          and the reverse.\n"
     );
     let _ = writeln!(s, "![detection probability](figures/slip-detection.svg)\n");
+}
 
+/// The false alarms of the two no-slip baselines.
+fn false_alarms(s: &mut String, study: &Study) {
     let _ = writeln!(s, "## False alarms\n");
     let _ = writeln!(s, "| truth | intervals | rejected | rate | design |");
     let _ = writeln!(s, "|---|---:|---:|---:|---:|");
@@ -589,8 +603,14 @@ pub fn markdown(study: &Study, reading: &str) -> String {
          ratio of about 0.07 even on level ground (rolling resistance from sinkage), so the lowest \
          lateral bin is not a no-slip bin (see the lateral table's longitudinal column).\n"
     );
+}
+
+/// Detection against the lateral, the longitudinal and the total slip.
+fn sweeps(s: &mut String, study: &Study) {
+    let lat = study.lateral_bins();
+    let lon = study.longitudinal_bins();
     let _ = writeln!(s, "## Lateral slip (cross-slope sweep)\n");
-    bin_table(&mut s, &lat, "slip angle (magnitude), deg", 1);
+    bin_table(s, &lat, "slip angle (magnitude), deg", 1);
     let _ = writeln!(
         s,
         "\nDetection reaches 50 % at `|alpha|` = {} and 90 % at {}.\n",
@@ -598,7 +618,7 @@ pub fn markdown(study: &Study, reading: &str) -> String {
         crossing_text(&lat, 0.9, " deg", 1)
     );
     let _ = writeln!(s, "## Longitudinal slip (uphill sweep)\n");
-    bin_table(&mut s, &lon, "slip ratio (magnitude)", 3);
+    bin_table(s, &lon, "slip ratio (magnitude)", 3);
     let _ = writeln!(
         s,
         "\nDetection reaches 50 % at `|s|` = {} and 90 % at {}.\n",
@@ -617,13 +637,17 @@ pub fn markdown(study: &Study, reading: &str) -> String {
          true slip displacement over the interval, `hypot(lateral, longitudinal)` in mm: the \
          quantity the gate compares with the odometry's covariance, whatever its direction.\n"
     );
-    bin_table(&mut s, &tot, "slip / interval, mm", 3);
+    bin_table(s, &tot, "slip / interval, mm", 3);
     let _ = writeln!(
         s,
         "\nDetection reaches 50 % at {} and 90 % at {}.\n",
         crossing_text(&tot, 0.5, " mm", 3),
         crossing_text(&tot, 0.9, " mm", 3)
     );
+}
+
+/// One row per run of the sweeps.
+fn per_run(s: &mut String, study: &Study) {
     let _ = writeln!(s, "## Per run\n");
     let _ = writeln!(
         s,
@@ -653,7 +677,10 @@ pub fn markdown(study: &Study, reading: &str) -> String {
         );
     }
     let _ = writeln!(s);
+}
 
+/// The slip-hold runs.
+fn slip_hold(s: &mut String, study: &Study) {
     let _ = writeln!(s, "## Slip hold\n");
     let _ = writeln!(
         s,
@@ -688,10 +715,6 @@ pub fn markdown(study: &Study, reading: &str) -> String {
         );
     }
     let _ = writeln!(s);
-    if !reading.is_empty() {
-        let _ = writeln!(s, "## Reading\n\n{reading}");
-    }
-    s
 }
 
 /// The figure `docs/figures/slip-detection.svg`: detection probability against the lateral

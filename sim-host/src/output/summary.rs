@@ -450,6 +450,109 @@ fn suspension(run: &RunResult) -> SuspensionSummary {
     }
 }
 
+/// The targets of the mission sequencer, if the run had any.
+fn targets_summary(run: &RunResult) -> Option<TargetsSummary> {
+    run.mission.as_ref().map(|m| TargetsSummary {
+        counters: m.counters,
+        order: m.order.clone(),
+        outcomes: m.outcomes.iter().map(|o| format!("{o:?}")).collect(),
+        miss_m: (0..m.outcomes.len())
+            .map(|i| m.visits.iter().find(|v| v.target == i).map(|v| v.miss_m))
+            .collect(),
+        energy_budget_j: m.energy_budget_j,
+        phase: format!("{:?}", m.phase),
+    })
+}
+
+/// What terrain-map localization did, if the run asked for it.
+fn localization_summary(run: &RunResult) -> Option<LocalizationSummary> {
+    run.localization.as_ref().map(|l| {
+        let n = l.checks.len();
+        let mean = |f: &dyn Fn(&crate::closed_loop::LocCheck) -> f64| {
+            (n > 0).then(|| l.checks.iter().map(f).sum::<f64>() / n as f64)
+        };
+        LocalizationSummary {
+            updates: l.counters.updates,
+            rejected: l.counters.rejected,
+            failed: l.counters.failed,
+            not_started: l.counters.not_started,
+            stale: l.counters.stale,
+            searches: l.counters.searches,
+            maps: l.counters.maps,
+            nees_mean: mean(&|c| c.nees),
+            fixes_checked: n,
+            fix_error_rms_m: mean(&|c| c.error[0].powi(2) + c.error[1].powi(2)).map(f64::sqrt),
+            fused_error_max_m: l
+                .checks
+                .iter()
+                .filter(|c| c.applied)
+                .map(|c| c.error[0].hypot(c.error[1]))
+                .reduce(f64::max),
+            map_points: l.map_points,
+            map_features: l.map_features,
+            last_error: l.last_error.clone(),
+        }
+    })
+}
+
+/// What the hazard maps and the planner did, on a goal-directed drive.
+fn planner_summary(run: &RunResult) -> Option<PlannerSummary> {
+    run.planner.as_ref().map(|p| PlannerSummary {
+        status: match p.verdict {
+            fsw::flight::nav::hazard_nav::PlannerVerdict::Driving => "driving",
+            fsw::flight::nav::hazard_nav::PlannerVerdict::Reached => "reached",
+            fsw::flight::nav::hazard_nav::PlannerVerdict::Unreachable => "unreachable",
+            fsw::flight::nav::hazard_nav::PlannerVerdict::Blocked => "blocked",
+        }
+        .to_string(),
+        last_status: p.last_status.clone(),
+        replans: p.planner.map_or(0, |c| c.replans),
+        steps: p.planner.map_or(0, |c| c.calls),
+        boundary_following: p.planner.map_or(0, |c| c.follow_entries),
+        path_length_m: run.distance_m,
+        straight_line_m: p.straight_line_m,
+        maps: p.hazard.maps,
+        map_errors: p.hazard.map_errors,
+        gazes: p.hazard.gazes,
+        gazes_skipped: p.hazard.gazes_skipped,
+        room_moves: p.hazard.room_moves,
+        hold_cycles: p.hazard.holds,
+    })
+}
+
+/// The truth-side hazard check.
+fn hazard_summary(run: &RunResult) -> HazardSummary {
+    HazardSummary {
+        count: run.hazards,
+        height_m: run.hazard_height_m,
+        min_distance_m: run.hazard_min_distance_m,
+        contacts: run
+            .collisions
+            .iter()
+            .map(|c| HazardContact {
+                t_s: c.t_s,
+                at_m: c.at_m,
+            })
+            .collect(),
+    }
+}
+
+/// Fault protection at the end of the run.
+fn fault_protection_summary(run: &RunResult) -> FaultProtectionSummary {
+    FaultProtectionSummary {
+        responses: run.nav.fault_stops,
+        last_response: format!("{:?}", run.fault_response),
+        last_ekf_error: run.last_ekf_error.clone(),
+        stopped_safe: run.nav_mode == fsw::flight::nav::NavMode::Stopped,
+        final_position_sigma_m: run
+            .records
+            .iter()
+            .rev()
+            .find_map(|r| r.est)
+            .map(|e| e.ekf_pos_sigma_m[0].hypot(e.ekf_pos_sigma_m[1])),
+    }
+}
+
 /// Build the summary of `run`.
 pub fn summarise(run: &RunResult) -> Summary {
     let n = run.records.len().max(1) as f64;
@@ -511,77 +614,10 @@ pub fn summarise(run: &RunResult) -> Summary {
         truth_scrub_pct: run.truth_scrub_pct,
         truth_scrub_net_pct: run.truth_scrub_net_pct,
         collisions: u32::try_from(run.collisions.len()).unwrap_or(u32::MAX),
-        hazards: HazardSummary {
-            count: run.hazards,
-            height_m: run.hazard_height_m,
-            min_distance_m: run.hazard_min_distance_m,
-            contacts: run
-                .collisions
-                .iter()
-                .map(|c| HazardContact {
-                    t_s: c.t_s,
-                    at_m: c.at_m,
-                })
-                .collect(),
-        },
-        targets: run.mission.as_ref().map(|m| TargetsSummary {
-            counters: m.counters,
-            order: m.order.clone(),
-            outcomes: m.outcomes.iter().map(|o| format!("{o:?}")).collect(),
-            miss_m: (0..m.outcomes.len())
-                .map(|i| m.visits.iter().find(|v| v.target == i).map(|v| v.miss_m))
-                .collect(),
-            energy_budget_j: m.energy_budget_j,
-            phase: format!("{:?}", m.phase),
-        }),
-        localization: run.localization.as_ref().map(|l| {
-            let n = l.checks.len();
-            let mean = |f: &dyn Fn(&crate::closed_loop::LocCheck) -> f64| {
-                (n > 0).then(|| l.checks.iter().map(f).sum::<f64>() / n as f64)
-            };
-            LocalizationSummary {
-                updates: l.counters.updates,
-                rejected: l.counters.rejected,
-                failed: l.counters.failed,
-                not_started: l.counters.not_started,
-                stale: l.counters.stale,
-                searches: l.counters.searches,
-                maps: l.counters.maps,
-                nees_mean: mean(&|c| c.nees),
-                fixes_checked: n,
-                fix_error_rms_m: mean(&|c| c.error[0].powi(2) + c.error[1].powi(2)).map(f64::sqrt),
-                fused_error_max_m: l
-                    .checks
-                    .iter()
-                    .filter(|c| c.applied)
-                    .map(|c| c.error[0].hypot(c.error[1]))
-                    .reduce(f64::max),
-                map_points: l.map_points,
-                map_features: l.map_features,
-                last_error: l.last_error.clone(),
-            }
-        }),
-        planner: run.planner.as_ref().map(|p| PlannerSummary {
-            status: match p.verdict {
-                fsw::flight::nav::hazard_nav::PlannerVerdict::Driving => "driving",
-                fsw::flight::nav::hazard_nav::PlannerVerdict::Reached => "reached",
-                fsw::flight::nav::hazard_nav::PlannerVerdict::Unreachable => "unreachable",
-                fsw::flight::nav::hazard_nav::PlannerVerdict::Blocked => "blocked",
-            }
-            .to_string(),
-            last_status: p.last_status.clone(),
-            replans: p.planner.map_or(0, |c| c.replans),
-            steps: p.planner.map_or(0, |c| c.calls),
-            boundary_following: p.planner.map_or(0, |c| c.follow_entries),
-            path_length_m: run.distance_m,
-            straight_line_m: p.straight_line_m,
-            maps: p.hazard.maps,
-            map_errors: p.hazard.map_errors,
-            gazes: p.hazard.gazes,
-            gazes_skipped: p.hazard.gazes_skipped,
-            room_moves: p.hazard.room_moves,
-            hold_cycles: p.hazard.holds,
-        }),
+        hazards: hazard_summary(run),
+        targets: targets_summary(run),
+        localization: localization_summary(run),
+        planner: planner_summary(run),
         slip: SlipSummary {
             gate_reject_fraction: (run.nav.kin_tested > 0)
                 .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
@@ -622,18 +658,7 @@ pub fn summarise(run: &RunResult) -> Summary {
         driver: run.driver.clone(),
         slip_compensation: run.slip_compensation,
         nav_mode: format!("{:?}", run.nav_mode),
-        fault_protection: FaultProtectionSummary {
-            responses: run.nav.fault_stops,
-            last_response: format!("{:?}", run.fault_response),
-            last_ekf_error: run.last_ekf_error.clone(),
-            stopped_safe: run.nav_mode == fsw::flight::nav::NavMode::Stopped,
-            final_position_sigma_m: run
-                .records
-                .iter()
-                .rev()
-                .find_map(|r| r.est)
-                .map(|e| e.ekf_pos_sigma_m[0].hypot(e.ekf_pos_sigma_m[1])),
-        },
+        fault_protection: fault_protection_summary(run),
         nav: run.nav,
         wall_time_s: run.wall_time_s,
     }
