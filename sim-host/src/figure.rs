@@ -396,6 +396,9 @@ fn legend_width(fig: &Figure) -> u32 {
 /// A chart of a figure: `f64` coordinates on an SVG drawing area.
 type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
+/// A chart with its final x and y ranges.
+type SettledChart<'a, 'b> = (Chart<'a, 'b>, (f64, f64), (f64, f64));
+
 /// The chart of `area` over the ranges `x`, `y` with a y label area of `ylab` pixels.
 fn build_chart<'a, 'b>(
     area: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
@@ -441,7 +444,7 @@ fn settled_chart<'a, 'b>(
     area: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
     bounds: (f64, f64, f64, f64),
     ylab: u32,
-) -> anyhow::Result<(Chart<'a, 'b>, (f64, f64), (f64, f64))> {
+) -> anyhow::Result<SettledChart<'a, 'b>> {
     let (bx0, bx1, by0, by1) = bounds;
     let mut ylab = ylab;
     let (mut xr, mut yr) = ((bx0, bx1), (by0, by1));

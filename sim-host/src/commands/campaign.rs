@@ -63,62 +63,66 @@ pub enum CampaignCommand {
         rerun: bool,
     },
     /// Plan and write the Slurm scripts (job array and dependent gather); --submit submits them.
-    Slurm {
-        /// Campaign spec (TOML).
-        spec: PathBuf,
-        /// Campaign folder (on a filesystem every node sees).
-        #[arg(long)]
-        out: PathBuf,
-        /// Number of runs (default: the spec's).
-        #[arg(long)]
-        runs: Option<u64>,
-        /// Array tasks running at once (the `%` of --array); 0: no limit.
-        #[arg(long, default_value_t = 0)]
-        throttle: u64,
-        /// Array tasks at most (Slurm's MaxArraySize is 1001 by default); more runs are split
-        /// into this many shards.
-        #[arg(long, default_value_t = 1000)]
-        tasks: u64,
-        /// Partition.
-        #[arg(long)]
-        partition: Option<String>,
-        /// Account.
-        #[arg(long)]
-        account: Option<String>,
-        /// Quality of service.
-        #[arg(long)]
-        qos: Option<String>,
-        /// Time limit of each array task.
-        #[arg(long, default_value = "00:30:00")]
-        time: String,
-        /// Time limit of the gather job.
-        #[arg(long, default_value = "00:30:00")]
-        gather_time: String,
-        /// CPUs per array task (the renderer's threads).
-        #[arg(long, default_value_t = 1)]
-        cpus_per_task: u32,
-        /// Memory per task.
-        #[arg(long, default_value = "1G")]
-        mem: String,
-        /// Start the gather after every task succeeded (ok) or after every task ended (any).
-        #[arg(long, value_enum, default_value_t = After::Ok)]
-        gather_after: After,
-        /// More #SBATCH options for both scripts (repeatable), e.g. --sbatch=--constraint=x86.
-        #[arg(long = "sbatch", allow_hyphen_values = true)]
-        extra: Vec<String>,
-        /// sim-host binary the jobs run (default: this one).
-        #[arg(long)]
-        bin: Option<PathBuf>,
-        /// Submit with sbatch and print the job ids.
-        #[arg(long)]
-        submit: bool,
-        /// With --submit: wait until the gather job ends (fails if it fails or cannot start).
-        #[arg(long, requires = "submit")]
-        wait: bool,
-        /// With --wait: give up after this many seconds.
-        #[arg(long, default_value_t = 7200.0)]
-        timeout: f64,
-    },
+    Slurm(SlurmArgs),
+}
+
+/// `sim-host campaign slurm SPEC --out DIR [OPTIONS]`.
+#[derive(Debug, Args)]
+pub struct SlurmArgs {
+    /// Campaign spec (TOML).
+    pub spec: PathBuf,
+    /// Campaign folder (on a filesystem every node sees).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Number of runs (default: the spec's).
+    #[arg(long)]
+    pub runs: Option<u64>,
+    /// Array tasks running at once (the `%` of --array); 0: no limit.
+    #[arg(long, default_value_t = 0)]
+    pub throttle: u64,
+    /// Array tasks at most (Slurm's MaxArraySize is 1001 by default); more runs are split
+    /// into this many shards.
+    #[arg(long, default_value_t = 1000)]
+    pub tasks: u64,
+    /// Partition.
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Account.
+    #[arg(long)]
+    pub account: Option<String>,
+    /// Quality of service.
+    #[arg(long)]
+    pub qos: Option<String>,
+    /// Time limit of each array task.
+    #[arg(long, default_value = "00:30:00")]
+    pub time: String,
+    /// Time limit of the gather job.
+    #[arg(long, default_value = "00:30:00")]
+    pub gather_time: String,
+    /// CPUs per array task (the renderer's threads).
+    #[arg(long, default_value_t = 1)]
+    pub cpus_per_task: u32,
+    /// Memory per task.
+    #[arg(long, default_value = "1G")]
+    pub mem: String,
+    /// Start the gather after every task succeeded (ok) or after every task ended (any).
+    #[arg(long, value_enum, default_value_t = After::Ok)]
+    pub gather_after: After,
+    /// More #SBATCH options for both scripts (repeatable), e.g. --sbatch=--constraint=x86.
+    #[arg(long = "sbatch", allow_hyphen_values = true)]
+    pub extra: Vec<String>,
+    /// sim-host binary the jobs run (default: this one).
+    #[arg(long)]
+    pub bin: Option<PathBuf>,
+    /// Submit with sbatch and print the job ids.
+    #[arg(long)]
+    pub submit: bool,
+    /// With --submit: wait until the gather job ends (fails if it fails or cannot start).
+    #[arg(long, requires = "submit")]
+    pub wait: bool,
+    /// With --wait: give up after this many seconds.
+    #[arg(long, default_value_t = 7200.0)]
+    pub timeout: f64,
 }
 
 /// `--gather-after`.
@@ -152,33 +156,7 @@ pub fn main(args: CampaignArgs) -> anyhow::Result<bool> {
             index,
             shard,
             outputs,
-        } => {
-            let manifest = plan::Manifest::load(&dir)?;
-            let indices = match (index, shard) {
-                (Some(i), _) => {
-                    manifest.entry(i)?;
-                    vec![i]
-                }
-                (None, Some(s)) => {
-                    let (k, n) = exec::parse_shard(&s)?;
-                    exec::shard_indices(manifest.runs, k, n)
-                }
-                (None, None) => anyhow::bail!("give --index I or --shard K/N"),
-            };
-            if let (Some(out), [i]) = (outputs.as_deref(), indices.as_slice()) {
-                let s = exec::run_index(&dir, &manifest, *i, Some(out))?;
-                println!(
-                    "run {i}: goal {} cross-track max {:.3} m; every output in {}",
-                    if s.goal_reached { "reached" } else { "missed" },
-                    s.cross_track_m.max,
-                    out.display()
-                );
-                return Ok(true);
-            }
-            let failed = exec::run_sequential(&dir, &manifest, &indices);
-            anyhow::ensure!(failed == 0, "{failed} of {} runs failed", indices.len());
-            Ok(true)
-        }
+        } => run(&dir, index, shard, outputs.as_deref()),
         CampaignCommand::Gather { dir } => gather(&dir),
         CampaignCommand::Local {
             spec,
@@ -186,116 +164,165 @@ pub fn main(args: CampaignArgs) -> anyhow::Result<bool> {
             runs,
             jobs,
             rerun,
-        } => {
-            let manifest = plan::plan_to_dir(&spec, &out, runs)?;
-            let todo: Vec<u64> = (0..manifest.runs)
-                .filter(|&i| rerun || !exec::is_done(&out, i))
-                .collect();
-            let done = manifest.runs - todo.len() as u64;
-            println!(
-                "campaign {}: {} runs of {} ({} to run{}), output in {}",
-                manifest.campaign,
-                manifest.runs,
-                manifest.base_scenario()?.name,
-                todo.len(),
-                if done > 0 {
-                    format!(", {done} already done")
-                } else {
-                    String::new()
-                },
-                out.display()
-            );
-            let start = std::time::Instant::now();
-            let failed = exec::run_parallel(&out, &manifest, &todo, jobs)?;
-            println!(
-                "{} runs in {:.1} s wall time, {} failed",
-                todo.len(),
-                start.elapsed().as_secs_f64(),
-                failed.len()
-            );
-            for (i, e) in &failed {
-                eprintln!("run {i}: FAILED: {e}");
-            }
-            gather(&out)
-        }
-        CampaignCommand::Slurm {
-            spec,
-            out,
-            runs,
-            throttle,
-            tasks,
-            partition,
-            account,
-            qos,
-            time,
-            gather_time,
-            cpus_per_task,
-            mem,
-            gather_after,
-            extra,
-            bin,
-            submit,
-            wait,
-            timeout,
-        } => {
-            let manifest = plan::plan_to_dir(&spec, &out, runs)?;
-            let dir = slurm::absolute(&out)?;
-            let bin = match bin {
-                Some(b) => slurm::absolute(&b)?,
-                None => std::env::current_exe()?,
-            };
-            let after = match gather_after {
-                After::Ok => slurm::GatherAfter::Ok,
-                After::Any => slurm::GatherAfter::Any,
-            };
-            let options = slurm::SlurmOptions {
-                bin,
-                tasks,
-                throttle,
-                partition,
-                account,
-                qos,
-                time,
-                gather_time,
-                cpus_per_task,
-                mem,
-                gather_after: after,
-                extra,
-            };
-            slurm::write_scripts(&manifest.campaign, manifest.runs, &dir, &options)?;
-            println!(
-                "campaign {}: {} runs planned; wrote {} and {}",
-                manifest.campaign,
-                manifest.runs,
-                dir.join("campaign.sbatch").display(),
-                dir.join("gather.sbatch").display()
-            );
-            if !submit {
-                println!(
-                    "submit: jid=$(sbatch --parsable {d}/campaign.sbatch) && sbatch \
-                     --dependency={dep}:$jid {d}/gather.sbatch",
-                    d = dir.display(),
-                    dep = after.dependency()
-                );
-                return Ok(true);
-            }
-            let (array, gather_id) = slurm::submit(&dir, after)?;
-            println!("submitted: array job {array}, gather job {gather_id}");
-            if wait {
-                slurm::wait(&dir, &gather_id, timeout)?;
-                let stats: serde_json::Value =
-                    serde_json::from_str(&std::fs::read_to_string(dir.join("stats.json"))?)?;
-                let verdict = stats.get("verdict").and_then(|v| v.as_str()).unwrap_or("?");
-                println!(
-                    "campaign {}: verdict {verdict}; {}",
-                    manifest.campaign,
-                    dir.join("report.html").display()
-                );
-                return Ok(verdict == "pass");
-            }
-            Ok(true)
-        }
+        } => local(&spec, &out, runs, jobs, rerun),
+        CampaignCommand::Slurm(args) => submit_slurm(args),
     }
+}
+
+/// `campaign run`: one index (every output with `outputs`) or a shard, one after the other.
+fn run(
+    dir: &Path,
+    index: Option<u64>,
+    shard: Option<String>,
+    outputs: Option<&Path>,
+) -> anyhow::Result<bool> {
+    let manifest = plan::Manifest::load(dir)?;
+    let indices = match (index, shard) {
+        (Some(i), _) => {
+            manifest.entry(i)?;
+            vec![i]
+        }
+        (None, Some(s)) => {
+            let (k, n) = exec::parse_shard(&s)?;
+            exec::shard_indices(manifest.runs, k, n)
+        }
+        (None, None) => anyhow::bail!("give --index I or --shard K/N"),
+    };
+    if let (Some(out), [i]) = (outputs, indices.as_slice()) {
+        let s = exec::run_index(dir, &manifest, *i, Some(out))?;
+        println!(
+            "run {i}: goal {} cross-track max {:.3} m; every output in {}",
+            if s.goal_reached { "reached" } else { "missed" },
+            s.cross_track_m.max,
+            out.display()
+        );
+        return Ok(true);
+    }
+    let failed = exec::run_sequential(dir, &manifest, &indices);
+    anyhow::ensure!(failed == 0, "{failed} of {} runs failed", indices.len());
+    Ok(true)
+}
+
+/// `campaign local`: plan, run what is not done (or everything with `rerun`) in parallel,
+/// gather.
+fn local(
+    spec: &Path,
+    out: &Path,
+    runs: Option<u64>,
+    jobs: Option<usize>,
+    rerun: bool,
+) -> anyhow::Result<bool> {
+    let manifest = plan::plan_to_dir(spec, out, runs)?;
+    let todo: Vec<u64> = (0..manifest.runs)
+        .filter(|&i| rerun || !exec::is_done(out, i))
+        .collect();
+    let done = manifest.runs - todo.len() as u64;
+    println!(
+        "campaign {}: {} runs of {} ({} to run{}), output in {}",
+        manifest.campaign,
+        manifest.runs,
+        manifest.base_scenario()?.name,
+        todo.len(),
+        if done > 0 {
+            format!(", {done} already done")
+        } else {
+            String::new()
+        },
+        out.display()
+    );
+    let start = std::time::Instant::now();
+    let failed = exec::run_parallel(out, &manifest, &todo, jobs)?;
+    println!(
+        "{} runs in {:.1} s wall time, {} failed",
+        todo.len(),
+        start.elapsed().as_secs_f64(),
+        failed.len()
+    );
+    for (i, e) in &failed {
+        eprintln!("run {i}: FAILED: {e}");
+    }
+    gather(out)
+}
+
+/// `campaign slurm`: plan, write the scripts, and with `--submit` submit them (and with
+/// `--wait` wait for the gather and read its verdict).
+fn submit_slurm(args: SlurmArgs) -> anyhow::Result<bool> {
+    let SlurmArgs {
+        spec,
+        out,
+        runs,
+        throttle,
+        tasks,
+        partition,
+        account,
+        qos,
+        time,
+        gather_time,
+        cpus_per_task,
+        mem,
+        gather_after,
+        extra,
+        bin,
+        submit,
+        wait,
+        timeout,
+    } = args;
+    let manifest = plan::plan_to_dir(&spec, &out, runs)?;
+    let dir = slurm::absolute(&out)?;
+    let bin = match bin {
+        Some(b) => slurm::absolute(&b)?,
+        None => std::env::current_exe()?,
+    };
+    let after = match gather_after {
+        After::Ok => slurm::GatherAfter::Ok,
+        After::Any => slurm::GatherAfter::Any,
+    };
+    let options = slurm::SlurmOptions {
+        bin,
+        tasks,
+        throttle,
+        partition,
+        account,
+        qos,
+        time,
+        gather_time,
+        cpus_per_task,
+        mem,
+        gather_after: after,
+        extra,
+    };
+    slurm::write_scripts(&manifest.campaign, manifest.runs, &dir, &options)?;
+    println!(
+        "campaign {}: {} runs planned; wrote {} and {}",
+        manifest.campaign,
+        manifest.runs,
+        dir.join("campaign.sbatch").display(),
+        dir.join("gather.sbatch").display()
+    );
+    if !submit {
+        println!(
+            "submit: jid=$(sbatch --parsable {d}/campaign.sbatch) && sbatch \
+             --dependency={dep}:$jid {d}/gather.sbatch",
+            d = dir.display(),
+            dep = after.dependency()
+        );
+        return Ok(true);
+    }
+    let (array, gather_id) = slurm::submit(&dir, after)?;
+    println!("submitted: array job {array}, gather job {gather_id}");
+    if wait {
+        slurm::wait(&dir, &gather_id, timeout)?;
+        let stats: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("stats.json"))?)?;
+        let verdict = stats.get("verdict").and_then(|v| v.as_str()).unwrap_or("?");
+        println!(
+            "campaign {}: verdict {verdict}; {}",
+            manifest.campaign,
+            dir.join("report.html").display()
+        );
+        return Ok(verdict == "pass");
+    }
+    Ok(true)
 }
 
 /// Gather `dir`: write `stats.json`, `report.html`, `runtime.json`, print the criteria.

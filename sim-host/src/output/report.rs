@@ -448,18 +448,10 @@ fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 }
 
 /// The figures of the page in order, with the section heading each starts (if any).
+/// The figures of the report, each with the heading of the section it opens.
 fn figures(run: &RunResult) -> anyhow::Result<Vec<(Option<&'static str>, String)>> {
-    let r = &run.records;
     let mut out = vec![(Some("Trajectory"), top_view_figure(run)?)];
-    let mut cross = Figure::new(
-        "Cross-track error of the true path",
-        "time (s)",
-        "m",
-        PLOT_H,
-    );
-    cross.y_include = vec![0.0];
-    cross.layers = vec![line_of(r, "truth", C_TRUTH, &|x| (x.t_s, x.cross_track_m))];
-    out.push((None, render(&cross)?));
+    out.push((None, cross_track_figure(run)?));
     out.push((
         Some("Flight estimates against the truth, with the EKF's 3σ bounds"),
         error_figure(run, "EKF north error and 3σ bound", "m", &|x, e| {
@@ -479,6 +471,35 @@ fn figures(run: &RunResult) -> anyhow::Result<Vec<(Option<&'static str>, String)
             (d.to_degrees(), e.ekf_heading_sigma_rad.to_degrees())
         })?,
     ));
+    out.push((None, vo_error_figure(run)?));
+    let [ratio, angle] = slip_figures(run)?;
+    out.push((Some("Slip"), ratio));
+    out.push((None, angle));
+    out.push((None, flight_slip_figure(run)?));
+    let [per_bin, nis] = gate_figures(run)?;
+    out.push((Some("Slip gate"), per_bin));
+    out.push((None, nis));
+    out.push((Some("Vehicle"), attitude_figure(run)?));
+    out.push((Some("Timing"), timing_figure(run)?));
+    Ok(out)
+}
+
+/// The cross-track error of the true path.
+fn cross_track_figure(run: &RunResult) -> anyhow::Result<String> {
+    let r = &run.records;
+    let mut cross = Figure::new(
+        "Cross-track error of the true path",
+        "time (s)",
+        "m",
+        PLOT_H,
+    );
+    cross.y_include = vec![0.0];
+    cross.layers = vec![line_of(r, "truth", C_TRUTH, &|x| (x.t_s, x.cross_track_m))];
+    render(&cross)
+}
+
+/// The flight VO relative-pose translation errors with their reported 3σ.
+fn vo_error_figure(run: &RunResult) -> anyhow::Result<String> {
     let mut vo = Figure::new(
         "Flight VO relative-pose translation error per update and 3σ bound",
         "time (s)",
@@ -510,10 +531,12 @@ fn figures(run: &RunResult) -> anyhow::Result<Vec<(Option<&'static str>, String)
             c.iter().map(|c| (c.t_s, 1e3 * c.trans_err_m[1])).collect(),
         ),
     ];
-    out.push((None, render(&vo)?));
-    let [ratio, angle] = slip_figures(run)?;
-    out.push((Some("Slip"), ratio));
-    out.push((None, angle));
+    render(&vo)
+}
+
+/// The flight software's slip vector.
+fn flight_slip_figure(run: &RunResult) -> anyhow::Result<String> {
+    let r = &run.records;
     let mut flight_slip = Figure::new(
         "Flight slip vector (EKF minus kinematics per 50 ms cycle; 0 when the gate accepts)",
         "time (s)",
@@ -531,10 +554,12 @@ fn figures(run: &RunResult) -> anyhow::Result<Vec<(Option<&'static str>, String)
         Layer::line("y slip (mm)", C_TRUTH, Stroke::Solid, sv(1)),
         Layer::line("yaw slip (mrad)", C_VO, Stroke::Solid, sv(2)),
     ];
-    out.push((None, render(&flight_slip)?));
-    let [per_bin, nis] = gate_figures(run)?;
-    out.push((Some("Slip gate"), per_bin));
-    out.push((None, nis));
+    render(&flight_slip)
+}
+
+/// The true attitude and suspension angles.
+fn attitude_figure(run: &RunResult) -> anyhow::Result<String> {
+    let r = &run.records;
     let mut attitude = Figure::new(
         "True attitude and suspension",
         "time (s)",
@@ -554,9 +579,7 @@ fn figures(run: &RunResult) -> anyhow::Result<Vec<(Option<&'static str>, String)
             &deg(|x| x.suspension_rad[2]),
         ),
     ];
-    out.push((Some("Vehicle"), render(&attitude)?));
-    out.push((Some("Timing"), timing_figure(run)?));
-    Ok(out)
+    render(&attitude)
 }
 
 /// The HTML report of `run`.

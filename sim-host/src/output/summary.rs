@@ -553,6 +553,69 @@ fn fault_protection_summary(run: &RunResult) -> FaultProtectionSummary {
     }
 }
 
+/// The true slip over the records where the rover moved, and the gate's rejections.
+fn slip_summary(run: &RunResult) -> SlipSummary {
+    let moving: Vec<_> = run
+        .records
+        .windows(2)
+        .filter(|w| w[1].distance_m > w[0].distance_m + 1e-5)
+        .map(|w| w[1])
+        .collect();
+    let m = moving.len().max(1) as f64;
+    SlipSummary {
+        gate_reject_fraction: (run.nav.kin_tested > 0)
+            .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
+        mean_slip_ratio: moving.iter().map(|r| r.slip_ratio).sum::<f64>() / m,
+        mean_slip_angle_deg: moving
+            .iter()
+            .map(|r| r.slip_angle_rad.to_degrees())
+            .sum::<f64>()
+            / m,
+    }
+}
+
+/// Visual odometry in the flight software.
+fn vo_summary(run: &RunResult) -> VoSummary {
+    VoSummary {
+        updates: Some(u64::from(run.nav.vo_updates)),
+        failures: Some(u64::from(run.nav.vo_failures)),
+        mean_features: run.vo_mean_features,
+        mean_inliers: run.vo_mean_inliers,
+        boresight_mrad: run.vo_boresight.0 * 1e3,
+        boresight_samples: run.vo_boresight.1,
+        last_error: run.vo_last_error.clone(),
+    }
+}
+
+/// The executive's timing per rate group, by group name.
+fn timing_summary(run: &RunResult) -> serde_json::Map<String, serde_json::Value> {
+    let mut timing = serde_json::Map::new();
+    for g in &run.timing {
+        let value = serde_json::to_value(GroupTimingJson {
+            max_us: g.max_us,
+            mean_us: g.mean_us,
+            overruns: g.overruns,
+        })
+        .unwrap_or(serde_json::Value::Null);
+        timing.insert(g.name.clone(), value);
+    }
+    timing
+}
+
+/// The flight software's health of each device, by device name.
+fn device_health_summary(run: &RunResult) -> serde_json::Map<String, serde_json::Value> {
+    ["imu", "joints", "camera", "sun", "power"]
+        .iter()
+        .zip(run.device_health.iter())
+        .map(|(k, h)| {
+            (
+                k.to_string(),
+                serde_json::to_value(h).unwrap_or(serde_json::Value::Null),
+            )
+        })
+        .collect()
+}
+
 /// Build the summary of `run`.
 pub fn summarise(run: &RunResult) -> Summary {
     let n = run.records.len().max(1) as f64;
@@ -568,23 +631,6 @@ pub fn summarise(run: &RunResult) -> Summary {
         .iter()
         .map(|r| r.cross_track_m)
         .fold(0.0, f64::max);
-    let moving: Vec<_> = run
-        .records
-        .windows(2)
-        .filter(|w| w[1].distance_m > w[0].distance_m + 1e-5)
-        .map(|w| w[1])
-        .collect();
-    let m = moving.len().max(1) as f64;
-    let mut timing = serde_json::Map::new();
-    for g in &run.timing {
-        let value = serde_json::to_value(GroupTimingJson {
-            max_us: g.max_us,
-            mean_us: g.mean_us,
-            overruns: g.overruns,
-        })
-        .unwrap_or(serde_json::Value::Null);
-        timing.insert(g.name.clone(), value);
-    }
     Summary {
         scenario: run.scenario.clone(),
         seed: run.seed,
@@ -618,37 +664,11 @@ pub fn summarise(run: &RunResult) -> Summary {
         targets: targets_summary(run),
         localization: localization_summary(run),
         planner: planner_summary(run),
-        slip: SlipSummary {
-            gate_reject_fraction: (run.nav.kin_tested > 0)
-                .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
-            mean_slip_ratio: moving.iter().map(|r| r.slip_ratio).sum::<f64>() / m,
-            mean_slip_angle_deg: moving
-                .iter()
-                .map(|r| r.slip_angle_rad.to_degrees())
-                .sum::<f64>()
-                / m,
-        },
-        vo: VoSummary {
-            updates: Some(u64::from(run.nav.vo_updates)),
-            failures: Some(u64::from(run.nav.vo_failures)),
-            mean_features: run.vo_mean_features,
-            mean_inliers: run.vo_mean_inliers,
-            boresight_mrad: run.vo_boresight.0 * 1e3,
-            boresight_samples: run.vo_boresight.1,
-            last_error: run.vo_last_error.clone(),
-        },
-        timing,
+        slip: slip_summary(run),
+        vo: vo_summary(run),
+        timing: timing_summary(run),
         device_faults: run.device_faults,
-        device_health: ["imu", "joints", "camera", "sun", "power"]
-            .iter()
-            .zip(run.device_health.iter())
-            .map(|(k, h)| {
-                (
-                    k.to_string(),
-                    serde_json::to_value(h).unwrap_or(serde_json::Value::Null),
-                )
-            })
-            .collect(),
+        device_health: device_health_summary(run),
         stereo_frames: run.stereo_frames,
         energy: EnergySummary {
             used_j: run.energy_used_j,

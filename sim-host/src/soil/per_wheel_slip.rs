@@ -290,30 +290,8 @@ impl SlipModel {
                 out[i].load_n = normal;
                 continue;
             }
-            // Drawbar pull along the driving direction: the share of the weight's component
-            // (the wheel's own compaction resistance is inside the rigid-wheel drawbar pull).
-            let table = &self.tables[i];
-            let demand = g.rim_speed_m_s.signum() * mu * share;
-            let side = nu * share;
-            let first = table.slip_for_drawbar_pull(normal, 0.0, demand);
-            let (alpha0, _) = table.slip_angle_for_side_force(normal, first.slip_ratio, side);
-            let sol = table.slip_for_drawbar_pull(normal, alpha0, demand);
-            let (alpha, side_saturated) =
-                table.slip_angle_for_side_force(normal, sol.slip_ratio, side);
-            let s = sol.slip_ratio;
-            let ground_speed = if s >= 0.0 {
-                g.rim_speed_m_s * (1.0 - s)
-            } else {
-                g.rim_speed_m_s / (1.0 + s).max(1e-3)
-            };
-            out[i] = WheelSlip {
-                load_n: normal,
-                slip_ratio: s,
-                slip_angle_rad: alpha,
-                saturated: sol.saturated || side_saturated,
-                ground_speed_m_s: ground_speed,
-                lateral_m_s: ground_speed.abs() * alpha.tan(),
-            };
+            out[i] = wheel_slip(&self.tables[i], g, normal, [mu, nu], share);
+            let (s, alpha) = (out[i].slip_ratio, out[i].slip_angle_rad);
             mean_s += normal * s;
             mean_a += normal * alpha * g.spin.y.signum();
             weight += normal;
@@ -327,6 +305,41 @@ impl SlipModel {
             SlipState::default()
         };
         (out, state)
+    }
+}
+
+/// The slip of one rolling wheel on the ground `g` under the normal load `normal`, N, that
+/// carries `share` of the weight, N, where the ground must deliver the traction and side force
+/// `[mu, nu]` per unit weight: the slip ratio for the drawbar pull and the slip angle for the
+/// side force, each solved twice (the slip angle changes the drawbar pull).
+fn wheel_slip(
+    table: &WheelTable,
+    g: &WheelGround,
+    normal: f64,
+    [mu, nu]: [f64; 2],
+    share: f64,
+) -> WheelSlip {
+    // Drawbar pull along the driving direction: the share of the weight's component (the
+    // wheel's own compaction resistance is inside the rigid-wheel drawbar pull).
+    let demand = g.rim_speed_m_s.signum() * mu * share;
+    let side = nu * share;
+    let first = table.slip_for_drawbar_pull(normal, 0.0, demand);
+    let (alpha0, _) = table.slip_angle_for_side_force(normal, first.slip_ratio, side);
+    let sol = table.slip_for_drawbar_pull(normal, alpha0, demand);
+    let (alpha, side_saturated) = table.slip_angle_for_side_force(normal, sol.slip_ratio, side);
+    let s = sol.slip_ratio;
+    let ground_speed = if s >= 0.0 {
+        g.rim_speed_m_s * (1.0 - s)
+    } else {
+        g.rim_speed_m_s / (1.0 + s).max(1e-3)
+    };
+    WheelSlip {
+        load_n: normal,
+        slip_ratio: s,
+        slip_angle_rad: alpha,
+        saturated: sol.saturated || side_saturated,
+        ground_speed_m_s: ground_speed,
+        lateral_m_s: ground_speed.abs() * alpha.tan(),
     }
 }
 

@@ -194,6 +194,7 @@ fn gravity_row(weight: &Weight) -> Row {
     ])
 }
 
+#[allow(clippy::needless_range_loop)] // parallel arrays per contact
 impl Problem<'_> {
     /// The weighted normal equations of the active contacts, `None` when fewer than three
     /// wheels carry load.
@@ -239,6 +240,7 @@ impl Problem<'_> {
     }
 }
 
+#[allow(clippy::needless_range_loop)] // parallel arrays per contact
 impl Passes {
     /// Reweight: a contact whose creep force would exceed mu N slides at mu N. The normal
     /// force of the bound is relaxed (half the previous bound, half this pass's force) so the
