@@ -282,7 +282,7 @@ pub struct Scenario {
     /// [`crate::hazards::DEFAULT_HAZARD_HEIGHT_M`].
     #[serde(default = "default_hazard_height")]
     pub hazard_height_m: f64,
-    /// The day's science targets for the flight software's sequencer (V99 sec. 3; issue 17),
+    /// The day's science targets for the flight software's sequencer (V99 sec. 3),
     /// uplinked after the start. Needs `navigation = "roverbug"`.
     #[serde(default)]
     pub mission: Option<MissionSpec>,

@@ -151,7 +151,7 @@ fn sim_12_cross_slope_drift_without_compensation() {
 /// SIM-13: on flat firm soil the rover does not drift sideways (less than 2 cm over the open-loop
 /// drive) and its mean slip ratio is the single-wheel free-rolling slip of the rigid-wheel law
 /// on `firm_soil` within 0.06 (about 0.17: Wong's loam resists a 0.2 m wheel; the lumped
-/// model's "below 2 %" no longer holds, see `docs/simulator.md`, section Slip).
+/// model's "below 2 %" does not hold for it, see `docs/simulator.md`, section Slip).
 #[test]
 fn sim_13_flat_firm_soil_small_slip() {
     let mut s = scenario("slope-10-cross");

@@ -1,4 +1,4 @@
-//! Issue 14 acceptance: the flight configuration of every scenario is the nominal flight
+//! The flight configuration of every scenario is the nominal flight
 //! profile plus the mission plan, and nothing else: no simulator parameter (IMU noise, sun
 //! sensor noise, dimension or calibration errors), no truth (start pose, terrain roughness)
 //! and no seed leaks into it.

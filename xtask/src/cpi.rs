@@ -1,4 +1,4 @@
-//! Cycles per instruction of the flight kernels on the Cortex-M7 pipeline (issue 18).
+//! Cycles per instruction of the flight kernels on the Cortex-M7 pipeline.
 //!
 //! QEMU counts instructions, not cycles. This module derives a CPI for the image's own code from
 //! the Cortex-M7 pipeline description that LLVM carries (`ARMScheduleM7.td`: dual issue, two

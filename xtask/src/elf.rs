@@ -57,7 +57,8 @@ impl ElfReport {
     /// Panic sites outside the image's number formatting (`core::fmt`, `core::num::flt2dec`,
     /// `core::num::bignum`: the semihosting reports and the panic handler's message), per
     /// enclosing function: the flight code's own, inlined into whatever function it ended up
-    /// in. Must be empty (issue 18); `cargo xtask timing` fails otherwise.
+    /// in. Must be empty (the flight code has no panic path); `cargo xtask timing`
+    /// fails otherwise.
     pub fn flight_panic_sites(&self) -> Vec<(String, usize)> {
         self.panic_sites_by_function
             .iter()

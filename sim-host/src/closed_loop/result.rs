@@ -265,7 +265,7 @@ pub(super) fn loc_check(
     })
 }
 
-/// What the sequencer did with the day's targets (issue 17, V99 sec. 3).
+/// What the sequencer did with the day's targets (V99 sec. 3).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MissionRun {
     /// The flight software's counters.

@@ -184,9 +184,9 @@ pub struct Summary {
     pub hazards: HazardSummary,
     /// The goal-directed drive (hazard maps and RoverBug; null for a path drive).
     pub planner: Option<PlannerSummary>,
-    /// Terrain-map localization (issue 17; null when the run did not ask for it).
+    /// Terrain-map localization (V99 sec. 5; null when the run did not ask for it).
     pub localization: Option<LocalizationSummary>,
-    /// The day's targets and the sequencer (issue 17; null without targets).
+    /// The day's targets and the sequencer (V99 sec. 3; null without targets).
     pub targets: Option<TargetsSummary>,
     /// Slip.
     pub slip: SlipSummary,
@@ -231,7 +231,7 @@ pub struct HazardSummary {
     pub contacts: Vec<HazardContact>,
 }
 
-/// The goal-directed drive of a run (issue 16).
+/// The goal-directed drive of a run (hazard maps and RoverBug, V99 sec. 4).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct PlannerSummary {
     /// `reached`, `unreachable`, `blocked` or `driving` (the planner's verdict at the end).
@@ -263,7 +263,7 @@ pub struct PlannerSummary {
     pub hold_cycles: u32,
 }
 
-/// Terrain-map localization of a run (issue 17, V99 sec. 5).
+/// Terrain-map localization of a run (V99 sec. 5).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct LocalizationSummary {
     /// Fixes fused into the EKF.
@@ -298,7 +298,7 @@ pub struct LocalizationSummary {
     pub last_error: Option<String>,
 }
 
-/// The day's targets and the on-board sequencer of a run (issue 17, V99 sec. 3): the flight
+/// The day's targets and the on-board sequencer of a run (V99 sec. 3): the flight
 /// software's counters (`total`, `visited`, `dropped`, `unreachable`, `replans`, `reorders`,
 /// the triggers, `goal_switches`, the power calibration, `energy_used_j` since the uplink at
 /// its last replan; `fsw::flight::nav::MissionCounters`) and the outcome per target.

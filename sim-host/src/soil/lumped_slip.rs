@@ -4,7 +4,7 @@
 //! sand gives the drift of H05 Fig. 9, and its contact patch is a fixed assumption; the
 //! default per-wheel terramechanics model ([`crate::soil::per_wheel_slip`], `slip_model = "terramechanics"`,
 //! the rigid-wheel law of [`crate::soil::rigid_wheel`]) derives both from published soil values
-//! (see `docs/simulator.md`). This model is kept for comparison with earlier results.
+//! (see `docs/simulator.md`). This model runs the reference cases SIL-SLIP-1/2.
 //!
 //! What follows is the model: how much the rover's ground velocity falls short of
 //! (longitudinal) and departs sideways from (lateral, downhill) the velocity its wheels

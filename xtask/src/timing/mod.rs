@@ -31,7 +31,7 @@ const DESIGN_MARGIN: f64 = 0.5;
 
 /// Goals (reported, not enforced).
 const GOAL_PROPAGATE: u64 = 15_000;
-/// Inverse kinematics per RG2 cycle (issue 18).
+/// Inverse kinematics per RG2 cycle.
 const GOAL_IK: u64 = 10_000;
 const GOAL_RG2_FRAME: u64 = 100_000;
 /// The minor frame, s.
@@ -42,7 +42,7 @@ const GOAL_STACK: u64 = 32 * 1024;
 /// the bottom of the painted region may have overflowed into the statics unseen.
 const MIN_STACK_HEADROOM: u64 = 4 * 1024;
 
-/// Most stack the flight phase may use, bytes (issue 18: the flight stack at most 32 KiB):
+/// Most stack the flight phase may use, bytes (the flight stack budget of 32 KiB):
 /// the painted high-water mark of "flight software, 2000 replayed frames", which includes the
 /// image's `main`, the measuring closure and the replay harness under `Fsw::tick`. Enforced:
 /// `cargo xtask timing` fails above it (the margin is in `docs/timing.md`, Goals and Stack).
@@ -436,14 +436,14 @@ fn check_budgets(m: &Measured, report: &ElfReport) -> Result<()> {
     let flight_panics = report.flight_panic_sites();
     if !flight_panics.is_empty() {
         bail!(
-            "the image has panic sites outside its number formatting (issue 18: the flight code \
-             has no panic path); enclosing functions: {flight_panics:?}"
+            "the image has panic sites outside its number formatting (the flight code has no \
+             panic path); enclosing functions: {flight_panics:?}"
         );
     }
     if !flight_stack_ok(m) {
         bail!(
-            "the flight phase's painted stack peak ({} B) exceeds {} B (issue 18; \
-             docs/timing.md, Stack; `cargo xtask stack` shows the deepest static path)",
+            "the flight phase's painted stack peak ({} B) exceeds {} B (the flight stack \
+             budget, docs/timing.md, Stack; `cargo xtask stack` shows the deepest static path)",
             m.stack.get("flight").copied().unwrap_or(0),
             MAX_FLIGHT_STACK
         );
@@ -565,7 +565,7 @@ fn groups(m: &Measured) -> Vec<Group> {
             name: "LOC",
             period_s: 5.0,
             insns: m.task("localize").max,
-            content: "terrain-map localization (issue 17, `fsw::flight::nav::loc_nav`): a search \
+            content: "terrain-map localization (`fsw::flight::nav::loc_nav`): a search \
                       in background work items after the hazard map that completes a local \
                       map (four maps, one every 0.5 m of travel) or a stop's view: at most one \
                       per hazard map, the HAZ bound"
@@ -575,7 +575,7 @@ fn groups(m: &Measured) -> Vec<Group> {
             name: "SEQ",
             period_s: 5.0,
             insns: m.task("sequencer_replan").max,
-            content: "on-board sequencer (issue 17, `fsw::flight::nav::mission`): one replan in \
+            content: "on-board sequencer (`fsw::flight::nav::mission`): one replan in \
                       a background slice per trigger (a dwell done, every 2 m of travel, a leg \
                       grown at a RoverBug step, the energy check at a 0.2 Hz power reading): \
                       at most one per power reading, 5 s, taken as the bound (SIL-SEQ-1 made \

@@ -63,7 +63,7 @@ const TASK_DOC: [(&str, &str, &str); 17] = [
     (
         "ekf_gate_fuse_without_vo",
         "`Ekf::gate_relative_pose_kept` then `Ekf::fuse_kept_relative_pose` (every other kinematic interval of the tape instead of the gate and the update)",
-        "RG2 without VO: the interval gated at its own covariance, then fused with z observed and the slip allowances from the kept innovation (`Navigator::fuse_without_vo`; a gate and a whole update before issue 18's third pass)",
+        "RG2 without VO: the interval gated at its own covariance, then fused with z observed and the slip allowances from the kept innovation (`Navigator::fuse_without_vo`)",
     ),
     (
         "forward_kinematics",
@@ -93,7 +93,7 @@ const TASK_DOC: [(&str, &str, &str); 17] = [
     (
         "hazard_map",
         "`HazardMapper::start`, then `step` per work item",
-        "background (goal-directed drives): one hazard map of the pair after VO (issue 16)",
+        "background (goal-directed drives): one hazard map of the pair after VO",
     ),
     (
         "roverbug_plan",
@@ -114,19 +114,19 @@ const TASK_DOC: [(&str, &str, &str); 17] = [
     (
         "localization_map",
         "`GlobalMap::reset_centred`, `insert_point` per point, `finish`",
-        "once per uplinked map (issue 17): a 38.4 m global map of a synthetic field of 392 rocks \
+        "once per uplinked map: a 38.4 m global map of a synthetic field of 392 rocks \
          (`fsw/image/src/target/loc_bench.rs`), with its distance transform",
     ),
     (
         "localize",
         "`Localizer::localize`",
-        "background, after a hazard map (issue 17): one branch-and-bound localization of a hazard grid against that map, prior 0.3 m / \
+        "background, after a hazard map: one branch-and-bound localization of a hazard grid against that map, prior 0.3 m / \
          0.03 rad, 8 synthetic trials",
     ),
     (
         "sequencer_replan",
         "`Sequencer::replan_committed`",
-        "background, on a trigger of the navigator's mission (issue 17): one replan of 8 \
+        "background, on a trigger of the navigator's mission: one replan of 8 \
          targets with windows, energy, a leg penalty and the commitment to one target, 8 random \
          problems",
     ),
