@@ -1,5 +1,5 @@
 //! Host wall time of the flight visual odometry on real 640x480 stereo pairs (the VO work items of
-//! `docs/timing.md`), the
+//! `docs/results/timing.md`), the
 //! Rust half of `tools/vo_speed.py` (which exports the pairs and runs the OpenCV peer).
 //!
 //! Loads the rectified pairs listed in `DIR/pairs.txt` (one name per line; `NAME_left.pgm`,

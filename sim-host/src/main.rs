@@ -34,7 +34,7 @@ enum Command {
     /// Run a scenario file in closed loop and write the outputs.
     Run(commands::run::RunArgs),
     /// Record the HAL call tape of a scenario segment (with rendered stereo images) for replay
-    /// on the host or the rover CPU (docs/timing.md).
+    /// on the host or the rover CPU (docs/results/timing.md).
     Record(commands::record::RecordArgs),
     /// Monte Carlo campaigns: plan, run, gather, local, slurm (docs/campaigns.md).
     Campaign(commands::campaign::CampaignArgs),

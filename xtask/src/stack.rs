@@ -1,5 +1,5 @@
 //! Static worst-case stack analysis of the rover-CPU image (the flight stack budget of 32 KiB,
-//! `docs/timing.md`), next to the painted
+//! `docs/results/timing.md`), next to the painted
 //! high-water marks of `cargo xtask timing`.
 //!
 //! The image's `.text` is decoded here (Thumb-2, no external disassembler; the `$d` mapping

@@ -674,7 +674,8 @@ fn campaign_example_specs_plan() {
 /// labels outside its canvas, and a criteria table that matches its `stats.json`.
 #[test]
 fn campaign_committed_report_labels_do_not_overlap() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/campaigns/slope-10-cross");
+    let dir =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/campaigns/slope-10-cross");
     let page = std::fs::read_to_string(dir.join("report.html")).unwrap();
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("stats.json")).unwrap()).unwrap();

@@ -8,8 +8,8 @@
 //! pairs every kinematic interval with the simulator's true slip over it, and bins the gate
 //! decisions by the true slip. It also measures the slip-hold policy
 //! (`NavConfig::slip_hold_cycles`) through the run's experiment hook
-//! ([`RunOptions::configure`]). It writes `docs/slip-detection.md` and
-//! `docs/figures/slip-detection.svg`.
+//! ([`RunOptions::configure`]). It writes `docs/results/slip-detection.md` and
+//! `docs/results/slip-detection.svg`.
 
 use crate::closed_loop::{run, RunOptions, RunResult};
 use crate::devices::hazcam_calibration;
@@ -513,7 +513,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "-".to_string(), |x| format!("{x:.digits$}"))
 }
 
-/// The results page `docs/slip-detection.md`.
+/// The results page `docs/results/slip-detection.md`.
 pub fn markdown(study: &Study, reading: &str) -> String {
     let mut s = String::new();
     intro(&mut s, study);
@@ -578,7 +578,7 @@ fn intro(s: &mut String, study: &Study) {
          own: pooling them would mix the cross-slope runs' lateral slip into the longitudinal bins \
          and the reverse.\n"
     );
-    let _ = writeln!(s, "![detection probability](figures/slip-detection.svg)\n");
+    let _ = writeln!(s, "![detection probability](slip-detection.svg)\n");
 }
 
 /// The false alarms of the two no-slip baselines.
@@ -716,7 +716,7 @@ fn slip_hold(s: &mut String, study: &Study) {
     let _ = writeln!(s);
 }
 
-/// The figure `docs/figures/slip-detection.svg`: detection probability against the lateral
+/// The figure `docs/results/slip-detection.svg`: detection probability against the lateral
 /// slip angle (cross-slope sweep) and against the longitudinal slip ratio (uphill sweep), with
 /// the design false-alarm level dashed.
 pub fn svg(study: &Study) -> anyhow::Result<String> {
@@ -810,10 +810,10 @@ fn plot_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 #[derive(Debug, Clone, clap::Args)]
 pub struct DetectionArgs {
     /// Results page to write.
-    #[arg(long, default_value = "docs/slip-detection.md")]
+    #[arg(long, default_value = "docs/results/slip-detection.md")]
     pub out: PathBuf,
     /// Figure to write (SVG).
-    #[arg(long, default_value = "docs/figures/slip-detection.svg")]
+    #[arg(long, default_value = "docs/results/slip-detection.svg")]
     pub figure: PathBuf,
     /// Directory of the scenario files.
     #[arg(long, default_value = "scenarios")]

@@ -6,12 +6,12 @@
 //! - [`compare`]: the main command's default: a scenario with and without slip compensation,
 //!   compared, with the H05 Fig. 9 top view.
 //! - [`still`]: the flight executive on a rover standing still (per-rate-group timing).
-//! - [`sil`]: the SIL acceptance cases (tests and `docs/sil-results.md`).
+//! - [`sil`]: the SIL acceptance cases (tests and `docs/results/sil-results.md`).
 //! - [`detection`]: slip detection probability against slip magnitude and the slip-hold
-//!   policy (`docs/slip-detection.md`).
+//!   policy (`docs/results/slip-detection.md`).
 //! - [`record`], [`replay`]: call tapes of the HAL inputs and their replay through the flight
 //!   software with per-frame output digests, for bit-identical host/target comparison
-//!   (`docs/timing.md`).
+//!   (`docs/results/timing.md`).
 //! - [`campaign`]: Monte Carlo campaigns (plan, run, gather, local, slurm; [`crate::campaign`]).
 
 pub mod campaign;

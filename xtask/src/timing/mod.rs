@@ -1,5 +1,5 @@
 //! `cargo xtask timing`: timing analysis on the rover CPU model (QEMU `mps2-an500`, `-icount`),
-//! bit-identical host/target replay, stack and memory budgets; writes `docs/timing.md`.
+//! bit-identical host/target replay, stack and memory budgets; writes `docs/results/timing.md`.
 
 use crate::cpi;
 use crate::elf::{self, ElfReport};
@@ -20,7 +20,7 @@ const SECONDS: &str = "10";
 /// Where the tape goes.
 const TAPE: &str = "target/timing/slope-10-cross.tape";
 /// The generated document.
-const DOC: &str = "docs/timing.md";
+const DOC: &str = "docs/results/timing.md";
 
 /// Stated clock of the rover CPU, Hz.
 const CLOCK_HZ: f64 = 300e6;
@@ -45,7 +45,7 @@ const MIN_STACK_HEADROOM: u64 = 4 * 1024;
 /// Most stack the flight phase may use, bytes (the flight stack budget of 32 KiB):
 /// the painted high-water mark of "flight software, 2000 replayed frames", which includes the
 /// image's `main`, the measuring closure and the replay harness under `Fsw::tick`. Enforced:
-/// `cargo xtask timing` fails above it (the margin is in `docs/timing.md`, Goals and Stack).
+/// `cargo xtask timing` fails above it (the margin is in `docs/results/timing.md`, Goals and Stack).
 const MAX_FLIGHT_STACK: u64 = 32 * 1024;
 
 /// True when the painted flight phase is within [`MAX_FLIGHT_STACK`].
@@ -273,7 +273,7 @@ fn response_time(groups: &[Group], i: usize, cpi: f64) -> Option<f64> {
     None
 }
 
-/// Run the timing analysis and write `docs/timing.md`.
+/// Run the timing analysis and write `docs/results/timing.md`.
 pub fn timing() -> Result<()> {
     let total = Instant::now();
     let host_output = record_and_replay()?;
@@ -443,7 +443,7 @@ fn check_budgets(m: &Measured, report: &ElfReport) -> Result<()> {
     if !flight_stack_ok(m) {
         bail!(
             "the flight phase's painted stack peak ({} B) exceeds {} B (the flight stack \
-             budget, docs/timing.md, Stack; `cargo xtask stack` shows the deepest static path)",
+             budget, docs/results/timing.md, Stack; `cargo xtask stack` shows the deepest static path)",
             m.stack.get("flight").copied().unwrap_or(0),
             MAX_FLIGHT_STACK
         );
@@ -451,7 +451,7 @@ fn check_budgets(m: &Measured, report: &ElfReport) -> Result<()> {
     if !stack_headroom_ok(m) {
         bail!(
             "the deepest stack phase ({} B) leaves less than {} B of the {} B stack region: the \
-             stack may have overflowed into the statics (docs/timing.md, Stack)",
+             stack may have overflowed into the statics (docs/results/timing.md, Stack)",
             stack_peak(m),
             MIN_STACK_HEADROOM,
             m.stack.get("region").copied().unwrap_or(0)

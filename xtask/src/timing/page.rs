@@ -1,4 +1,4 @@
-//! The generated page `docs/timing.md`: its fixed text is the template `page.md` (next to this
+//! The generated page `docs/results/timing.md`: its fixed text is the template `page.md` (next to this
 //! file), whose `{name}` placeholders [`document`] fills with the measured figures, the tables
 //! and the few sentences that depend on them.
 

@@ -1,7 +1,7 @@
 //! The software-in-the-loop (SIL) acceptance cases: closed-loop scenario runs of the flight
 //! software with thresholds, each tagged with a requirement id. One table of cases serves both
 //! the tests (`tests/tests/sil_scenarios.rs`) and the results page (`sim-host sil`, which writes
-//! `docs/sil-results.md`), so the thresholds are written once.
+//! `docs/results/sil-results.md`), so the thresholds are written once.
 //!
 //! Every case renders the stereo images (the flight VO runs on them) and uses the simulated
 //! time as the execution counter, so the figures are deterministic for a scenario and seed.
@@ -49,7 +49,7 @@ pub struct Check {
     /// A requirement (failing fails the test) or a goal (reported only).
     pub required: bool,
     /// A requirement that the flight software does not meet on every seed: reported as
-    /// failing, listed in `docs/sil-results.md` with the reason, and not failing the tests.
+    /// failing, listed in `docs/results/sil-results.md` with the reason, and not failing the tests.
     pub open: bool,
 }
 
@@ -230,7 +230,7 @@ pub fn run_case(case: Case, scenarios_dir: &Path) -> anyhow::Result<CaseResult> 
 #[derive(Debug, Clone, clap::Args)]
 pub struct SilArgs {
     /// Results page to write.
-    #[arg(long, default_value = "docs/sil-results.md")]
+    #[arg(long, default_value = "docs/results/sil-results.md")]
     pub out: PathBuf,
     /// Directory of the scenario files.
     #[arg(long, default_value = "scenarios")]

@@ -1,4 +1,4 @@
-//! The results page `docs/sil-results.md`: its text is the template `page.md` (next to this
+//! The results page `docs/results/sil-results.md`: its text is the template `page.md` (next to this
 //! file); [`markdown`] fills in the table of checks, the count of force-model fallbacks and the
 //! table of runs.
 
