@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Host speed of the flight visual odometry against an OpenCV sparse pipeline (issue 18), on the
+"""Host speed of the flight visual odometry against an OpenCV sparse pipeline, on the
 same real 640x480 stereo pairs, in the same run, on one core.
 
 Data: the stereo-calibration sequence of OpenCV's sample data (Debian `opencv-doc`,

@@ -2,9 +2,9 @@
 //! loop and flat-grey cameras (no rendering). Real-time factor = 60 s / measured time.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use sim_host::hal_devices::CounterMode;
+use sim_host::closed_loop::{run, RunOptions};
+use sim_host::devices::world::CounterMode;
 use sim_host::scenario::Scenario;
-use sim_host::sim::{run, RunOptions};
 use std::path::Path;
 
 fn marsyard_60s(c: &mut Criterion) {

@@ -1,6 +1,6 @@
 //! CPU time of rendered hazcam stereo pairs on one core, on a scenario's terrain (default
 //! `scenarios/marsyard-25m.toml`), through the simulator's camera device
-//! ([`sim_host::camera::TexturedRenderer`]).
+//! ([`sim_host::devices::renderer::TexturedRenderer`]).
 //!
 //! `cargo run --release -p sim-host --example render_cpu -- [SCENARIO] [PAIRS]`
 //!
@@ -9,8 +9,8 @@
 //! thread (Linux `/proc/thread-self/schedstat`, else wall clock) is reported per pair. Also
 //! prints an FNV-1a hash of all images (a quick determinism check between builds).
 
-use sim_host::camera::StereoRenderer as _;
 use sim_host::devices::hazcam_calibration;
+use sim_host::devices::renderer::StereoRenderer as _;
 use sim_host::scenario::Scenario;
 use sim_host::surface::TerrainSurface;
 use sim_host::terrain::Terrain;
@@ -70,8 +70,11 @@ fn main() -> anyhow::Result<()> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let (w, h) = (rover_hal::IMAGE_WIDTH_PX, rover_hal::IMAGE_HEIGHT_PX);
     let (ns, hash, errors) = pool.install(|| {
-        let renderer =
-            sim_host::camera::TexturedRenderer::new(calib, scenario.seed, [sun.x, sun.y, sun.z]);
+        let renderer = sim_host::devices::renderer::TexturedRenderer::new(
+            calib,
+            scenario.seed,
+            [sun.x, sun.y, sun.z],
+        );
         let mut left = vec![0u8; w * h];
         let mut right = vec![0u8; w * h];
         // One warm-up pair (first-touch of the buffers).

@@ -1,4 +1,5 @@
-//! Host wall time of the flight visual odometry on real 640x480 stereo pairs (issue 18), the
+//! Host wall time of the flight visual odometry on real 640x480 stereo pairs (the VO work items of
+//! `docs/results/timing.md`), the
 //! Rust half of `tools/vo_speed.py` (which exports the pairs and runs the OpenCV peer).
 //!
 //! Loads the rectified pairs listed in `DIR/pairs.txt` (one name per line; `NAME_left.pgm`,
@@ -158,7 +159,16 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
-fn main() -> Result<()> {
+/// The command line: the folder of the pairs and the options.
+struct Args {
+    dir: PathBuf,
+    passes: usize,
+    warmup: usize,
+    json: bool,
+    profile: bool,
+}
+
+fn parse_args() -> Result<Args> {
     let mut args = std::env::args().skip(1);
     let mut dir: Option<PathBuf> = None;
     let (mut passes, mut warmup, mut json, mut profile) = (5usize, 1usize, false, false);
@@ -173,6 +183,20 @@ fn main() -> Result<()> {
         }
     }
     let dir = dir.context("usage: vo_speed DIR [--passes P] [--warmup W] [--json]")?;
+    Ok(Args {
+        dir,
+        passes,
+        warmup,
+        json,
+        profile,
+    })
+}
+
+/// A stereo pair: the left and the right image.
+type Pair = (Vec<u8>, Vec<u8>);
+
+/// The pair names of `DIR/pairs.txt` and their images.
+fn load_pairs(dir: &Path) -> Result<(Vec<String>, Vec<Pair>)> {
     let names: Vec<String> = std::fs::read_to_string(dir.join("pairs.txt"))
         .context("reading pairs.txt (export with tools/vo_speed.py)")?
         .lines()
@@ -189,31 +213,34 @@ fn main() -> Result<()> {
         let right = read_pgm(&dir.join(format!("{n}_right.pgm")))?;
         pairs.push((left, right));
     }
-    let calibration = read_calibration(&dir.join("calibration.txt"))?;
-    let flight = FswConfig::rocky8([0.0; 3], 0.0);
-    let config: VoConfig = flight.nav.vo.pipeline;
-    let quantum = flight.exec.background_quantum;
-    // On the heap like the flight's static slot (no 90 KB temporary on the stack).
-    let mut vo = Box::new(VisualOdometry::<FEATURES>::EMPTY);
-    vo.init(config, &calibration)
-        .map_err(|e| anyhow::anyhow!("VO refused the configuration or calibration: {e:?}"))?;
+    Ok((names, pairs))
+}
 
+/// The timed passes (after the warm-up passes): every update, and the first frames' times.
+#[allow(clippy::too_many_arguments)]
+fn timed_passes(
+    vo: &mut VisualOdometry<FEATURES>,
+    names: &[String],
+    pairs: &[(Vec<u8>, Vec<u8>)],
+    quantum: u32,
+    (warmup, passes): (usize, usize),
+    t_us: &mut u64,
+    sequence: &mut u32,
+) -> (Vec<Update>, Vec<f64>) {
     let mut updates = Vec::new();
     let mut keyframe_ms = Vec::new();
-    let mut t_us = 0u64;
-    let mut sequence = 0u32;
     for pass in 0..warmup + passes {
         vo.reset();
         for (k, (left, right)) in pairs.iter().enumerate() {
-            t_us += 1_000_000;
-            sequence = sequence.wrapping_add(1);
+            *t_us += 1_000_000;
+            *sequence = sequence.wrapping_add(1);
             let frame = StereoFrame {
                 left,
                 right,
-                capture_t_us: t_us,
-                sequence,
+                capture_t_us: *t_us,
+                sequence: *sequence,
             };
-            let (ms, result) = run_frame(&mut vo, &frame, quantum);
+            let (ms, result) = run_frame(vo, &frame, quantum);
             if pass < warmup {
                 continue;
             }
@@ -230,7 +257,12 @@ fn main() -> Result<()> {
         }
     }
 
-    for u in &updates {
+    (updates, keyframe_ms)
+}
+
+/// One line per update (a JSON object with `json`).
+fn print_updates(updates: &[Update], json: bool) {
+    for u in updates {
         let q = u.result.map(|o| o.quality).unwrap_or_default();
         let (ok, error) = match &u.result {
             Ok(o) if o.pose.is_some() => (true, String::new()),
@@ -280,6 +312,17 @@ fn main() -> Result<()> {
             );
         }
     }
+}
+
+/// The summary of the timed updates (on stderr with `json`).
+fn print_summary(
+    updates: &[Update],
+    keyframe_ms: &mut [f64],
+    pairs: usize,
+    quantum: u32,
+    passes: usize,
+    json: bool,
+) {
     let mut ms: Vec<f64> = updates.iter().map(|u| u.ms).collect();
     ms.sort_by(f64::total_cmp);
     keyframe_ms.sort_by(f64::total_cmp);
@@ -292,44 +335,89 @@ fn main() -> Result<()> {
          median {:.2} ms, p90 {:.2} ms, min {:.2} ms, max {:.2} ms; first frame (keyframe) median {:.2} ms; \
          {successes} with a motion",
         ms.len(),
-        pairs.len(),
+        pairs,
         percentile(&ms, 50.0),
         percentile(&ms, 90.0),
         ms.first().copied().unwrap_or(f64::NAN),
         ms.last().copied().unwrap_or(f64::NAN),
-        percentile(&keyframe_ms, 50.0),
+        percentile(keyframe_ms, 50.0),
     );
     if json {
         eprintln!("{summary}");
     } else {
         println!("{summary}");
     }
+}
+
+/// The profile pass's host time per work kind.
+fn print_profile(sums: &[(f64, u64)], pairs: usize, json: bool) {
+    let updates = (pairs - 1) as f64;
+    if json {
+        let kinds: serde_json::Map<String, serde_json::Value> = WorkKind::ALL
+            .iter()
+            .zip(sums.iter())
+            .map(|(k, (ms, n))| {
+                (
+                    format!("{k:?}"),
+                    serde_json::json!({"ms_per_update": ms / updates, "items_per_update": *n as f64 / updates}),
+                )
+            })
+            .collect();
+        println!("{}", serde_json::json!({ "profile": kinds }));
+    } else {
+        println!("host time per update by work kind (one item per step):");
+        for (k, (ms, n)) in WorkKind::ALL.iter().zip(sums.iter()) {
+            println!(
+                "  {:10} {:7.3} ms  {:6.1} items",
+                format!("{k:?}"),
+                ms / updates,
+                *n as f64 / updates
+            );
+        }
+    }
+}
+
+fn main() -> Result<()> {
+    let Args {
+        dir,
+        passes,
+        warmup,
+        json,
+        profile,
+    } = parse_args()?;
+    let (names, pairs) = load_pairs(&dir)?;
+    let calibration = read_calibration(&dir.join("calibration.txt"))?;
+    let flight = FswConfig::rocky8([0.0; 3], 0.0);
+    let config: VoConfig = flight.nav.vo.pipeline;
+    let quantum = flight.exec.background_quantum;
+    // On the heap like the flight's static slot (no 90 KB temporary on the stack).
+    let mut vo = Box::new(VisualOdometry::<FEATURES>::EMPTY);
+    vo.init(config, &calibration)
+        .map_err(|e| anyhow::anyhow!("VO refused the configuration or calibration: {e:?}"))?;
+
+    let mut t_us = 0u64;
+    let mut sequence = 0u32;
+    let (updates, mut keyframe_ms) = timed_passes(
+        &mut vo,
+        &names,
+        &pairs,
+        quantum,
+        (warmup, passes),
+        &mut t_us,
+        &mut sequence,
+    );
+    print_updates(&updates, json);
+    print_summary(
+        &updates,
+        &mut keyframe_ms,
+        pairs.len(),
+        quantum,
+        passes,
+        json,
+    );
     if profile {
         let sums = profile_pass(&mut vo, &pairs, &mut t_us, &mut sequence);
-        let updates = (pairs.len() - 1) as f64;
-        if json {
-            let kinds: serde_json::Map<String, serde_json::Value> = WorkKind::ALL
-                .iter()
-                .zip(sums.iter())
-                .map(|(k, (ms, n))| {
-                    (
-                        format!("{k:?}"),
-                        serde_json::json!({"ms_per_update": ms / updates, "items_per_update": *n as f64 / updates}),
-                    )
-                })
-                .collect();
-            println!("{}", serde_json::json!({ "profile": kinds }));
-        } else {
-            println!("host time per update by work kind (one item per step):");
-            for (k, (ms, n)) in WorkKind::ALL.iter().zip(sums.iter()) {
-                println!(
-                    "  {:10} {:7.3} ms  {:6.1} items",
-                    format!("{k:?}"),
-                    ms / updates,
-                    *n as f64 / updates
-                );
-            }
-        }
+        print_profile(&sums, pairs.len(), json);
     }
     Ok(())
 }

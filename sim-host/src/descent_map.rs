@@ -140,20 +140,9 @@ impl Outline {
     }
 }
 
-/// The global map of `terrain`'s rocks and blocks inside the square of side `side_m`
-/// centred on `centre_m` (north, east, m) as `image` shows them, with its errors drawn from
-/// `seed`. The pixel grid is aligned with `W` and has a corner at `centre_m`.
-pub fn descent_map(
-    terrain: &Terrain,
-    image: &DescentImage,
-    centre_m: [f64; 2],
-    side_m: f64,
-    seed: u64,
-) -> DescentMap {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xDE5C_E27A);
-    let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
-    let tie_offset_m = [image.tie_sigma_m * normal(), image.tie_sigma_m * normal()];
-    let tie_rotation_rad = image.tie_rotation_sigma_rad * normal();
+/// The rocks and blocks of `terrain` as outlines at the height `image` outlines them (a rock's
+/// cap where it rises above `outline_height_m`), with their heights.
+fn mapped_features(terrain: &Terrain, image: &DescentImage) -> Vec<(Outline, f64)> {
     let mut features: Vec<(Outline, f64)> = Vec::new();
     let cap_radius =
         |r: f64, h: f64| r * (1.0 - (image.outline_height_m / h).sqrt()).max(0.0).sqrt();
@@ -197,6 +186,49 @@ pub fn descent_map(
             )),
         }
     }
+    features
+}
+
+/// The pixel centres (corner of the pixel grid of `px` at `centre_m`) inside `outline`; its
+/// centre when no pixel centre is.
+fn outline_pixels(outline: &Outline, centre_m: [f64; 2], px: f64) -> Vec<[f64; 2]> {
+    let c = outline.centre();
+    let reach = outline.reach();
+    let lo = |v: f64, o: f64| ((v - reach - o) / px).floor() as i64;
+    let hi = |v: f64, o: f64| ((v + reach - o) / px).ceil() as i64;
+    let mut own = Vec::new();
+    for a in lo(c[0], centre_m[0])..=hi(c[0], centre_m[0]) {
+        for b in lo(c[1], centre_m[1])..=hi(c[1], centre_m[1]) {
+            let p = [
+                centre_m[0] + (a as f64 + 0.5) * px,
+                centre_m[1] + (b as f64 + 0.5) * px,
+            ];
+            if outline.contains(p) {
+                own.push(p);
+            }
+        }
+    }
+    if own.is_empty() {
+        own.push(c);
+    }
+    own
+}
+
+/// The global map of `terrain`'s rocks and blocks inside the square of side `side_m`
+/// centred on `centre_m` (north, east, m) as `image` shows them, with its errors drawn from
+/// `seed`. The pixel grid is aligned with `W` and has a corner at `centre_m`.
+pub fn descent_map(
+    terrain: &Terrain,
+    image: &DescentImage,
+    centre_m: [f64; 2],
+    side_m: f64,
+    seed: u64,
+) -> DescentMap {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xDE5C_E27A);
+    let mut normal = || -> f64 { StandardNormal.sample(&mut rng) };
+    let tie_offset_m = [image.tie_sigma_m * normal(), image.tie_sigma_m * normal()];
+    let tie_rotation_rad = image.tie_rotation_sigma_rad * normal();
+    let features = mapped_features(terrain, image);
     let half_side = 0.5 * side_m;
     let inside = |p: [f64; 2]| {
         (p[0] - centre_m[0]).abs() <= half_side && (p[1] - centre_m[1]).abs() <= half_side
@@ -222,25 +254,7 @@ pub fn descent_map(
             image.feature_sigma_px * px * normal(),
             image.feature_sigma_px * px * normal(),
         ];
-        // Pixel centres (corner of the pixel grid at centre_m) within the outline's reach.
-        let reach = outline.reach();
-        let lo = |v: f64, o: f64| ((v - reach - o) / px).floor() as i64;
-        let hi = |v: f64, o: f64| ((v + reach - o) / px).ceil() as i64;
-        let mut own = Vec::new();
-        for a in lo(c[0], centre_m[0])..=hi(c[0], centre_m[0]) {
-            for b in lo(c[1], centre_m[1])..=hi(c[1], centre_m[1]) {
-                let p = [
-                    centre_m[0] + (a as f64 + 0.5) * px,
-                    centre_m[1] + (b as f64 + 0.5) * px,
-                ];
-                if outline.contains(p) {
-                    own.push(p);
-                }
-            }
-        }
-        if own.is_empty() {
-            own.push(c);
-        }
+        let own = outline_pixels(outline, centre_m, px);
         for p in own {
             // Feature error, then the map tie about the map centre.
             let q = [p[0] + err[0] - centre_m[0], p[1] + err[1] - centre_m[1]];

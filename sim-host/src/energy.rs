@@ -2,7 +2,7 @@
 //! and the energy it has used, integrated along the truth state every simulation step. It is
 //! the simulator's own model, independent of the flight software (no flight parameter, no
 //! `fsw::sequencer` resource model); the flight software sees it only through the power
-//! subsystem device ([`crate::hal_devices::WorldPower`]).
+//! subsystem device ([`crate::devices::world::WorldPower`]).
 //!
 //! **Model.** Electrical power drawn from the battery:
 //!
@@ -46,8 +46,8 @@
 //!   0.97 W at the wheels), not a measured split; if MER's 100 W already included a larger
 //!   motor share, `P_awake` is too high by that share.
 
-use crate::slip_lumped::LumpedSoil;
-use crate::terramechanics::{Wheel, MARS_GRAVITY, ROCKY8_MASS_KG};
+use crate::soil::lumped_slip::LumpedSoil;
+use crate::soil::terramechanics::{Wheel, MARS_GRAVITY, ROCKY8_MASS_KG};
 use crate::vehicle::geometry::WHEELS;
 use crate::world::{Slip, Truth};
 use nalgebra::Vector3;
@@ -134,7 +134,7 @@ impl EnergyModel {
 /// Rolling-resistance coefficient `c_rr` of a run's soil: the lumped model's
 /// `rolling_resistance` (after the run's per-seed draw); for the terramechanics soils the
 /// rigid wheel's resistance at zero slip, `-DP(s = 0) / W`, under the level-ground wheel load
-/// `W = m g / 6` ([`crate::rigid_wheel::wheel_forces`] on the Rocky 8 wheel), not below 0 (a
+/// `W = m g / 6` ([`crate::soil::rigid_wheel::wheel_forces`] on the Rocky 8 wheel), not below 0 (a
 /// soil whose stress distribution gives a net pull at zero slip has no rolling resistance in
 /// this model).
 pub fn rolling_resistance(slip: &Slip) -> f64 {
@@ -142,7 +142,8 @@ pub fn rolling_resistance(slip: &Slip) -> f64 {
         Slip::Lumped(m) => m.soil().rolling_resistance.max(0.0),
         Slip::Terramechanics(m) => {
             let load = ROCKY8_MASS_KG * MARS_GRAVITY / WHEELS as f64;
-            let f = crate::rigid_wheel::wheel_forces(m.soil(), &Wheel::rocky8(), load, 0.0, 0.0);
+            let f =
+                crate::soil::rigid_wheel::wheel_forces(m.soil(), &Wheel::rocky8(), load, 0.0, 0.0);
             (-f.drawbar_pull_n / load).max(0.0)
         }
     }
@@ -324,9 +325,9 @@ mod tests {
     /// `docs/simulator.md`).
     #[test]
     fn energy_5_rolling_resistance_of_the_soils() {
-        use crate::terramechanics::Soil;
+        use crate::soil::terramechanics::Soil;
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(1);
-        let lumped = Slip::Lumped(crate::slip_lumped::LumpedSlip::new(
+        let lumped = Slip::Lumped(crate::soil::lumped_slip::LumpedSlip::new(
             LumpedSoil::loose_sand(),
             true,
             &mut rng,
@@ -334,7 +335,7 @@ mod tests {
         let c = rolling_resistance(&lumped);
         assert!((c - 0.08).abs() < 0.08 * 0.3, "{c}");
         let mut terra = |soil: Soil| {
-            Slip::Terramechanics(crate::slip::SlipModel::new(
+            Slip::Terramechanics(crate::soil::per_wheel_slip::SlipModel::new(
                 soil,
                 [0.1; WHEELS],
                 false,
@@ -355,7 +356,7 @@ mod tests {
     /// (invalid, dropout) reach the reading.
     #[test]
     fn energy_6_world_and_power_device() {
-        use crate::hal_devices::WorldPower;
+        use crate::devices::world::WorldPower;
         use crate::sensors::faults::{FaultDevice, FaultKind, FaultSpec};
         use rover_hal::{ErrorKind, Power};
         let path =

@@ -1,5 +1,5 @@
 //! Truth-side hazard check: which terrain features are hazards to the truth vehicle, and when
-//! the rover's footprint touches one (issue 16's `collisions`).
+//! the rover's footprint touches one (`collisions` in `summary.json`).
 //!
 //! This is the simulator's own judgement, independent of the flight software's hazard grid
 //! (`fsw::perception`): it looks at the analytic terrain description, not at images.

@@ -1,16 +1,16 @@
 //! Scenario files (TOML): terrain, soil, path, duration, sensor rates and noise, seed, faults.
 //! The format is documented in `docs/simulator.md`.
 
-use crate::sensors::camera_model::CameraTolerances;
 use crate::sensors::encoders::EncoderParams;
 use crate::sensors::faults::FaultSpec;
+use crate::sensors::hazcam::CameraTolerances;
+use crate::sensors::hazcam_lens::LensTolerances;
 use crate::sensors::imu::ImuParams;
-use crate::sensors::lens::LensTolerances;
 use crate::sensors::sun::SunParams;
-use crate::slip::SoilParams;
-use crate::slip_lumped::LumpedSoil;
+use crate::soil::lumped_slip::LumpedSoil;
+use crate::soil::per_wheel_slip::SoilParams;
+use crate::soil::terramechanics::Soil;
 use crate::terrain::TerrainSpec;
-use crate::terramechanics::Soil;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -35,9 +35,9 @@ pub enum SoilSpec {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum SlipModelKind {
-    /// One slip ratio and angle for the vehicle from the slopes ([`crate::slip_lumped`]).
+    /// One slip ratio and angle for the vehicle from the slopes ([`crate::soil::lumped_slip`]).
     Lumped,
-    /// Per-wheel slip from loads and rigid-wheel (Wong-Reece) terramechanics ([`crate::slip`]);
+    /// Per-wheel slip from loads and rigid-wheel (Wong-Reece) terramechanics ([`crate::soil::per_wheel_slip`]);
     /// the default.
     #[default]
     Terramechanics,
@@ -158,7 +158,7 @@ pub struct SensorSpec {
     pub camera_tolerances: CameraTolerances,
     /// Ideal lenses: the cameras deliver the rectified pinhole pair directly (the model before
     /// the wide-angle lenses, for comparison). Default `false`: raw images through the
-    /// wide-angle lens model (`sensors::lens`), rectified by the flight software.
+    /// wide-angle lens model (`sensors::hazcam_lens`), rectified by the flight software.
     pub ideal_lens: bool,
     /// 1-sigma tolerance of the lens calibration (per camera).
     pub lens_tolerances: LensTolerances,
@@ -228,7 +228,7 @@ pub struct Scenario {
     pub calibration_seed: Option<u64>,
     /// Offset of the true start pose from the planned one (the first waypoint, facing the
     /// second): the rover's localisation error before the drive. The flight software is given
-    /// the planned pose ([`crate::sim::Mission::plan`]); the truth starts offset. Default 0.
+    /// the planned pose ([`crate::closed_loop::Mission::plan`]); the truth starts offset. Default 0.
     #[serde(default)]
     pub start_offset: StartOffset,
     /// Longest simulated time, s.
@@ -282,7 +282,7 @@ pub struct Scenario {
     /// [`crate::hazards::DEFAULT_HAZARD_HEIGHT_M`].
     #[serde(default = "default_hazard_height")]
     pub hazard_height_m: f64,
-    /// The day's science targets for the flight software's sequencer (V99 sec. 3; issue 17),
+    /// The day's science targets for the flight software's sequencer (V99 sec. 3),
     /// uplinked after the start. Needs `navigation = "roverbug"`.
     #[serde(default)]
     pub mission: Option<MissionSpec>,

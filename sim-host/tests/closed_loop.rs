@@ -1,10 +1,10 @@
 //! Closed-loop runs of the simulator with the flight software (SIM-11 to SIM-15).
 
-use sim_host::hal_devices::CounterMode;
-use sim_host::rigid_wheel::{slip_angle_for_side_force, slip_for_drawbar_pull};
+use sim_host::closed_loop::{run, RunOptions, RunResult};
+use sim_host::devices::world::CounterMode;
 use sim_host::scenario::{DriverMode, Scenario};
-use sim_host::sim::{run, RunOptions, RunResult};
-use sim_host::terramechanics::{Soil, Wheel, MARS_GRAVITY, ROCKY8_MASS_KG};
+use sim_host::soil::rigid_wheel::{slip_angle_for_side_force, slip_for_drawbar_pull};
+use sim_host::soil::terramechanics::{Soil, Wheel, MARS_GRAVITY, ROCKY8_MASS_KG};
 use sim_host::world::{World, MARS_GRAVITY_M_S2};
 use std::path::{Path, PathBuf};
 
@@ -103,7 +103,7 @@ fn sim_11_same_seed_byte_identical_outputs() {
 
 /// Single-wheel prediction of the rigid-wheel law for a sixth of the weight on a plane of
 /// `slope_deg` across the wheel: (slip ratio at zero drawbar pull, slip-angle magnitude), two
-/// passes as in `slip.rs`.
+/// passes as in `sim_host::soil::per_wheel_slip`.
 fn single_wheel(soil: &Soil, slope_deg: f64) -> (f64, f64) {
     let wheel = Wheel::rocky8();
     let w = ROCKY8_MASS_KG * MARS_GRAVITY / 6.0;
@@ -151,7 +151,7 @@ fn sim_12_cross_slope_drift_without_compensation() {
 /// SIM-13: on flat firm soil the rover does not drift sideways (less than 2 cm over the open-loop
 /// drive) and its mean slip ratio is the single-wheel free-rolling slip of the rigid-wheel law
 /// on `firm_soil` within 0.06 (about 0.17: Wong's loam resists a 0.2 m wheel; the lumped
-/// model's "below 2 %" no longer holds, see `docs/simulator.md`, section Slip).
+/// model's "below 2 %" does not hold for it, see `docs/simulator.md`, section Slip).
 #[test]
 fn sim_13_flat_firm_soil_small_slip() {
     let mut s = scenario("slope-10-cross");

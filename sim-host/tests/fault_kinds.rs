@@ -7,12 +7,12 @@ use rover_hal::{
     CaptureStatus, Clock, ErrorKind, Imu, Mobility, MobilityCommand, StereoCamera, SunSensor,
     Telemetry, IMAGE_WIDTH_PX,
 };
-use sim_host::camera::FlatGreyRenderer;
-use sim_host::devices::CountingTelemetry;
-use sim_host::hal_devices::{
+use sim_host::devices::renderer::FlatGreyRenderer;
+use sim_host::devices::world::{
     telemetry_faults, CounterMode, SharedWorld, WorldClock, WorldImu, WorldMobility, WorldStereo,
     WorldSun,
 };
+use sim_host::devices::CountingTelemetry;
 use sim_host::scenario::Scenario;
 use sim_host::sensors::faults::{FaultDevice, FaultKind, FaultSpec};
 use sim_host::world::World;

@@ -1,4 +1,4 @@
-//! Issue 14 acceptance: the flight configuration of every scenario is the nominal flight
+//! The flight configuration of every scenario is the nominal flight
 //! profile plus the mission plan, and nothing else: no simulator parameter (IMU noise, sun
 //! sensor noise, dimension or calibration errors), no truth (start pose, terrain roughness)
 //! and no seed leaks into it.
@@ -6,8 +6,8 @@
 use fsw::estimation::ephemeris::SunEphemeris;
 use fsw::estimation::EkfConfig;
 use fsw::flight::FswConfig;
+use sim_host::closed_loop::{flight_config, DriveOptions};
 use sim_host::scenario::Scenario;
-use sim_host::sim::{flight_config, DriveOptions};
 use sim_host::world::World;
 
 fn scenarios() -> Vec<Scenario> {

@@ -1,9 +1,9 @@
-//! SIM-18: the simulator's nominal hazcam head (`sim_host::sensors::camera_model`, written from
+//! SIM-18: the simulator's nominal hazcam head (`sim_host::sensors::hazcam`, written from
 //! the published figures) is the calibration the flight software is built around. This test is
 //! the only place where simulator code reads the flight camera model; the simulation never does.
 
 use sim_host::devices::hazcam_calibration;
-use sim_host::sensors::camera_model::nominal_hazcam;
+use sim_host::sensors::hazcam::nominal_hazcam;
 
 /// SIM-18: every field of the simulator's nominal head equals `fsw::vo::rocky8_hazcam()` to
 /// 1e-9, and the HAL devices' nominal calibration is the simulator's own.

@@ -4,11 +4,11 @@
 //! no text on the plotting areas), the page's determinism, and that every stamp of every
 //! estimate TUM file is a stamp of `truth.tum` (what `evo_ape tum truth.tum X.tum` needs).
 
-use sim_host::camera::{StereoRenderer, TexturedRenderer};
-use sim_host::hal_devices::CounterMode;
-use sim_host::plot::{overlapping_texts, plot_geometry, svg_elements, svg_texts, tick_scales};
+use sim_host::closed_loop::{run, RunOptions, RunResult};
+use sim_host::devices::renderer::{StereoRenderer, TexturedRenderer};
+use sim_host::devices::world::CounterMode;
+use sim_host::figure::{overlapping_texts, plot_geometry, svg_elements, svg_texts, tick_scales};
 use sim_host::scenario::Scenario;
-use sim_host::sim::{run, RunOptions, RunResult};
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -86,8 +86,11 @@ fn check_figure(svg: &str, what: &str, equal: bool) {
 fn report_page_figures_equal_scale_no_overlaps_deterministic() {
     let (comp, _) = runs();
     let summary = sim_host::output::summary::summarise(comp);
-    let html = sim_host::report::report_html(comp, &summary).unwrap();
-    assert_eq!(html, sim_host::report::report_html(comp, &summary).unwrap());
+    let html = sim_host::output::report::report_html(comp, &summary).unwrap();
+    assert_eq!(
+        html,
+        sim_host::output::report::report_html(comp, &summary).unwrap()
+    );
     let svgs = svg_elements(&html);
     assert!(svgs.len() >= 12, "{} figures", svgs.len());
     for (k, svg) in svgs.iter().enumerate() {
@@ -122,7 +125,7 @@ fn report_page_figures_equal_scale_no_overlaps_deterministic() {
 #[test]
 fn report_compare_figure_both_runs_equal_scale() {
     let (comp, no_comp) = runs();
-    let svg = sim_host::report::compare_figure(comp, no_comp).unwrap();
+    let svg = sim_host::output::report::compare_figure(comp, no_comp).unwrap();
     check_figure(&svg, "compare figure", true);
     let g = plot_geometry(&svg).unwrap();
     let legend: Vec<String> = svg_texts(&svg).into_iter().map(|t| t.text).collect();
@@ -200,7 +203,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 #[test]
 fn report_slip_estimate_follows_true_slip_angle() {
     let (comp, _) = runs();
-    let est = sim_host::report::estimated_slip(&comp.records);
+    let est = sim_host::output::report::estimated_slip(&comp.records);
     assert!(est.len() > 500, "{} windows", est.len());
     let t0 = est[0].0 + 5.0;
     let t1 = est.last().unwrap().0 - 5.0;

@@ -8,8 +8,8 @@
 //! below 0.3 m/s (three times the commanded 0.1 m/s) and its acceleration below
 //! `g (1 + mu)` of loose sand, with margin.
 
+use sim_host::closed_loop::{run, RunOptions};
 use sim_host::scenario::Scenario;
-use sim_host::sim::{run, RunOptions};
 use std::path::Path;
 
 #[test]

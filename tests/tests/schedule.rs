@@ -5,7 +5,7 @@
 /// (VO retry: the still rover's uniform grey frames give VO no keyframe); no device faults.
 #[test]
 fn sil_exec_1_schedule_counts_on_host() {
-    let summary = match sim_host::run::run_still(2000) {
+    let summary = match sim_host::commands::still::run_still(2000) {
         Ok(s) => s,
         Err(e) => panic!("run failed: {e}"),
     };

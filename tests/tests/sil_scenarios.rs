@@ -1,8 +1,8 @@
 //! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..6, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7, SIL-HAZ-1..3, SIL-LOC-1..2, SIL-SEQ-1..2: closed-loop scenario runs of the flight software on the
-//! simulator with rendered stereo, against the thresholds of `sim_host::sil::CASES` (the same
-//! table `sim-host sil` writes to `docs/sil-results.md`).
+//! simulator with rendered stereo, against the thresholds of `sim_host::commands::sil::CASES` (the same
+//! table `sim-host sil` writes to `docs/results/sil-results.md`).
 
-use sim_host::sil::{case, run_case, CaseResult};
+use sim_host::commands::sil::{case, run_case, CaseResult};
 use std::path::PathBuf;
 
 fn scenarios() -> PathBuf {

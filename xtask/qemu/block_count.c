@@ -1,5 +1,5 @@
 /*
- * QEMU TCG plugin: execution count of every translated block (issue 18, `xtask/src/cpi.rs`).
+ * QEMU TCG plugin: execution count of every translated block (`xtask/src/cpi.rs`).
  *
  * For each block QEMU translates, an inline counter is added to the block's entry; at exit the
  * plugin writes one line per translation, `<guest address hex> <instructions> <executions>`,

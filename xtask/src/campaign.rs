@@ -130,7 +130,7 @@ pub fn slurm_smoke() -> Result<()> {
         }
         println!("{file}: identical ({} bytes)", a.len());
     }
-    // The campaign report renders in headless Chromium with its CDF figures drawn (issue 19).
+    // The campaign report renders in headless Chromium with its CDF figures drawn.
     let t = step("campaign report: headless-Chromium screenshot");
     let png = work.join("campaign-report.png");
     crate::report::screenshot(&local_dir.join("report.html"), &png, (1280, 4000))?.check(

@@ -1,4 +1,4 @@
-//! Cycles per instruction of the flight kernels on the Cortex-M7 pipeline (issue 18).
+//! Cycles per instruction of the flight kernels on the Cortex-M7 pipeline.
 //!
 //! QEMU counts instructions, not cycles. This module derives a CPI for the image's own code from
 //! the Cortex-M7 pipeline description that LLVM carries (`ARMScheduleM7.td`: dual issue, two
@@ -21,7 +21,7 @@
 //! What the model assumes: code and data in zero-wait memory (ITCM/DTCM or cache hits), no
 //! branch mispredictions (the loop branch is predicted), calls inside a loop as one instruction
 //! (the callee's own loops are measured where the callee is). Data-cache misses on the stereo
-//! images in external RAM are not modelled: they add to the figure (see `docs/timing.md`).
+//! images in external RAM are not modelled: they add to the figure (see `docs/results/timing.md`).
 
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;

@@ -57,7 +57,8 @@ impl ElfReport {
     /// Panic sites outside the image's number formatting (`core::fmt`, `core::num::flt2dec`,
     /// `core::num::bignum`: the semihosting reports and the panic handler's message), per
     /// enclosing function: the flight code's own, inlined into whatever function it ended up
-    /// in. Must be empty (issue 18); `cargo xtask timing` fails otherwise.
+    /// in. Must be empty (the flight code has no panic path); `cargo xtask timing`
+    /// fails otherwise.
     pub fn flight_panic_sites(&self) -> Vec<(String, usize)> {
         self.panic_sites_by_function
             .iter()
@@ -196,10 +197,52 @@ struct Function {
     end: u64,
 }
 
+/// Everything the analysis reads from the image's symbol table.
+struct Symbols {
+    /// Functions by start address (one per address).
+    functions: Vec<Function>,
+    /// Addresses of the `$d` (data) and `$t` (Thumb code) mapping symbols, sorted.
+    data_marks: Vec<u64>,
+    code_marks: Vec<u64>,
+    /// The largest statics in RAM and external RAM.
+    statics: Vec<Sized>,
+    allocator_symbols: Vec<String>,
+    /// `_stack_start`, `_stack_end`.
+    stack_region: (u64, u64),
+}
+
+/// The panic sites the decoder found.
+struct PanicSites {
+    by_target: BTreeMap<String, usize>,
+    by_crate: BTreeMap<String, usize>,
+    by_function: BTreeMap<String, usize>,
+    /// Instructions decoded.
+    decoded: usize,
+}
+
 pub fn analyse(path: &Path) -> Result<ElfReport> {
     let data = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let file = object::File::parse(&*data).context("not an ELF file")?;
+    let sections = sections(&file);
+    let symbols = symbols(&file);
+    let sites = panic_sites(&file, &symbols)?;
+    let mut panic_sites_by_function: Vec<(String, usize)> = sites.by_function.into_iter().collect();
+    panic_sites_by_function.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+    Ok(ElfReport {
+        panic_sites_by_function,
+        sections,
+        statics: symbols.statics,
+        allocator_symbols: symbols.allocator_symbols,
+        panic_sites: sites.by_target,
+        panic_sites_by_crate: sites.by_crate,
+        decoded_instructions: sites.decoded,
+        stack_region: symbols.stack_region,
+    })
+}
 
+/// The image's allocated sections (and `.text`, `.vector_table`, `.data`, `.bss`, `.rodata`
+/// even when empty).
+fn sections(file: &object::File) -> Vec<Section> {
     let mut sections = Vec::new();
     for s in file.sections() {
         let name = s.name().unwrap_or("").to_string();
@@ -215,6 +258,12 @@ pub fn analyse(path: &Path) -> Result<ElfReport> {
         }
     }
 
+    sections
+}
+
+/// The functions, mapping symbols, statics, allocator symbols and stack region of the
+/// symbol table.
+fn symbols(file: &object::File) -> Symbols {
     let mut functions = Vec::new();
     let mut data_marks = Vec::new();
     let mut code_marks = Vec::new();
@@ -271,6 +320,25 @@ pub fn analyse(path: &Path) -> Result<ElfReport> {
     data_marks.sort_unstable();
     code_marks.sort_unstable();
 
+    Symbols {
+        functions,
+        data_marks,
+        code_marks,
+        statics,
+        allocator_symbols,
+        stack_region: (stack_start, stack_end),
+    }
+}
+
+/// Decode every function of `.text` (skipping literal pools) and count the branches to a
+/// panic function.
+fn panic_sites(file: &object::File, symbols: &Symbols) -> Result<PanicSites> {
+    let Symbols {
+        functions,
+        data_marks,
+        code_marks,
+        ..
+    } = symbols;
     let text = file.section_by_name(".text").context("no .text section")?;
     let text_addr = text.address();
     let text_data = text.data()?;
@@ -307,7 +375,7 @@ pub fn analyse(path: &Path) -> Result<ElfReport> {
     let mut panic_sites_by_crate = BTreeMap::new();
     let mut by_function: BTreeMap<String, usize> = BTreeMap::new();
     let mut decoded = 0usize;
-    for f in &functions {
+    for f in functions {
         if is_panic_function(&f.name) {
             continue;
         }
@@ -340,17 +408,11 @@ pub fn analyse(path: &Path) -> Result<ElfReport> {
             pc += if wide { 4 } else { 2 };
         }
     }
-    let mut panic_sites_by_function: Vec<(String, usize)> = by_function.into_iter().collect();
-    panic_sites_by_function.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
-    Ok(ElfReport {
-        panic_sites_by_function,
-        sections,
-        statics,
-        allocator_symbols,
-        panic_sites,
-        panic_sites_by_crate,
-        decoded_instructions: decoded,
-        stack_region: (stack_start, stack_end),
+    Ok(PanicSites {
+        by_target: panic_sites,
+        by_crate: panic_sites_by_crate,
+        by_function,
+        decoded,
     })
 }
 

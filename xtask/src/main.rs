@@ -18,9 +18,9 @@
 //!   must be identical (installs `slurm-wlm` and `munge` when missing). A step of `test`.
 //! - `cargo xtask timing`: timing analysis on the rover CPU model (instruction counts per task,
 //!   utilisation, response times, stack, memory, panic sites) and the bit-identical host/target
-//!   replay check; writes `docs/timing.md`. Also the last step of `test`.
+//!   replay check; writes `docs/results/timing.md`. Also the last step of `test`.
 //! - `cargo xtask cpi`: build the rover-CPU image and print the CPI of its kernel loops on
-//!   LLVM's Cortex-M7 pipeline model ([`cpi`]; also a section of `docs/timing.md`).
+//!   LLVM's Cortex-M7 pipeline model ([`cpi`]; also a section of `docs/results/timing.md`).
 //! - `cargo xtask stack`: build the rover-CPU image and print its static worst-case stack paths
 //!   ([`stack`]; `STACK_CALLEES=<name part>` lists a function's callees, `STACK_INDIRECT=1` the
 //!   functions with indirect calls).
@@ -83,14 +83,16 @@ fn main() -> Result<()> {
             eprintln!(
                 "  stack  build the rover-CPU image and print its static worst-case stack paths"
             );
-            eprintln!("  timing timing analysis on the rover CPU model, writes docs/timing.md");
+            eprintln!(
+                "  timing timing analysis on the rover CPU model, writes docs/results/timing.md"
+            );
             bail!("unknown or missing command")
         }
     }
 }
 
 /// `cargo xtask cpi`: the Cortex-M7 pipeline model's CPI of the image's kernel loops
-/// ([`cpi`]), printed per group (the same figures as `docs/timing.md`); `CPI_LOOPS=1` lists
+/// ([`cpi`]), printed per group (the same figures as `docs/results/timing.md`); `CPI_LOOPS=1` lists
 /// every loop with its function.
 fn cpi_command() -> Result<()> {
     let image = build_image()?;
@@ -390,7 +392,7 @@ fn test() -> Result<()> {
     qemu_run()?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
 
-    let t = step("timing analysis on the rover CPU model (docs/timing.md)");
+    let t = step("timing analysis on the rover CPU model (docs/results/timing.md)");
     timing::timing()?;
     println!("ok in {:.1} s", t.elapsed().as_secs_f64());
 

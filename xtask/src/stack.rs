@@ -1,4 +1,5 @@
-//! Static worst-case stack analysis of the rover-CPU image (issue 18), next to the painted
+//! Static worst-case stack analysis of the rover-CPU image (the flight stack budget of 32 KiB,
+//! `docs/results/timing.md`), next to the painted
 //! high-water marks of `cargo xtask timing`.
 //!
 //! The image's `.text` is decoded here (Thumb-2, no external disassembler; the `$d` mapping

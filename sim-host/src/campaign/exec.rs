@@ -6,9 +6,9 @@
 //! `sim-host run` in `OUT`.
 
 use super::plan::Manifest;
-use crate::hal_devices::CounterMode;
+use crate::closed_loop::{run, RunOptions};
+use crate::devices::world::CounterMode;
 use crate::output::summary::Summary;
-use crate::sim::{run, RunOptions};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -70,15 +70,16 @@ pub fn run_index(
 fn simulate(manifest: &Manifest, index: u64, outputs: Option<&Path>) -> anyhow::Result<Summary> {
     let entry = manifest.entry(index)?;
     let scenario = manifest.scenario(index)?;
-    let renderer: Option<Box<dyn crate::camera::StereoRenderer>> = manifest.run.render.then(|| {
-        let sun = scenario.site.sun_w(0.0);
-        // The ground texture belongs to the terrain: its seed is the terrain seed.
-        Box::new(crate::camera::TexturedRenderer::new(
-            crate::devices::hazcam_calibration(),
-            entry.terrain_seed,
-            [sun.x, sun.y, sun.z],
-        )) as Box<dyn crate::camera::StereoRenderer>
-    });
+    let renderer: Option<Box<dyn crate::devices::renderer::StereoRenderer>> =
+        manifest.run.render.then(|| {
+            let sun = scenario.site.sun_w(0.0);
+            // The ground texture belongs to the terrain: its seed is the terrain seed.
+            Box::new(crate::devices::renderer::TexturedRenderer::new(
+                crate::devices::hazcam_calibration(),
+                entry.terrain_seed,
+                [sun.x, sun.y, sun.z],
+            )) as Box<dyn crate::devices::renderer::StereoRenderer>
+        });
     let result = run(
         &scenario,
         RunOptions {

@@ -261,7 +261,31 @@ th{background:#eee}td.l,th.l{text-align:left}\
 pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<String> {
     let s: &Stats = &gathered.stats;
     let spec = manifest.spec()?;
+    let keys: Vec<String> = spec.dispersions.iter().map(|d| d.key()).collect();
     let mut h = String::new();
+    header(&mut h, manifest, s)?;
+    unfinished_runs(&mut h, manifest, s)?;
+    criteria_table(&mut h, s)?;
+    criteria_figures(&mut h, gathered)?;
+    worst_runs(&mut h, manifest, s, &keys)?;
+    metrics_table(&mut h, s)?;
+    outcomes_table(&mut h, s)?;
+    dispersions_table(&mut h, &spec, s)?;
+    sensitivity_table(&mut h, s, &keys)?;
+    let _ = writeln!(
+        h,
+        "<h2>Reproduce</h2>\n<p><code>sim-host campaign local {spec} --out DIR --runs {n}</code> \
+         or on Slurm <code>sim-host campaign slurm {spec} --out DIR --runs {n} --submit</code>; \
+         any single run: <code>sim-host campaign run DIR --index I</code>. \
+         <code>stats.json</code> holds every figure of this page.</p>\n</body></html>",
+        spec = esc(&manifest.spec_file),
+        n = manifest.runs
+    );
+    Ok(h)
+}
+
+/// The title, the verdict and what the campaign ran.
+fn header(h: &mut String, manifest: &Manifest, s: &Stats) -> anyhow::Result<()> {
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>campaign {name}</title>\
@@ -303,8 +327,13 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
         )),
         esc(&s.percentile_definition)
     );
+    Ok(())
+}
+
+/// The runs that failed or left no summary (nothing when every run finished).
+fn unfinished_runs(h: &mut String, manifest: &Manifest, s: &Stats) -> anyhow::Result<()> {
     if !s.failed_runs.is_empty() || !s.missing_runs.is_empty() {
-        h += "<h2>Runs that did not finish</h2>\n<table><tr><th>run</th><th>seed</th>\
+        *h += "<h2>Runs that did not finish</h2>\n<table><tr><th>run</th><th>seed</th>\
               <th class=\"l\">state</th></tr>\n";
         for f in &s.failed_runs {
             let _ = writeln!(
@@ -323,10 +352,14 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
                  summary.json, no error.txt)</td></tr>"
             );
         }
-        h += "</table>\n";
+        *h += "</table>\n";
     }
-    // Criteria.
-    h += "<h2>Acceptance criteria</h2>\n<table><tr><th class=\"l\">criterion</th>\
+    Ok(())
+}
+
+/// The acceptance criteria and their results.
+fn criteria_table(h: &mut String, s: &Stats) -> anyhow::Result<()> {
+    *h += "<h2>Acceptance criteria</h2>\n<table><tr><th class=\"l\">criterion</th>\
           <th class=\"l\">metric</th><th>statistic</th><th>required</th><th>measured</th>\
           <th>at run</th><th>runs beyond</th><th>runs without value</th><th>result</th>\
           <th class=\"l\">source of the threshold</th></tr>\n";
@@ -353,7 +386,14 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
             cls = if c.pass { "pass" } else { "fail" },
         );
     }
-    h += "</table>\n<div class=\"figs\">\n";
+    *h += "</table>\n";
+    Ok(())
+}
+
+/// One figure per criterion with its explanation.
+fn criteria_figures(h: &mut String, gathered: &Gathered) -> anyhow::Result<()> {
+    *h += "<div class=\"figs\">\n";
+    let s: &Stats = &gathered.stats;
     for c in &s.criteria {
         let values = gathered
             .values
@@ -394,10 +434,18 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
         };
         let _ = writeln!(h, "<div class=\"fig\">{svg}<p>{explain}</p></div>");
     }
-    h += "</div>\n";
-    // Worst runs.
-    let keys: Vec<String> = spec.dispersions.iter().map(|d| d.key()).collect();
-    h += "<h2>Worst runs per criterion</h2>\n<p>Replay a run with every output (trajectories, \
+    *h += "</div>\n";
+    Ok(())
+}
+
+/// The worst runs of each criterion with their draws and replay commands.
+fn worst_runs(
+    h: &mut String,
+    manifest: &Manifest,
+    s: &Stats,
+    keys: &[String],
+) -> anyhow::Result<()> {
+    *h += "<h2>Worst runs per criterion</h2>\n<p>Replay a run with every output (trajectories, \
           per-run report) from the campaign folder with the command shown; \
           <code>sim-host campaign run . --index I</code> alone rewrites its summary.</p>\n";
     for c in &s.criteria {
@@ -407,10 +455,10 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
             esc(&c.name),
             esc(&c.metric)
         );
-        for k in &keys {
+        for k in keys {
             let _ = write!(h, "<th>{}</th>", esc(k));
         }
-        h += "<th class=\"l\">replay</th></tr>\n";
+        *h += "<th class=\"l\">replay</th></tr>\n";
         let op = op_of(c);
         for w in &c.worst {
             let bad = w.value.is_none_or(|v| !op.holds(v, c.threshold));
@@ -423,7 +471,7 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
                 w.value.map_or("null".into(), fmt_num)
             );
             let entry = manifest.entries.get(w.index as usize);
-            for k in &keys {
+            for k in keys {
                 let d = entry.and_then(|e| e.draws.get(k)).copied();
                 let _ = write!(h, "<td>{}</td>", fmt_opt(d));
             }
@@ -433,10 +481,14 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
                 esc(&replay_command(w.index))
             );
         }
-        h += "</table>\n";
+        *h += "</table>\n";
     }
-    // Metrics.
-    h += "<h2>Statistics of the metrics</h2>\n<table><tr><th class=\"l\">metric</th><th>unit</th>\
+    Ok(())
+}
+
+/// The statistics of every metric.
+fn metrics_table(h: &mut String, s: &Stats) -> anyhow::Result<()> {
+    *h += "<h2>Statistics of the metrics</h2>\n<table><tr><th class=\"l\">metric</th><th>unit</th>\
           <th>n</th><th>null</th><th>mean</th><th>std</th><th>min</th><th>P50</th><th>P90</th>\
           <th>P95</th><th>P99</th><th>max</th><th>max at run</th></tr>\n";
     for m in &s.metrics {
@@ -466,7 +518,13 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
             m.max.as_ref().map_or("-".into(), |x| x.run.to_string()),
         );
     }
-    h += "</table>\n<h2>Outcomes</h2>\n<table><tr><th class=\"l\">field</th>\
+    *h += "</table>\n";
+    Ok(())
+}
+
+/// The counts of each outcome field's values.
+fn outcomes_table(h: &mut String, s: &Stats) -> anyhow::Result<()> {
+    *h += "<h2>Outcomes</h2>\n<table><tr><th class=\"l\">field</th>\
           <th class=\"l\">value</th><th>runs</th></tr>\n";
     for (field, counts) in &s.outcomes {
         for (value, n) in counts {
@@ -478,9 +536,13 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
             );
         }
     }
-    h += "</table>\n";
-    // Dispersions.
-    h +=
+    *h += "</table>\n";
+    Ok(())
+}
+
+/// The dispersions and the range of their draws.
+fn dispersions_table(h: &mut String, spec: &super::spec::Spec, s: &Stats) -> anyhow::Result<()> {
+    *h +=
         "<h2>Dispersions</h2>\n<table><tr><th class=\"l\">name</th><th class=\"l\">parameters</th>\
           <th class=\"l\">applied as</th><th class=\"l\">distribution</th><th>min drawn</th>\
           <th>mean drawn</th><th>max drawn</th></tr>\n";
@@ -504,15 +566,20 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
             range.map_or("-".into(), |r| fmt_num(r.max)),
         );
     }
-    h += "</table>\n";
+    *h += "</table>\n";
+    Ok(())
+}
+
+/// The correlation of each criterion's metric with each dispersion's draw.
+fn sensitivity_table(h: &mut String, s: &Stats, keys: &[String]) -> anyhow::Result<()> {
     if !s.sensitivity.is_empty() && !keys.is_empty() {
-        h += "<h2>Sensitivity</h2>\n<p>Pearson correlation of each criterion's metric with each \
+        *h += "<h2>Sensitivity</h2>\n<p>Pearson correlation of each criterion's metric with each \
               dispersion's draw (over the runs with a value; |r| near 1: that dispersion drives \
               the metric).</p>\n<table><tr><th class=\"l\">metric</th>";
-        for k in &keys {
+        for k in keys {
             let _ = write!(h, "<th>{}</th>", esc(k));
         }
-        h += "</tr>\n";
+        *h += "</tr>\n";
         let mut metrics: Vec<&str> = Vec::new();
         for x in &s.sensitivity {
             if !metrics.contains(&x.metric.as_str()) {
@@ -521,7 +588,7 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
         }
         for m in metrics {
             let _ = write!(h, "<tr><td class=\"l\"><code>{}</code></td>", esc(m));
-            for k in &keys {
+            for k in keys {
                 let r = s
                     .sensitivity
                     .iter()
@@ -533,20 +600,11 @@ pub fn report_html(manifest: &Manifest, gathered: &Gathered) -> anyhow::Result<S
                     r.map_or("-".into(), |r| format!("{r:+.2}"))
                 );
             }
-            h += "</tr>\n";
+            *h += "</tr>\n";
         }
-        h += "</table>\n";
+        *h += "</table>\n";
     }
-    let _ = writeln!(
-        h,
-        "<h2>Reproduce</h2>\n<p><code>sim-host campaign local {spec} --out DIR --runs {n}</code> \
-         or on Slurm <code>sim-host campaign slurm {spec} --out DIR --runs {n} --submit</code>; \
-         any single run: <code>sim-host campaign run DIR --index I</code>. \
-         <code>stats.json</code> holds every figure of this page.</p>\n</body></html>",
-        spec = esc(&manifest.spec_file),
-        n = manifest.runs
-    );
-    Ok(h)
+    Ok(())
 }
 
 fn on_off(b: bool) -> &'static str {

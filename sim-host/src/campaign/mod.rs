@@ -17,9 +17,8 @@
 //! - [`slurm`]: `DIR/campaign.sbatch` (job array over the indices) and `DIR/gather.sbatch`
 //!   (dependent on the array), optionally submitted.
 //! - [`svg_labels`]: a check that no two text labels of an SVG overlap (used by the tests).
-//! - [`cli`]: the `campaign` subcommand of the main command.
+//! - the `campaign` subcommand of the main command: [`crate::commands::campaign`].
 
-pub mod cli;
 pub mod exec;
 pub mod html;
 pub mod params;

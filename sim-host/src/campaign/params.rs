@@ -4,7 +4,7 @@
 //! parameters (the preset's values, so an undispersed field keeps the preset's value).
 
 use crate::scenario::{Scenario, SlipModelKind, SoilSpec};
-use crate::slip::SoilParams;
+use crate::soil::per_wheel_slip::SoilParams;
 use crate::terrain::BaseShape;
 
 /// Accessor of one parameter.
@@ -30,7 +30,7 @@ impl std::fmt::Debug for Param {
 }
 
 /// The explicit rigid-wheel soil parameters of `soil` (inverse of `SoilParams::soil`).
-pub fn soil_params(soil: &crate::terramechanics::Soil) -> SoilParams {
+pub fn soil_params(soil: &crate::soil::terramechanics::Soil) -> SoilParams {
     SoilParams {
         n: soil.n,
         k_c: soil.k_c,
@@ -63,9 +63,9 @@ fn bekker(s: &mut Scenario) -> anyhow::Result<&mut SoilParams> {
             // them starts from the value the simulator uses.
             p.lateral_shear_modulus_m.get_or_insert(p.shear_modulus_m);
             p.theta_m_a0
-                .get_or_insert(crate::terramechanics::WONG_REECE_SAND_A0);
+                .get_or_insert(crate::soil::terramechanics::WONG_REECE_SAND_A0);
             p.theta_m_a1
-                .get_or_insert(crate::terramechanics::WONG_REECE_SAND_A1);
+                .get_or_insert(crate::soil::terramechanics::WONG_REECE_SAND_A1);
             Ok(p)
         }
         _ => anyhow::bail!("soil is not a rigid-wheel soil"),
@@ -73,7 +73,7 @@ fn bekker(s: &mut Scenario) -> anyhow::Result<&mut SoilParams> {
 }
 
 /// The scenario's lumped soil as explicit parameters.
-fn lumped(s: &mut Scenario) -> anyhow::Result<&mut crate::slip_lumped::LumpedSoil> {
+fn lumped(s: &mut Scenario) -> anyhow::Result<&mut crate::soil::lumped_slip::LumpedSoil> {
     anyhow::ensure!(
         s.slip_model == SlipModelKind::Lumped,
         "a lumped soil parameter, but the scenario runs the terramechanics slip model (use soil.*)"

@@ -590,10 +590,23 @@ pub fn metric_list(spec: &super::spec::Spec) -> Vec<String> {
     names
 }
 
-/// Read the runs of `dir` and compute everything (writes nothing).
-pub fn gather(dir: &Path, manifest: &Manifest) -> anyhow::Result<Gathered> {
-    let spec = manifest.spec()?;
-    let metrics = metric_list(&spec);
+/// What the runs of a campaign folder hold.
+struct RunsRead {
+    /// Each metric's value per run with a summary, in index order.
+    values: BTreeMap<String, Vec<RunValue>>,
+    failed: Vec<FailedRun>,
+    missing: Vec<u64>,
+    /// Counts of each outcome field's values.
+    outcomes: BTreeMap<String, BTreeMap<String, u64>>,
+    /// `(index, wall time, simulated time)` per run with a summary.
+    times: Vec<(u64, f64, f64)>,
+    /// Runs with a summary.
+    ok: u64,
+}
+
+/// Read every run of the manifest in `dir`: its summary (the `metrics`, the outcomes, the
+/// times), or its error, or nothing.
+fn read_runs(dir: &Path, manifest: &Manifest, metrics: &[String]) -> anyhow::Result<RunsRead> {
     let mut values: BTreeMap<String, Vec<RunValue>> = BTreeMap::new();
     let mut failed = Vec::new();
     let mut missing = Vec::new();
@@ -619,7 +632,7 @@ pub fn gather(dir: &Path, manifest: &Manifest) -> anyhow::Result<Gathered> {
             }
         };
         ok += 1;
-        for metric in &metrics {
+        for metric in metrics {
             let value = value_at(&summary, metric)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", summary_path.display()))?;
             values.entry(metric.clone()).or_default().push(RunValue {
@@ -651,25 +664,22 @@ pub fn gather(dir: &Path, manifest: &Manifest) -> anyhow::Result<Gathered> {
             .unwrap_or(0.0);
         times.push((entry.index, wall, sim));
     }
-    for metric in &metrics {
+    for metric in metrics {
         values.entry(metric.clone()).or_default();
     }
-    let criteria = spec
-        .criteria
-        .iter()
-        .map(|c| evaluate(c, &values[&c.metric], spec.worst_runs))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let complete = failed.is_empty() && missing.is_empty();
-    let verdict = if !complete {
-        "incomplete"
-    } else if criteria.iter().all(|c| c.pass) {
-        "pass"
-    } else {
-        "fail"
-    };
-    let keys: Vec<String> = spec.dispersions.iter().map(|d| d.key()).collect();
-    let draws = keys
-        .iter()
+    Ok(RunsRead {
+        values,
+        failed,
+        missing,
+        outcomes,
+        times,
+        ok,
+    })
+}
+
+/// The range of each dispersion's draws over the manifest (`keys`: the dispersions).
+fn draw_ranges(manifest: &Manifest, keys: &[String]) -> Vec<DrawRange> {
+    keys.iter()
         .filter_map(|k| {
             let xs: Vec<f64> = manifest
                 .entries
@@ -683,7 +693,17 @@ pub fn gather(dir: &Path, manifest: &Manifest) -> anyhow::Result<Gathered> {
                 max: xs.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             })
         })
-        .collect();
+        .collect()
+}
+
+/// The Pearson correlation of each criterion's metric (once per metric) with each
+/// dispersion's draw.
+fn sensitivities(
+    spec: &super::spec::Spec,
+    manifest: &Manifest,
+    values: &BTreeMap<String, Vec<RunValue>>,
+    keys: &[String],
+) -> Vec<Sensitivity> {
     let mut sensitivity = Vec::new();
     let mut seen = Vec::new();
     for c in &spec.criteria {
@@ -691,7 +711,7 @@ pub fn gather(dir: &Path, manifest: &Manifest) -> anyhow::Result<Gathered> {
             continue;
         }
         seen.push(c.metric.clone());
-        for k in &keys {
+        for k in keys {
             let pairs: Vec<(f64, f64)> = values[&c.metric]
                 .iter()
                 .filter_map(|r| {
@@ -706,6 +726,37 @@ pub fn gather(dir: &Path, manifest: &Manifest) -> anyhow::Result<Gathered> {
             });
         }
     }
+    sensitivity
+}
+
+/// Read the runs of `dir` and compute everything (writes nothing).
+pub fn gather(dir: &Path, manifest: &Manifest) -> anyhow::Result<Gathered> {
+    let spec = manifest.spec()?;
+    let metrics = metric_list(&spec);
+    let RunsRead {
+        values,
+        failed,
+        missing,
+        outcomes,
+        times,
+        ok,
+    } = read_runs(dir, manifest, &metrics)?;
+    let criteria = spec
+        .criteria
+        .iter()
+        .map(|c| evaluate(c, &values[&c.metric], spec.worst_runs))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let complete = failed.is_empty() && missing.is_empty();
+    let verdict = if !complete {
+        "incomplete"
+    } else if criteria.iter().all(|c| c.pass) {
+        "pass"
+    } else {
+        "fail"
+    };
+    let keys: Vec<String> = spec.dispersions.iter().map(|d| d.key()).collect();
+    let draws = draw_ranges(manifest, &keys);
+    let sensitivity = sensitivities(&spec, manifest, &values, &keys);
     let scenario = manifest.base_scenario()?.name;
     let stats = Stats {
         campaign: manifest.campaign.clone(),

@@ -96,7 +96,7 @@ fn campaign_plan_draws_are_deterministic_and_per_index() {
     assert_eq!(short.entries[..], a.entries[..10]);
     // Bounds, apply modes and the recorded parameters.
     let base = scenario("slope-10-cross");
-    let phi0 = crate::terramechanics::Soil::ishigami_regolith_simulant()
+    let phi0 = crate::soil::terramechanics::Soil::ishigami_regolith_simulant()
         .phi_rad
         .to_degrees();
     let gyro0 = base.sensors.imu.gyro_noise_rad_s;
@@ -232,8 +232,8 @@ fn campaign_world_start_offset_and_seeds() {
     assert!((p1.yaw_rad - p0.yaw_rad - 2f64.to_radians()).abs() < 1e-3);
     // The flight software is given the planned start, not the offset one.
     assert_eq!(
-        crate::sim::Mission::plan(&base),
-        crate::sim::Mission::plan(&off)
+        crate::closed_loop::Mission::plan(&base),
+        crate::closed_loop::Mission::plan(&off)
     );
     // A fixed terrain seed keeps the rocks; a fixed calibration seed keeps the rover unit.
     let rocks = |w: &crate::world::World| w.terrain.rocks().to_vec();
@@ -674,7 +674,8 @@ fn campaign_example_specs_plan() {
 /// labels outside its canvas, and a criteria table that matches its `stats.json`.
 #[test]
 fn campaign_committed_report_labels_do_not_overlap() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/campaigns/slope-10-cross");
+    let dir =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/results/campaigns/slope-10-cross");
     let page = std::fs::read_to_string(dir.join("report.html")).unwrap();
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("stats.json")).unwrap()).unwrap();

@@ -1,10 +1,11 @@
 //! Output files of a run: `truth.tum`, `ekf.tum`, `vo.tum`, `kin3d.tum`, `kin2d.tum`, `dr.tum`,
 //! `vo_checks.csv`, `summary.json`, `report.html`.
 
+pub mod report;
 pub mod summary;
 pub mod tum;
 
-use crate::sim::RunResult;
+use crate::closed_loop::RunResult;
 use std::path::Path;
 
 /// Write every output of `run` into `dir` (created if missing). Returns the summary.
@@ -67,7 +68,7 @@ pub fn write_all(dir: &Path, run: &RunResult) -> anyhow::Result<summary::Summary
     )?;
     std::fs::write(
         dir.join("report.html"),
-        crate::report::report_html(run, &s)?,
+        crate::output::report::report_html(run, &s)?,
     )?;
     Ok(s)
 }

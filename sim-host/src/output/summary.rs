@@ -4,7 +4,7 @@
 //! estimate and the truth over the run.
 
 use super::tum::Trajectory;
-use crate::sim::RunResult;
+use crate::closed_loop::RunResult;
 use serde::Serialize;
 
 /// Five flight estimates.
@@ -184,9 +184,9 @@ pub struct Summary {
     pub hazards: HazardSummary,
     /// The goal-directed drive (hazard maps and RoverBug; null for a path drive).
     pub planner: Option<PlannerSummary>,
-    /// Terrain-map localization (issue 17; null when the run did not ask for it).
+    /// Terrain-map localization (V99 sec. 5; null when the run did not ask for it).
     pub localization: Option<LocalizationSummary>,
-    /// The day's targets and the sequencer (issue 17; null without targets).
+    /// The day's targets and the sequencer (V99 sec. 3; null without targets).
     pub targets: Option<TargetsSummary>,
     /// Slip.
     pub slip: SlipSummary,
@@ -231,7 +231,7 @@ pub struct HazardSummary {
     pub contacts: Vec<HazardContact>,
 }
 
-/// The goal-directed drive of a run (issue 16).
+/// The goal-directed drive of a run (hazard maps and RoverBug, V99 sec. 4).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct PlannerSummary {
     /// `reached`, `unreachable`, `blocked` or `driving` (the planner's verdict at the end).
@@ -263,7 +263,7 @@ pub struct PlannerSummary {
     pub hold_cycles: u32,
 }
 
-/// Terrain-map localization of a run (issue 17, V99 sec. 5).
+/// Terrain-map localization of a run (V99 sec. 5).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct LocalizationSummary {
     /// Fixes fused into the EKF.
@@ -298,7 +298,7 @@ pub struct LocalizationSummary {
     pub last_error: Option<String>,
 }
 
-/// The day's targets and the on-board sequencer of a run (issue 17, V99 sec. 3): the flight
+/// The day's targets and the on-board sequencer of a run (V99 sec. 3): the flight
 /// software's counters (`total`, `visited`, `dropped`, `unreachable`, `replans`, `reorders`,
 /// the triggers, `goal_switches`, the power calibration, `energy_used_j` since the uplink at
 /// its last replan; `fsw::flight::nav::MissionCounters`) and the outcome per target.
@@ -450,6 +450,172 @@ fn suspension(run: &RunResult) -> SuspensionSummary {
     }
 }
 
+/// The targets of the mission sequencer, if the run had any.
+fn targets_summary(run: &RunResult) -> Option<TargetsSummary> {
+    run.mission.as_ref().map(|m| TargetsSummary {
+        counters: m.counters,
+        order: m.order.clone(),
+        outcomes: m.outcomes.iter().map(|o| format!("{o:?}")).collect(),
+        miss_m: (0..m.outcomes.len())
+            .map(|i| m.visits.iter().find(|v| v.target == i).map(|v| v.miss_m))
+            .collect(),
+        energy_budget_j: m.energy_budget_j,
+        phase: format!("{:?}", m.phase),
+    })
+}
+
+/// What terrain-map localization did, if the run asked for it.
+fn localization_summary(run: &RunResult) -> Option<LocalizationSummary> {
+    run.localization.as_ref().map(|l| {
+        let n = l.checks.len();
+        let mean = |f: &dyn Fn(&crate::closed_loop::LocCheck) -> f64| {
+            (n > 0).then(|| l.checks.iter().map(f).sum::<f64>() / n as f64)
+        };
+        LocalizationSummary {
+            updates: l.counters.updates,
+            rejected: l.counters.rejected,
+            failed: l.counters.failed,
+            not_started: l.counters.not_started,
+            stale: l.counters.stale,
+            searches: l.counters.searches,
+            maps: l.counters.maps,
+            nees_mean: mean(&|c| c.nees),
+            fixes_checked: n,
+            fix_error_rms_m: mean(&|c| c.error[0].powi(2) + c.error[1].powi(2)).map(f64::sqrt),
+            fused_error_max_m: l
+                .checks
+                .iter()
+                .filter(|c| c.applied)
+                .map(|c| c.error[0].hypot(c.error[1]))
+                .reduce(f64::max),
+            map_points: l.map_points,
+            map_features: l.map_features,
+            last_error: l.last_error.clone(),
+        }
+    })
+}
+
+/// What the hazard maps and the planner did, on a goal-directed drive.
+fn planner_summary(run: &RunResult) -> Option<PlannerSummary> {
+    run.planner.as_ref().map(|p| PlannerSummary {
+        status: match p.verdict {
+            fsw::flight::nav::hazard_nav::PlannerVerdict::Driving => "driving",
+            fsw::flight::nav::hazard_nav::PlannerVerdict::Reached => "reached",
+            fsw::flight::nav::hazard_nav::PlannerVerdict::Unreachable => "unreachable",
+            fsw::flight::nav::hazard_nav::PlannerVerdict::Blocked => "blocked",
+        }
+        .to_string(),
+        last_status: p.last_status.clone(),
+        replans: p.planner.map_or(0, |c| c.replans),
+        steps: p.planner.map_or(0, |c| c.calls),
+        boundary_following: p.planner.map_or(0, |c| c.follow_entries),
+        path_length_m: run.distance_m,
+        straight_line_m: p.straight_line_m,
+        maps: p.hazard.maps,
+        map_errors: p.hazard.map_errors,
+        gazes: p.hazard.gazes,
+        gazes_skipped: p.hazard.gazes_skipped,
+        room_moves: p.hazard.room_moves,
+        hold_cycles: p.hazard.holds,
+    })
+}
+
+/// The truth-side hazard check.
+fn hazard_summary(run: &RunResult) -> HazardSummary {
+    HazardSummary {
+        count: run.hazards,
+        height_m: run.hazard_height_m,
+        min_distance_m: run.hazard_min_distance_m,
+        contacts: run
+            .collisions
+            .iter()
+            .map(|c| HazardContact {
+                t_s: c.t_s,
+                at_m: c.at_m,
+            })
+            .collect(),
+    }
+}
+
+/// Fault protection at the end of the run.
+fn fault_protection_summary(run: &RunResult) -> FaultProtectionSummary {
+    FaultProtectionSummary {
+        responses: run.nav.fault_stops,
+        last_response: format!("{:?}", run.fault_response),
+        last_ekf_error: run.last_ekf_error.clone(),
+        stopped_safe: run.nav_mode == fsw::flight::nav::NavMode::Stopped,
+        final_position_sigma_m: run
+            .records
+            .iter()
+            .rev()
+            .find_map(|r| r.est)
+            .map(|e| e.ekf_pos_sigma_m[0].hypot(e.ekf_pos_sigma_m[1])),
+    }
+}
+
+/// The true slip over the records where the rover moved, and the gate's rejections.
+fn slip_summary(run: &RunResult) -> SlipSummary {
+    let moving: Vec<_> = run
+        .records
+        .windows(2)
+        .filter(|w| w[1].distance_m > w[0].distance_m + 1e-5)
+        .map(|w| w[1])
+        .collect();
+    let m = moving.len().max(1) as f64;
+    SlipSummary {
+        gate_reject_fraction: (run.nav.kin_tested > 0)
+            .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
+        mean_slip_ratio: moving.iter().map(|r| r.slip_ratio).sum::<f64>() / m,
+        mean_slip_angle_deg: moving
+            .iter()
+            .map(|r| r.slip_angle_rad.to_degrees())
+            .sum::<f64>()
+            / m,
+    }
+}
+
+/// Visual odometry in the flight software.
+fn vo_summary(run: &RunResult) -> VoSummary {
+    VoSummary {
+        updates: Some(u64::from(run.nav.vo_updates)),
+        failures: Some(u64::from(run.nav.vo_failures)),
+        mean_features: run.vo_mean_features,
+        mean_inliers: run.vo_mean_inliers,
+        boresight_mrad: run.vo_boresight.0 * 1e3,
+        boresight_samples: run.vo_boresight.1,
+        last_error: run.vo_last_error.clone(),
+    }
+}
+
+/// The executive's timing per rate group, by group name.
+fn timing_summary(run: &RunResult) -> serde_json::Map<String, serde_json::Value> {
+    let mut timing = serde_json::Map::new();
+    for g in &run.timing {
+        let value = serde_json::to_value(GroupTimingJson {
+            max_us: g.max_us,
+            mean_us: g.mean_us,
+            overruns: g.overruns,
+        })
+        .unwrap_or(serde_json::Value::Null);
+        timing.insert(g.name.clone(), value);
+    }
+    timing
+}
+
+/// The flight software's health of each device, by device name.
+fn device_health_summary(run: &RunResult) -> serde_json::Map<String, serde_json::Value> {
+    ["imu", "joints", "camera", "sun", "power"]
+        .iter()
+        .zip(run.device_health.iter())
+        .map(|(k, h)| {
+            (
+                k.to_string(),
+                serde_json::to_value(h).unwrap_or(serde_json::Value::Null),
+            )
+        })
+        .collect()
+}
+
 /// Build the summary of `run`.
 pub fn summarise(run: &RunResult) -> Summary {
     let n = run.records.len().max(1) as f64;
@@ -465,23 +631,6 @@ pub fn summarise(run: &RunResult) -> Summary {
         .iter()
         .map(|r| r.cross_track_m)
         .fold(0.0, f64::max);
-    let moving: Vec<_> = run
-        .records
-        .windows(2)
-        .filter(|w| w[1].distance_m > w[0].distance_m + 1e-5)
-        .map(|w| w[1])
-        .collect();
-    let m = moving.len().max(1) as f64;
-    let mut timing = serde_json::Map::new();
-    for g in &run.timing {
-        let value = serde_json::to_value(GroupTimingJson {
-            max_us: g.max_us,
-            mean_us: g.mean_us,
-            overruns: g.overruns,
-        })
-        .unwrap_or(serde_json::Value::Null);
-        timing.insert(g.name.clone(), value);
-    }
     Summary {
         scenario: run.scenario.clone(),
         seed: run.seed,
@@ -511,108 +660,15 @@ pub fn summarise(run: &RunResult) -> Summary {
         truth_scrub_pct: run.truth_scrub_pct,
         truth_scrub_net_pct: run.truth_scrub_net_pct,
         collisions: u32::try_from(run.collisions.len()).unwrap_or(u32::MAX),
-        hazards: HazardSummary {
-            count: run.hazards,
-            height_m: run.hazard_height_m,
-            min_distance_m: run.hazard_min_distance_m,
-            contacts: run
-                .collisions
-                .iter()
-                .map(|c| HazardContact {
-                    t_s: c.t_s,
-                    at_m: c.at_m,
-                })
-                .collect(),
-        },
-        targets: run.mission.as_ref().map(|m| TargetsSummary {
-            counters: m.counters,
-            order: m.order.clone(),
-            outcomes: m.outcomes.iter().map(|o| format!("{o:?}")).collect(),
-            miss_m: (0..m.outcomes.len())
-                .map(|i| m.visits.iter().find(|v| v.target == i).map(|v| v.miss_m))
-                .collect(),
-            energy_budget_j: m.energy_budget_j,
-            phase: format!("{:?}", m.phase),
-        }),
-        localization: run.localization.as_ref().map(|l| {
-            let n = l.checks.len();
-            let mean = |f: &dyn Fn(&crate::sim::LocCheck) -> f64| {
-                (n > 0).then(|| l.checks.iter().map(f).sum::<f64>() / n as f64)
-            };
-            LocalizationSummary {
-                updates: l.counters.updates,
-                rejected: l.counters.rejected,
-                failed: l.counters.failed,
-                not_started: l.counters.not_started,
-                stale: l.counters.stale,
-                searches: l.counters.searches,
-                maps: l.counters.maps,
-                nees_mean: mean(&|c| c.nees),
-                fixes_checked: n,
-                fix_error_rms_m: mean(&|c| c.error[0].powi(2) + c.error[1].powi(2)).map(f64::sqrt),
-                fused_error_max_m: l
-                    .checks
-                    .iter()
-                    .filter(|c| c.applied)
-                    .map(|c| c.error[0].hypot(c.error[1]))
-                    .reduce(f64::max),
-                map_points: l.map_points,
-                map_features: l.map_features,
-                last_error: l.last_error.clone(),
-            }
-        }),
-        planner: run.planner.as_ref().map(|p| PlannerSummary {
-            status: match p.verdict {
-                fsw::flight::nav::hazard_nav::PlannerVerdict::Driving => "driving",
-                fsw::flight::nav::hazard_nav::PlannerVerdict::Reached => "reached",
-                fsw::flight::nav::hazard_nav::PlannerVerdict::Unreachable => "unreachable",
-                fsw::flight::nav::hazard_nav::PlannerVerdict::Blocked => "blocked",
-            }
-            .to_string(),
-            last_status: p.last_status.clone(),
-            replans: p.planner.map_or(0, |c| c.replans),
-            steps: p.planner.map_or(0, |c| c.calls),
-            boundary_following: p.planner.map_or(0, |c| c.follow_entries),
-            path_length_m: run.distance_m,
-            straight_line_m: p.straight_line_m,
-            maps: p.hazard.maps,
-            map_errors: p.hazard.map_errors,
-            gazes: p.hazard.gazes,
-            gazes_skipped: p.hazard.gazes_skipped,
-            room_moves: p.hazard.room_moves,
-            hold_cycles: p.hazard.holds,
-        }),
-        slip: SlipSummary {
-            gate_reject_fraction: (run.nav.kin_tested > 0)
-                .then(|| f64::from(run.nav.kin_rejected) / f64::from(run.nav.kin_tested)),
-            mean_slip_ratio: moving.iter().map(|r| r.slip_ratio).sum::<f64>() / m,
-            mean_slip_angle_deg: moving
-                .iter()
-                .map(|r| r.slip_angle_rad.to_degrees())
-                .sum::<f64>()
-                / m,
-        },
-        vo: VoSummary {
-            updates: Some(u64::from(run.nav.vo_updates)),
-            failures: Some(u64::from(run.nav.vo_failures)),
-            mean_features: run.vo_mean_features,
-            mean_inliers: run.vo_mean_inliers,
-            boresight_mrad: run.vo_boresight.0 * 1e3,
-            boresight_samples: run.vo_boresight.1,
-            last_error: run.vo_last_error.clone(),
-        },
-        timing,
+        hazards: hazard_summary(run),
+        targets: targets_summary(run),
+        localization: localization_summary(run),
+        planner: planner_summary(run),
+        slip: slip_summary(run),
+        vo: vo_summary(run),
+        timing: timing_summary(run),
         device_faults: run.device_faults,
-        device_health: ["imu", "joints", "camera", "sun", "power"]
-            .iter()
-            .zip(run.device_health.iter())
-            .map(|(k, h)| {
-                (
-                    k.to_string(),
-                    serde_json::to_value(h).unwrap_or(serde_json::Value::Null),
-                )
-            })
-            .collect(),
+        device_health: device_health_summary(run),
         stereo_frames: run.stereo_frames,
         energy: EnergySummary {
             used_j: run.energy_used_j,
@@ -622,18 +678,7 @@ pub fn summarise(run: &RunResult) -> Summary {
         driver: run.driver.clone(),
         slip_compensation: run.slip_compensation,
         nav_mode: format!("{:?}", run.nav_mode),
-        fault_protection: FaultProtectionSummary {
-            responses: run.nav.fault_stops,
-            last_response: format!("{:?}", run.fault_response),
-            last_ekf_error: run.last_ekf_error.clone(),
-            stopped_safe: run.nav_mode == fsw::flight::nav::NavMode::Stopped,
-            final_position_sigma_m: run
-                .records
-                .iter()
-                .rev()
-                .find_map(|r| r.est)
-                .map(|e| e.ekf_pos_sigma_m[0].hypot(e.ekf_pos_sigma_m[1])),
-        },
+        fault_protection: fault_protection_summary(run),
         nav: run.nav,
         wall_time_s: run.wall_time_s,
     }

@@ -7,7 +7,7 @@
 //! X.tum` associates every estimate pose with a truth pose of the same stamp (evo's default
 //! tolerance is 10 ms; the VO captures are 15 ms off the record times).
 
-use crate::sim::Record;
+use crate::closed_loop::Record;
 use std::fmt::Write as _;
 
 /// Which trajectory of a record.
@@ -18,7 +18,7 @@ pub enum Trajectory {
     /// The flight EKF.
     Ekf,
     /// Flight VO relative poses chained (in records: the pose after the last update; the
-    /// output files use [`crate::sim::VoCheck`] at each capture time instead).
+    /// output files use [`crate::closed_loop::VoCheck`] at each capture time instead).
     Vo,
     /// Flight 3D kinematic dead reckoning.
     Kin3d,
@@ -84,7 +84,11 @@ fn tum_header(s: &mut String, header: &str) {
 
 /// The TUM text of the truth at every record time and at every VO capture time (the stamps of
 /// all estimate files), in time order without repeated stamps.
-pub fn truth_tum_text(header: &str, records: &[Record], checks: &[crate::sim::VoCheck]) -> String {
+pub fn truth_tum_text(
+    header: &str,
+    records: &[Record],
+    checks: &[crate::closed_loop::VoCheck],
+) -> String {
     let mut poses: Vec<(f64, [f64; 3], [f64; 4])> = records
         .iter()
         .map(|r| (r.t_s, r.pos_m, r.quat_xyzw))
@@ -107,7 +111,7 @@ pub fn truth_tum_text(header: &str, records: &[Record], checks: &[crate::sim::Vo
 }
 
 /// The TUM text of the VO-only trajectory, one pose per VO update at its capture time.
-pub fn vo_tum_text(header: &str, checks: &[crate::sim::VoCheck]) -> String {
+pub fn vo_tum_text(header: &str, checks: &[crate::closed_loop::VoCheck]) -> String {
     let mut s = String::new();
     tum_header(&mut s, header);
     for c in checks {

@@ -24,10 +24,10 @@
 //!
 //! # Not modelled
 //! Cast shadows, inter-reflection, vignetting, motion blur, exposure control. Lens distortion is
-//! modelled by [`lens::LensRig`]: a pinhole pair larger than the raw field, resampled through
+//! modelled by [`lens_rig::LensRig`]: a pinhole pair larger than the raw field, resampled through
 //! each raw camera's lens.
 
-pub mod lens;
+pub mod lens_rig;
 mod mesh;
 mod noise;
 mod raster;
@@ -228,7 +228,7 @@ impl StereoRenderer {
     }
 
     /// A renderer for `width x height` pinhole images (at least 2 x 2; the lens model renders
-    /// a pinhole image larger than the raw field, [`lens::LensRig`]).
+    /// a pinhole image larger than the raw field, [`lens_rig::LensRig`]).
     pub fn with_size(
         calib: StereoCalibration,
         settings: RenderSettings,

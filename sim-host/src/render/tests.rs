@@ -534,16 +534,16 @@ fn sim_r8_bad_input_is_refused() {
 /// The hazcam calibration and true lenses drawn from the lens tolerances with `seed` (the focal
 /// and principal-point arguments of `draw_truth` as SIM-LENS-4 has always used them).
 fn drawn_lenses(seed: u64) -> (StereoCalibration, rover_hal::LensCalibration) {
-    use crate::sensors::lens;
+    use crate::sensors::hazcam_lens;
     use rand::SeedableRng;
     let calib = hazcam_calibration();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let truth = lens::draw_truth(
-        &lens::nominal_lens(),
+    let truth = hazcam_lens::draw_truth(
+        &hazcam_lens::nominal_lens(),
         &calib,
         [0.002, -0.001],
         [0.3, -0.4],
-        &lens::LensTolerances::default(),
+        &hazcam_lens::LensTolerances::default(),
         &mut rng,
     );
     (calib, truth)
@@ -551,12 +551,12 @@ fn drawn_lenses(seed: u64) -> (StereoCalibration, rover_hal::LensCalibration) {
 
 /// SIM-LENS-4: through the wide-angle lenses (true lenses with drawn errors), a dark dot at a
 /// known ground point lands on the raw pixel the lens model predicts (projection computed here
-/// with `sensors::lens::project`, independently of the rig's inverse map), in both cameras,
+/// with `sensors::hazcam_lens::project`, independently of the rig's inverse map), in both cameras,
 /// within 0.5 px, including dots far off axis where the distortion moves them by tens of
 /// pixels.
 #[test]
 fn sim_lens_4_marker_lands_on_predicted_raw_pixel() {
-    use crate::sensors::lens;
+    use crate::sensors::hazcam_lens;
     let (calib, truth) = drawn_lenses(9);
     let r_wr = rot_zyx(0.2, 0.03, -0.02);
     let p_r = [1.0, 2.0, -0.2];
@@ -584,7 +584,7 @@ fn sim_lens_4_marker_lands_on_predicted_raw_pixel() {
         })
         .collect();
     let surface = Dots { dots: dots.clone() };
-    let mut rig = super::lens::LensRig::new(truth, &calib, quiet(300.0, 0.0)).unwrap();
+    let mut rig = super::lens_rig::LensRig::new(truth, &calib, quiet(300.0, 0.0)).unwrap();
     let pose = CameraPose::from_rover(r_wr, p_r, &calib);
     let (mut left, mut right) = buffers();
     rig.render(&surface, &pose, &ZENITH_SUN, 0, &mut left, &mut right)
@@ -596,8 +596,9 @@ fn sim_lens_4_marker_lands_on_predicted_raw_pixel() {
         let pk: Vec<f64> = (0..3)
             .map(|j| (0..3).map(|i| r_wk[i][j] * pw[i]).sum())
             .collect();
-        let want_l = lens::project(&truth.left, [pk[0], pk[1], pk[2]]).unwrap();
-        let want_r = lens::project(&truth.right, [pk[0] - calib.baseline_m, pk[1], pk[2]]).unwrap();
+        let want_l = hazcam_lens::project(&truth.left, [pk[0], pk[1], pk[2]]).unwrap();
+        let want_r =
+            hazcam_lens::project(&truth.right, [pk[0] - calib.baseline_m, pk[1], pk[2]]).unwrap();
         let pinhole_l = [
             calib.cx_px + calib.fx_px * pk[0] / pk[2],
             calib.cy_px + calib.fy_px * pk[1] / pk[2],
@@ -632,7 +633,7 @@ fn sim_lens_5_used_pixel_masks_change_no_raw_byte() {
     let pose = CameraPose::from_rover(rot_zyx(0.3, -0.35, 0.05), [0.4, -0.2, -0.3], &calib);
     let settings = RenderSettings::default();
     assert!(settings.noise_sigma_dn > 0.0);
-    let mut rig = super::lens::LensRig::new(truth, &calib, settings).unwrap();
+    let mut rig = super::lens_rig::LensRig::new(truth, &calib, settings).unwrap();
     let (mut l0, mut r0) = buffers();
     let masked = rig
         .render(&surface, &pose, &ZENITH_SUN, 7, &mut l0, &mut r0)

@@ -520,135 +520,184 @@ impl AlbedoTexture {
             .min(x_m.len())
             .min(y_m.len())
             .min(footprint_m.len());
-        let fine_top = self.fine.levels.len() - 1;
-        let detail_top = self.detail.levels.len() - 1;
-        let detail_on = self.params.detail_contrast > 0.0;
-        let (sin, cos) = self.detail_rotation;
-        let inv_texel = self.fine.inv_texel;
         for start in (0..n).step_by(BATCH) {
             let end = (start + BATCH).min(n);
             let x = &x_m[start..end];
             let y = &y_m[start..end];
             let f = &footprint_m[start..end];
             let out = &mut out[start..end];
-            let count = out.len();
-            let level = &mut s.level[..count];
-            // Levels from one fast_log2 per point: its integer part is the exponent of the
-            // ratio footprint / texel and its fraction the mantissa (the same values as
-            // Pyramid::level_blend and Pyramid::nearest_level with a four times finer texel).
-            // The points that blend with the next fine level and those with a detail layer
-            // are gathered on the way (batch index, level, weight, coordinates).
-            // Runs of equal level (the level changes slowly along a row) are noted on the way:
-            // the first point of each run of the fine lookups, the blends and the details.
-            let (mut blends, mut details) = (0, 0);
-            let (mut fine_runs, mut blend_runs, mut detail_runs) = (0, 0, 0);
-            let (mut fine_prev, mut blend_prev, mut detail_prev) = (u8::MAX, u8::MAX, u8::MAX);
-            for k in 0..count {
-                let ratio = f[k] * inv_texel;
-                let bits = ratio.to_bits();
-                let exponent = ((bits >> 52) & 0x7ff) as i64 - 1023;
-                let fraction =
-                    f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000) - 1.0;
-                let i0 = if ratio <= 1.0 || exponent < 0 {
-                    0
-                } else if exponent as usize >= fine_top {
-                    fine_top
-                } else {
-                    let t = ((fraction - 0.375) * 4.0).clamp(0.0, 1.0);
-                    if t > 0.0 {
-                        let lv = exponent as u8 + 1;
-                        if lv != blend_prev {
-                            s.blend_runs[blend_runs] = blends as u8;
-                            blend_runs += 1;
-                            blend_prev = lv;
-                        }
-                        s.bk[blends] = k as u8;
-                        s.bl[blends] = lv;
-                        s.bt[blends] = t;
-                        s.bx[blends] = x[k];
-                        s.by[blends] = y[k];
-                        blends += 1;
-                    }
-                    exponent as usize
-                };
-                let lv = i0 as u8;
-                if lv != fine_prev {
-                    s.fine_runs[fine_runs] = k as u8;
-                    fine_runs += 1;
-                    fine_prev = lv;
-                }
-                level[k] = lv;
-                let weight = (3.0 - 2.0 * ratio).min(1.0);
-                if detail_on && weight > 0.0 {
-                    // Detail texel = fine texel / 4: log2 of its ratio is exponent + 2 +
-                    // fraction, rounded to the nearest level.
-                    let d = if ratio * 4.0 > 1.414 {
-                        ((exponent + 2 + i64::from(fraction >= 0.5)).max(0) as usize)
-                            .min(detail_top)
-                    } else {
-                        0
-                    };
-                    let d = d as u8;
-                    if d != detail_prev {
-                        s.detail_runs[detail_runs] = details as u8;
-                        detail_runs += 1;
-                        detail_prev = d;
-                    }
-                    s.dk[details] = k as u8;
-                    s.dl[details] = d;
-                    s.dw[details] = weight;
-                    s.dx[details] = cos * x[k] - sin * y[k];
-                    s.dy[details] = sin * x[k] + cos * y[k];
-                    details += 1;
-                }
-            }
-            // Lookups run by run, each through the tile's batch lookup.
-            for r in 0..fine_runs {
-                let k = usize::from(s.fine_runs[r]);
-                let e = run_end(&s.fine_runs[..fine_runs], r, count);
-                let lv = usize::from(level[k]);
-                let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
-                tile.bilinear_batch(&x[k..e], &y[k..e], scale, &mut out[k..e], &mut s.bilinear);
-            }
-            // The blend with the next level, for the points with t > 0.
-            let values = &mut s.values;
-            for r in 0..blend_runs {
-                let j = usize::from(s.blend_runs[r]);
-                let e = run_end(&s.blend_runs[..blend_runs], r, blends);
-                let lv = usize::from(s.bl[j]);
-                let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
-                let (bx, by) = (&s.bx[j..e], &s.by[j..e]);
-                tile.bilinear_batch(bx, by, scale, &mut values[j..e], &mut s.bilinear);
-            }
-            for ((&k, &t), &value) in s.bk[..blends]
-                .iter()
-                .zip(&s.bt[..blends])
-                .zip(&values[..blends])
-            {
-                let o = &mut out[usize::from(k)];
-                *o += t * (value - *o);
-            }
-            // The detail layer, in its rotated coordinates.
-            for r in 0..detail_runs {
-                let j = usize::from(s.detail_runs[r]);
-                let e = run_end(&s.detail_runs[..detail_runs], r, details);
-                let d = usize::from(s.dl[j]);
-                let (tile, scale) = (&self.detail.levels[d], self.detail.scales[d]);
-                let (dx, dy) = (&s.dx[j..e], &s.dy[j..e]);
-                tile.bilinear_batch(dx, dy, scale, &mut values[j..e], &mut s.bilinear);
-            }
-            for ((&k, &weight), &value) in s.dk[..details]
-                .iter()
-                .zip(&s.dw[..details])
-                .zip(&values[..details])
-            {
-                out[usize::from(k)] *= 1.0 + weight * (2.0 * value - 1.0);
-            }
+            let plan = self.plan_batch(x, y, f, s);
+            self.look_up_batch(x, y, out, s, &plan);
             for o in out.iter_mut() {
                 *o = o.clamp(0.0, 1.0);
             }
         }
     }
+
+    /// The levels of one batch of at most [`BATCH`] points into `s`.
+    ///
+    /// Levels from one fast_log2 per point: its integer part is the exponent of the ratio
+    /// footprint / texel and its fraction the mantissa (the same values as
+    /// Pyramid::level_blend and Pyramid::nearest_level with a four times finer texel). The
+    /// points that blend with the next fine level and those with a detail layer are gathered on
+    /// the way (batch index, level, weight, coordinates). Runs of equal level (the level
+    /// changes slowly along a row) are noted on the way: the first point of each run of the
+    /// fine lookups, the blends and the details.
+    #[inline(always)]
+    fn plan_batch(&self, x: &[f64], y: &[f64], f: &[f64], s: &mut BatchScratch) -> BatchPlan {
+        let fine_top = self.fine.levels.len() - 1;
+        let detail_top = self.detail.levels.len() - 1;
+        let detail_on = self.params.detail_contrast > 0.0;
+        let (sin, cos) = self.detail_rotation;
+        let inv_texel = self.fine.inv_texel;
+        let count = x.len();
+        let level = &mut s.level[..count];
+        let (mut blends, mut details) = (0, 0);
+        let (mut fine_runs, mut blend_runs, mut detail_runs) = (0, 0, 0);
+        let (mut fine_prev, mut blend_prev, mut detail_prev) = (u8::MAX, u8::MAX, u8::MAX);
+        for k in 0..count {
+            let ratio = f[k] * inv_texel;
+            let bits = ratio.to_bits();
+            let exponent = ((bits >> 52) & 0x7ff) as i64 - 1023;
+            let fraction =
+                f64::from_bits((bits & 0x000f_ffff_ffff_ffff) | 0x3ff0_0000_0000_0000) - 1.0;
+            let i0 = if ratio <= 1.0 || exponent < 0 {
+                0
+            } else if exponent as usize >= fine_top {
+                fine_top
+            } else {
+                let t = ((fraction - 0.375) * 4.0).clamp(0.0, 1.0);
+                if t > 0.0 {
+                    let lv = exponent as u8 + 1;
+                    if lv != blend_prev {
+                        s.blend_runs[blend_runs] = blends as u8;
+                        blend_runs += 1;
+                        blend_prev = lv;
+                    }
+                    s.bk[blends] = k as u8;
+                    s.bl[blends] = lv;
+                    s.bt[blends] = t;
+                    s.bx[blends] = x[k];
+                    s.by[blends] = y[k];
+                    blends += 1;
+                }
+                exponent as usize
+            };
+            let lv = i0 as u8;
+            if lv != fine_prev {
+                s.fine_runs[fine_runs] = k as u8;
+                fine_runs += 1;
+                fine_prev = lv;
+            }
+            level[k] = lv;
+            let weight = (3.0 - 2.0 * ratio).min(1.0);
+            if detail_on && weight > 0.0 {
+                // Detail texel = fine texel / 4: log2 of its ratio is exponent + 2 +
+                // fraction, rounded to the nearest level.
+                let d = if ratio * 4.0 > 1.414 {
+                    ((exponent + 2 + i64::from(fraction >= 0.5)).max(0) as usize).min(detail_top)
+                } else {
+                    0
+                };
+                let d = d as u8;
+                if d != detail_prev {
+                    s.detail_runs[detail_runs] = details as u8;
+                    detail_runs += 1;
+                    detail_prev = d;
+                }
+                s.dk[details] = k as u8;
+                s.dl[details] = d;
+                s.dw[details] = weight;
+                s.dx[details] = cos * x[k] - sin * y[k];
+                s.dy[details] = sin * x[k] + cos * y[k];
+                details += 1;
+            }
+        }
+        BatchPlan {
+            count,
+            blends,
+            details,
+            fine_runs,
+            blend_runs,
+            detail_runs,
+        }
+    }
+
+    /// The lookups of one planned batch into `out`, run by run, each through the tile's batch
+    /// lookup: the fine level, the blend with the next level, the detail layer (before the
+    /// clamp).
+    #[inline(always)]
+    fn look_up_batch(
+        &self,
+        x: &[f64],
+        y: &[f64],
+        out: &mut [f64],
+        s: &mut BatchScratch,
+        plan: &BatchPlan,
+    ) {
+        let BatchPlan {
+            count,
+            blends,
+            details,
+            fine_runs,
+            blend_runs,
+            detail_runs,
+        } = *plan;
+        // Lookups run by run, each through the tile's batch lookup.
+        for r in 0..fine_runs {
+            let k = usize::from(s.fine_runs[r]);
+            let e = run_end(&s.fine_runs[..fine_runs], r, count);
+            let lv = usize::from(s.level[k]);
+            let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
+            tile.bilinear_batch(&x[k..e], &y[k..e], scale, &mut out[k..e], &mut s.bilinear);
+        }
+        // The blend with the next level, for the points with t > 0.
+        let values = &mut s.values;
+        for r in 0..blend_runs {
+            let j = usize::from(s.blend_runs[r]);
+            let e = run_end(&s.blend_runs[..blend_runs], r, blends);
+            let lv = usize::from(s.bl[j]);
+            let (tile, scale) = (&self.fine.levels[lv], self.fine.scales[lv]);
+            let (bx, by) = (&s.bx[j..e], &s.by[j..e]);
+            tile.bilinear_batch(bx, by, scale, &mut values[j..e], &mut s.bilinear);
+        }
+        for ((&k, &t), &value) in s.bk[..blends]
+            .iter()
+            .zip(&s.bt[..blends])
+            .zip(&values[..blends])
+        {
+            let o = &mut out[usize::from(k)];
+            *o += t * (value - *o);
+        }
+        // The detail layer, in its rotated coordinates.
+        for r in 0..detail_runs {
+            let j = usize::from(s.detail_runs[r]);
+            let e = run_end(&s.detail_runs[..detail_runs], r, details);
+            let d = usize::from(s.dl[j]);
+            let (tile, scale) = (&self.detail.levels[d], self.detail.scales[d]);
+            let (dx, dy) = (&s.dx[j..e], &s.dy[j..e]);
+            tile.bilinear_batch(dx, dy, scale, &mut values[j..e], &mut s.bilinear);
+        }
+        for ((&k, &weight), &value) in s.dk[..details]
+            .iter()
+            .zip(&s.dw[..details])
+            .zip(&values[..details])
+        {
+            out[usize::from(k)] *= 1.0 + weight * (2.0 * value - 1.0);
+        }
+    }
+}
+
+/// What [`AlbedoTexture::plan_batch`] found in a batch: its points, blends and details, and
+/// the runs of equal level of each.
+#[derive(Clone, Copy)]
+struct BatchPlan {
+    count: usize,
+    blends: usize,
+    details: usize,
+    fine_runs: usize,
+    blend_runs: usize,
+    detail_runs: usize,
 }
 
 /// End of run `r` whose first points are `starts` (the last run ends at `count`).

@@ -1,6 +1,6 @@
 //! Fault injection, selected per scenario: each fault acts on one device (or one wheel of it)
-//! over a time window. Sensor faults act in the device layer (`hal_devices.rs`: what the flight
-//! software reads); physical faults act on the simulator's truth (`world.rs`: a stalled wheel
+//! over a time window. Sensor faults act in the device layer ([`crate::devices::world`]: what the flight
+//! software reads); physical faults act on the simulator's truth ([`crate::world`]: a stalled wheel
 //! does not turn and the vehicle drags it; a slip override holds the wheels' ground speed).
 //!
 //! | device | kind | effect | `value` (default) |

@@ -7,7 +7,7 @@
 //! contact `c` of wheel `i` has the three rows of [`contact_rows`], normal `a_n`, rolling
 //! tangent `a_t` and lateral `a_l`, which give the velocity of the wheel's material contact
 //! point before its own spin; its **slip velocity** beyond what the soil's slip model
-//! ([`crate::slip`], [`crate::slip_lumped`]) already gives is
+//! ([`crate::soil::per_wheel_slip`], [`crate::soil::lumped_slip`]) already gives is
 //! `u_c = (a_t x - b_t,i, a_l x - b_l,i)`, with `b_t,i` the wheel's ground speed (its rim speed
 //! `r_i theta_dot_i` less the soil slip) and `b_l,i` its sideways slip velocity.
 //!
@@ -131,6 +131,146 @@ pub fn creep_stiffness(friction: &Friction, weight_n: f64, rim_speed_m_s: f64) -
     friction.mu * weight_n / WHEELS as f64 / (friction.creep_slip.max(1e-3) * v)
 }
 
+/// The contacts' rows and the per-wheel drive of one quasi-static solve.
+struct Problem<'a> {
+    contacts: &'a [ForceContact],
+    /// `[normal, tangent, lateral]` rows of each contact.
+    rows: Vec<[Row; 3]>,
+    ground_speed: &'a [f64; WHEELS],
+    lateral: &'a [f64; WHEELS],
+    /// The weight's row of the normal equations.
+    gravity: Row,
+    /// Creep stiffness, N/(m/s).
+    k: f64,
+}
+
+/// The state of the reweighting passes.
+struct Passes {
+    /// Creep weight of each contact (1: creeping; below: sliding at the Coulomb bound).
+    w: Vec<f64>,
+    /// Normal force of each contact, N.
+    normal: Vec<f64>,
+    /// Slip velocity of each contact `[tangent, lateral]`, m/s.
+    slip: Vec<[f64; 2]>,
+    sliding: Vec<bool>,
+    /// Relaxed normal force of each contact's friction bound, N.
+    bound_n: Vec<f64>,
+    first: bool,
+}
+
+/// Mean rim speed of the wheels on the ground, m/s.
+fn mean_rim_speed(
+    contacts: &[ForceContact],
+    ground_speed: &[f64; WHEELS],
+    slip_factor: &[f64; WHEELS],
+) -> f64 {
+    let mut on_ground = [false; WHEELS];
+    for c in contacts.iter().filter(|c| c.contact.touching) {
+        on_ground[c.wheel] = true;
+    }
+    let count = on_ground.iter().filter(|g| **g).count();
+    (0..WHEELS)
+        .filter(|i| on_ground[*i])
+        .map(|i| (ground_speed[i] / slip_factor[i].max(1e-6)).abs())
+        .sum::<f64>()
+        / count.max(1) as f64
+}
+
+/// The weight's generalised force: its normal component and its moment about the reference
+/// point.
+fn gravity_row(weight: &Weight) -> Row {
+    let g = weight.gravity_r.normalize();
+    let moment = weight.centre_of_mass_m.cross(&g);
+    Row::from_column_slice(&[
+        0.0,
+        0.0,
+        g.z * weight.weight_n,
+        moment.x * weight.weight_n,
+        moment.y * weight.weight_n,
+        moment.z * weight.weight_n,
+        0.0,
+        0.0,
+        0.0,
+    ])
+}
+
+#[allow(clippy::needless_range_loop)] // parallel arrays per contact
+impl Problem<'_> {
+    /// The weighted normal equations of the active contacts, `None` when fewer than three
+    /// wheels carry load.
+    fn normal_equations(
+        &self,
+        active: &[bool],
+        w: &[f64],
+    ) -> Option<(SMatrix<f64, 9, 9>, SVector<f64, 9>)> {
+        let mut wheel_active = [false; WHEELS];
+        let mut ata = SMatrix::<f64, 9, 9>::identity() * 1e-9;
+        let mut atb = self.gravity / self.k;
+        for c in 0..self.contacts.len() {
+            if !active[c] {
+                continue;
+            }
+            let i = self.contacts[c].wheel;
+            wheel_active[i] = true;
+            let [a_n, a_t, a_l] = &self.rows[c];
+            let lw2 = LATERAL_WEIGHT * LATERAL_WEIGHT;
+            ata += a_n * a_n.transpose() * (NORMAL_WEIGHT * NORMAL_WEIGHT)
+                + (a_t * a_t.transpose() + a_l * a_l.transpose() * lw2) * w[c];
+            atb += (a_t * self.ground_speed[i] + a_l * (self.lateral[i] * lw2)) * w[c];
+        }
+        (wheel_active.iter().filter(|a| **a).count() >= 3).then_some((ata, atb))
+    }
+
+    /// Normal forces and slip velocities of the pass with solution `x`.
+    fn forces_of(&self, x: &SVector<f64, 9>, active: &[bool], passes: &mut Passes) {
+        let normal_k = self.k * NORMAL_WEIGHT * NORMAL_WEIGHT;
+        for c in 0..self.contacts.len() {
+            let i = self.contacts[c].wheel;
+            let [a_n, a_t, a_l] = &self.rows[c];
+            passes.slip[c] = [
+                a_t.dot(x) - self.ground_speed[i],
+                a_l.dot(x) - self.lateral[i],
+            ];
+            passes.normal[c] = if active[c] {
+                -normal_k * a_n.dot(x)
+            } else {
+                0.0
+            };
+        }
+    }
+}
+
+#[allow(clippy::needless_range_loop)] // parallel arrays per contact
+impl Passes {
+    /// Reweight: a contact whose creep force would exceed mu N slides at mu N. The normal
+    /// force of the bound is relaxed (half the previous bound, half this pass's force) so the
+    /// coupling of the bounds and the normal forces settles instead of oscillating. Returns
+    /// whether no weight changed by more than [`SETTLED_WEIGHT`].
+    fn reweight(&mut self, active: &[bool], k: f64, mu: f64) -> bool {
+        let mut settled = true;
+        for c in 0..self.w.len() {
+            let slip = self.slip[c];
+            let u = (slip[0] * slip[0] + slip[1] * slip[1]).sqrt();
+            let previous_w = self.w[c];
+            self.bound_n[c] = if self.first {
+                self.normal[c].max(0.0)
+            } else {
+                0.5 * (self.bound_n[c] + self.normal[c].max(0.0))
+            };
+            let bound = mu * self.bound_n[c];
+            self.sliding[c] = active[c] && k * u > bound;
+            self.w[c] = if self.sliding[c] {
+                (bound / (k * u)).max(MIN_WEIGHT)
+            } else {
+                1.0
+            };
+            settled &= (self.w[c] - previous_w).abs() <= SETTLED_WEIGHT * previous_w;
+        }
+        self.first = false;
+        settled
+    }
+}
+
 /// Solve the quasi-static model. `wheels` are the wheel poses in `R` at `rocker_rad`,
 /// `bogie_rad`; `contacts` every contact of every wheel (a wheel may have several);
 /// `ground_speed`, `slip_factor`, `lateral` per wheel as in
@@ -164,109 +304,48 @@ pub fn solve_quasi_static(
         })
         .collect();
     let mut active: Vec<bool> = contacts.iter().map(|c| c.contact.touching).collect();
-    // Mean rim speed of the wheels on the ground.
-    let mut on_ground = [false; WHEELS];
-    for c in contacts.iter().filter(|c| c.contact.touching) {
-        on_ground[c.wheel] = true;
-    }
-    let count = on_ground.iter().filter(|g| **g).count();
-    let rim: f64 = (0..WHEELS)
-        .filter(|i| on_ground[*i])
-        .map(|i| (ground_speed[i] / slip_factor[i].max(1e-6)).abs())
-        .sum::<f64>()
-        / count.max(1) as f64;
+    let rim = mean_rim_speed(contacts, ground_speed, slip_factor);
     let k = creep_stiffness(friction, weight.weight_n, rim);
-    let g = weight.gravity_r.normalize();
-    let moment = weight.centre_of_mass_m.cross(&g);
-    let gravity = Row::from_column_slice(&[
-        0.0,
-        0.0,
-        g.z * weight.weight_n,
-        moment.x * weight.weight_n,
-        moment.y * weight.weight_n,
-        moment.z * weight.weight_n,
-        0.0,
-        0.0,
-        0.0,
-    ]);
-    let normal_k = k * NORMAL_WEIGHT * NORMAL_WEIGHT;
-    let mut w = vec![1.0; n];
-    let mut normal = vec![0.0; n];
-    let mut slip = vec![[0.0; 2]; n];
-    let mut sliding = vec![false; n];
-    let mut bound_n = vec![0.0; n];
-    let mut first = true;
+    let problem = Problem {
+        contacts,
+        rows,
+        ground_speed,
+        lateral,
+        gravity: gravity_row(weight),
+        k,
+    };
+    let mut passes = Passes {
+        w: vec![1.0; n],
+        normal: vec![0.0; n],
+        slip: vec![[0.0; 2]; n],
+        sliding: vec![false; n],
+        bound_n: vec![0.0; n],
+        first: true,
+    };
     let mut x = SVector::<f64, 9>::zeros();
     let mut solved = false;
     // Weights and active set of the last solve (the result).
-    let mut w_solved = w.clone();
+    let mut w_solved = passes.w.clone();
     let mut active_solved = active.clone();
     for _ in 0..ITERATIONS {
-        let mut wheel_active = [false; WHEELS];
-        let mut ata = SMatrix::<f64, 9, 9>::identity() * 1e-9;
-        let mut atb = gravity / k;
-        for c in 0..n {
-            if !active[c] {
-                continue;
-            }
-            let i = contacts[c].wheel;
-            wheel_active[i] = true;
-            let [a_n, a_t, a_l] = &rows[c];
-            let lw2 = LATERAL_WEIGHT * LATERAL_WEIGHT;
-            ata += a_n * a_n.transpose() * (NORMAL_WEIGHT * NORMAL_WEIGHT)
-                + (a_t * a_t.transpose() + a_l * a_l.transpose() * lw2) * w[c];
-            atb += (a_t * ground_speed[i] + a_l * (lateral[i] * lw2)) * w[c];
-        }
-        if wheel_active.iter().filter(|a| **a).count() < 3 {
-            solved = false;
-            break;
-        }
-        let Some(sol) = ata.cholesky().map(|ch| ch.solve(&atb)) else {
+        let Some(sol) = problem
+            .normal_equations(&active, &passes.w)
+            .and_then(|(ata, atb)| ata.cholesky().map(|ch| ch.solve(&atb)))
+        else {
             solved = false;
             break;
         };
         x = sol;
         solved = true;
-        w_solved.clone_from(&w);
+        w_solved.clone_from(&passes.w);
         active_solved.clone_from(&active);
-        // Normal forces and slip velocities of this pass.
-        for c in 0..n {
-            let i = contacts[c].wheel;
-            let [a_n, a_t, a_l] = &rows[c];
-            slip[c] = [a_t.dot(&x) - ground_speed[i], a_l.dot(&x) - lateral[i]];
-            normal[c] = if active[c] {
-                -normal_k * a_n.dot(&x)
-            } else {
-                0.0
-            };
-        }
-        // Reweight: a contact whose creep force would exceed mu N slides at mu N. The normal
-        // force of the bound is relaxed (half the previous bound, half this pass's force) so
-        // the coupling of the bounds and the normal forces settles instead of oscillating.
-        let mut settled = true;
-        for c in 0..n {
-            let u = (slip[c][0] * slip[c][0] + slip[c][1] * slip[c][1]).sqrt();
-            let previous_w = w[c];
-            bound_n[c] = if first {
-                normal[c].max(0.0)
-            } else {
-                0.5 * (bound_n[c] + normal[c].max(0.0))
-            };
-            let bound = friction.mu * bound_n[c];
-            sliding[c] = active[c] && k * u > bound;
-            w[c] = if sliding[c] {
-                (bound / (k * u)).max(MIN_WEIGHT)
-            } else {
-                1.0
-            };
-            settled &= (w[c] - previous_w).abs() <= SETTLED_WEIGHT * previous_w;
-        }
-        first = false;
+        problem.forces_of(&x, &active, &mut passes);
+        let mut settled = passes.reweight(&active, k, friction.mu);
         // Unilateral contacts (the semi-smooth Newton step of a one-sided penalty): a contact
         // carries load in the next pass when its wheel does not leave it in this one.
         for c in 0..n {
-            let now =
-                contacts[c].contact.touching && rows[c][0].dot(&x) <= SEPARATION_TOLERANCE_M_S;
+            let now = contacts[c].contact.touching
+                && problem.rows[c][0].dot(&x) <= SEPARATION_TOLERANCE_M_S;
             settled &= now == active[c];
             active[c] = now;
         }
@@ -276,7 +355,27 @@ pub fn solve_quasi_static(
             break;
         }
     }
-    let (w, active) = (w_solved, active_solved);
+    solution(contacts, passes, &x, solved, &w_solved, active_solved, k)
+}
+
+/// The result of the last solve `x` (zero twist when no solve succeeded) with the weights
+/// `w` and active set `active` it was made with.
+fn solution(
+    contacts: &[ForceContact],
+    passes: Passes,
+    x: &SVector<f64, 9>,
+    solved: bool,
+    w: &[f64],
+    active: Vec<bool>,
+    k: f64,
+) -> QuasiStatic {
+    let n = contacts.len();
+    let Passes {
+        mut normal,
+        slip,
+        mut sliding,
+        ..
+    } = passes;
     let mut wheel_load_n = [0.0; WHEELS];
     let mut friction_n = vec![[0.0; 2]; n];
     for c in 0..n {

@@ -276,7 +276,6 @@ pub fn place_cached(
         f64::INFINITY,
         f64::INFINITY,
     ];
-    let h = 1e-7;
     let mut previous = f64::INFINITY;
     let eval = |u: &Unknowns, contacts: &mut [WheelContact; WHEELS], fixed| {
         residuals(
@@ -301,38 +300,17 @@ pub fn place_cached(
         fixed = true;
         let stale = size > 0.25 * previous;
         previous = size;
-        let mut jac = match cache {
+        let jac = match cache {
             Some(j) if !stale => *j,
             _ => {
-                let mut j = PlacementJacobian::zeros();
-                let e0 = eval(&u, &mut contacts, true);
-                for k in 0..9 {
-                    let mut up = u;
-                    up[k] += h;
-                    let ep = eval(&up, &mut contacts, true);
-                    j.set_column(k, &((ep - e0) / h));
-                }
+                let j = finite_difference_jacobian(&eval, &u, &mut contacts);
                 *cache = Some(j);
                 j
             }
         };
-        for (k, is_free) in free.iter().enumerate() {
-            if !is_free {
-                jac.set_column(k, &Residuals::zeros());
-            }
-        }
-        // Minimum-norm step over the free unknowns (the damping keeps it defined when a joint
-        // stop leaves fewer than six).
-        let jjt = jac * jac.transpose() + SMatrix::<f64, 6, 6>::identity() * 1e-12;
-        let Some(y) = jjt.cholesky().map(|c| c.solve(&e)) else {
+        let Some(step) = newton_step(jac, &free, &e) else {
             break;
         };
-        let mut step = jac.transpose() * y;
-        // Limit the step so a bad start cannot throw the solution far away.
-        let big = step.amax();
-        if big > 0.2 {
-            step *= 0.2 / big;
-        }
         u -= step;
         for k in 3..6 {
             if u[k].abs() > lim[k] {
@@ -341,18 +319,82 @@ pub fn place_cached(
             }
         }
     }
-    let mut e = eval(&u, &mut contacts, false);
     let at_limit = free.iter().any(|f| !f);
+    let e = raised_residuals(&eval, &mut u, &mut contacts, at_limit);
+    placement(pose, &u, contacts, &e, iterations, at_limit)
+}
+
+/// Finite-difference step of the placement Jacobian (at fixed contact angles), m or rad.
+const JACOBIAN_STEP: f64 = 1e-7;
+
+/// The Jacobian `d e / d u` at `u` by forward differences at fixed contact angles.
+fn finite_difference_jacobian(
+    eval: &impl Fn(&Unknowns, &mut [WheelContact; WHEELS], bool) -> Residuals,
+    u: &Unknowns,
+    contacts: &mut [WheelContact; WHEELS],
+) -> PlacementJacobian {
+    let h = JACOBIAN_STEP;
+    let mut j = PlacementJacobian::zeros();
+    let e0 = eval(u, contacts, true);
+    for k in 0..9 {
+        let mut up = *u;
+        up[k] += h;
+        let ep = eval(&up, contacts, true);
+        j.set_column(k, &((ep - e0) / h));
+    }
+    j
+}
+
+/// The Newton step for residuals `e`: the minimum-norm step over the `free` unknowns (the
+/// damping keeps it defined when a joint stop leaves fewer than six), at most 0.2 in any
+/// unknown so a bad start cannot throw the solution far away. `None` when the normal matrix
+/// cannot be factored.
+fn newton_step(mut jac: PlacementJacobian, free: &[bool; 9], e: &Residuals) -> Option<Unknowns> {
+    for (k, is_free) in free.iter().enumerate() {
+        if !is_free {
+            jac.set_column(k, &Residuals::zeros());
+        }
+    }
+    let jjt = jac * jac.transpose() + SMatrix::<f64, 6, 6>::identity() * 1e-12;
+    let y = jjt.cholesky().map(|c| c.solve(e))?;
+    let mut step = jac.transpose() * y;
+    let big = step.amax();
+    if big > 0.2 {
+        step *= 0.2 / big;
+    }
+    Some(step)
+}
+
+/// The residuals at the solution `u`; at a joint stop the body is first raised until no wheel
+/// penetrates (three passes: the contacts move a little).
+fn raised_residuals(
+    eval: &impl Fn(&Unknowns, &mut [WheelContact; WHEELS], bool) -> Residuals,
+    u: &mut Unknowns,
+    contacts: &mut [WheelContact; WHEELS],
+    at_limit: bool,
+) -> Residuals {
+    let mut e = eval(u, contacts, false);
     if at_limit {
-        // Raise the body until no wheel penetrates (three passes: the contacts move a little).
         for _ in 0..3 {
             let lowest = e.min();
             if lowest < 0.0 {
                 u[0] += lowest;
             }
-            e = eval(&u, &mut contacts, false);
+            e = eval(u, contacts, false);
         }
     }
+    e
+}
+
+/// The placement of the unknowns `u` (relative to `pose` in north, east and yaw).
+fn placement(
+    pose: &BodyPose,
+    u: &Unknowns,
+    contacts: [WheelContact; WHEELS],
+    e: &Residuals,
+    iterations: u32,
+    at_limit: bool,
+) -> Placement {
     let mut clearance = [0.0; WHEELS];
     for (c, v) in clearance.iter_mut().zip(e.iter()) {
         *c = *v;
