@@ -62,7 +62,7 @@ pub struct RunOptions {
     /// Visual odometry off in the flight software (the cameras still capture).
     pub no_vo: bool,
     /// Terrain-map localization on in the flight software (V99 sec. 5), against a global map
-    /// the simulator makes from its own rocks as a MARDI descent image from 150 m shows them
+    /// the simulator makes from its own rocks as a MARDI descent image from 50 m shows them
     /// ([`crate::descent_map`]) and uplinks before the drive.
     pub localization: bool,
     /// Map-tie fault of the uplinked map: every point moved by this, m (north, east), on top of
@@ -98,7 +98,7 @@ impl Default for RunOptions {
     }
 }
 
-/// The global map the ground uplinks: the rocks a MARDI frame from 150 m shows
+/// The global map the ground uplinks: the rocks a MARDI frame from 50 m shows
 /// ([`crate::descent_map::DescentImage::mardi`]) in the flight map's 38.4 m square centred on
 /// the middle of the waypoints' bounding box.
 fn uplink_map(

@@ -48,7 +48,7 @@ pub struct RunFlags {
     #[arg(long)]
     pub ideal_lens: bool,
     /// Terrain-map localization on (V99 sec. 5): the simulator uplinks a global map of its
-    /// rocks as a MARDI descent image from 150 m shows them; the flight software matches
+    /// rocks as a MARDI descent image from 50 m shows them; the flight software matches
     /// its hazard maps against it (docs/localization.md).
     #[arg(long)]
     pub localization: bool,
