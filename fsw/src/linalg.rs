@@ -1,4 +1,4 @@
-//! Small fixed-size numerics of the flight code without a panic path (issue 18): nalgebra's
+//! Small fixed-size numerics of the flight code without a panic path: nalgebra's
 //! LU and 3x3 SVD keep runtime shape assertions and `unwrap`s that the optimiser cannot
 //! remove, and `f64::clamp` asserts its bounds. These replacements index only with constants or
 //! checked accesses, run a fixed number of iterations and report failure as a value.
@@ -305,7 +305,7 @@ pub fn norm<const R: usize, const C: usize>(v: &nalgebra::SMatrix<f64, R, C>) ->
 /// triangle is read; any frame and unit), computed operation for operation as nalgebra's
 /// `Cholesky::new` (column `j` less `L(j, k)` times column `k` for every `k < j`, the root of
 /// the pivot, the column below it divided by the root), so the factor is bit-identical to it,
-/// with the FPU's square root ([`sqrt`]) instead of `libm`'s emulation (issue 18). `None` when
+/// with the FPU's square root ([`sqrt`]) instead of `libm`'s emulation (the timing budget). `None` when
 /// a pivot is zero, negative or NaN, as nalgebra. The result is nalgebra's `Cholesky`, so its
 /// `solve`, `inverse` and `l_dirty` are nalgebra's own.
 // Index loops over constant ranges: the optimiser proves them in bounds (the image's

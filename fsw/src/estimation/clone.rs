@@ -68,7 +68,7 @@ impl Ekf {
         let i = clone_index(slot);
         // Rows and columns [dtheta, dp] of the current state copied into the clone block.
         // `slot` comes from the clone array, so `i + 5 < DIM`; the accesses are checked anyway
-        // (no panic path, issue 18).
+        // (no panic path).
         for (dst, src) in [(i, I_THETA), (i + 3, I_P)] {
             for k in 0..3 {
                 for j in 0..DIM {

@@ -9,9 +9,9 @@
 //! - `P <- P - K S K' = P - V V'` (eq. 54 with the optimal gain: the Joseph form
 //!   `(I - K H) P (I - K H)' + K R K'` equals it exactly for `K = U S^-1`), a rank-`M` downdate
 //!   evaluated on the upper triangle of the live rows only and mirrored, so `P` stays exactly
-//!   symmetric. Until issue 18 the Joseph form was evaluated expanded, `P - U K' - K W'` with
-//!   `W = U - K S`: twice the products for the same result up to rounding (the gain here is
-//!   always the optimal one, computed from the same factor);
+//!   symmetric. The expanded Joseph form, `P - U K' - K W'` with `W = U - K S`, takes twice
+//!   the products for the same result up to rounding (the gain here is always the optimal
+//!   one, computed from the same factor);
 //! - `dx = K r` (eq. 55-56), injected into the nominal state ([`Ekf::inject`]).
 
 use super::state::{Cov, ErrorVec, CLONE_DIM, CORE_DIM, DIM};
@@ -40,7 +40,7 @@ impl<const M: usize, const C: usize> Innovation<M, C> {
         for (a, &ia) in cols.iter().enumerate() {
             for (b, &ib) in cols.iter().enumerate() {
                 // An index outside the state (a programming error) poisons `S`, which the
-                // gate and the update then refuse (no panic path, issue 18).
+                // gate and the update then refuse (no panic path).
                 if let Some(v) = pcc.get_mut((a, b)) {
                     *v = p.get((ia, ib)).copied().unwrap_or(f64::NAN);
                 }
@@ -246,7 +246,7 @@ impl Ekf {
     #[inline(always)]
     fn downdate(&mut self, i: usize, j: usize, acc: f64) {
         // Live indices are below DIM by construction; the test lets the optimiser drop the
-        // matrix's own index checks (no panic path, issue 18).
+        // matrix's own index checks (no panic path).
         if i >= DIM || j >= DIM {
             return;
         }

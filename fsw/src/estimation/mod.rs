@@ -83,12 +83,12 @@ impl Default for ImuNoise {
     ///
     /// The gyro bias random walk is the published figure of a MEMS unit of this class: the
     /// ADIS16448 of the EuRoC MAV datasets (Burri et al. 2016, `imu0/sensor.yaml`:
-    /// 1.9393e-5 rad/s^2/sqrt(Hz)). It was 1e-6 before issue 14: with that the filter held its
-    /// gyro bias as nearly constant, a bias that wandered turned the attitude during every
-    /// slip hold (the IMU coasts), the lateral kinematic residual walked to -2 sigma and the
-    /// gate's false alarms on firm flat ground rose to 8.8 % (`docs/estimation.md`, "Gyro bias
-    /// walk"). The other three densities are kept: the EuRoC set's accelerometer figures
-    /// (2e-3 and 3e-3) made the estimate worse on the three seeds tried (`flat-firm`, seeds
+    /// 1.9393e-5 rad/s^2/sqrt(Hz)). With 1e-6 the filter holds its gyro bias as nearly
+    /// constant, a bias that wanders turns the attitude during every slip hold (the IMU
+    /// coasts), the lateral kinematic residual walks to -2 sigma and the gate's false alarms
+    /// on firm flat ground rise to 8.8 % (`docs/estimation.md`, "Gyro bias walk"). The other
+    /// three densities are the nominal ones: the EuRoC set's accelerometer figures
+    /// (2e-3 and 3e-3) make the estimate worse on the three seeds tried (`flat-firm`, seeds
     /// 1-3: 1.87, 1.72, 1.00 % of distance against 0.75, 1.69, 0.56 %).
     fn default() -> Self {
         Self {

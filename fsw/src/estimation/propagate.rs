@@ -247,7 +247,7 @@ impl Ekf {
         }
     }
 
-    /// Health check after a propagation step (issue 20: every cycle, not only after updates):
+    /// Health check after a propagation step (every cycle, not only after updates):
     /// the nominal state finite, and the core diagonal finite, non-negative and, for attitude
     /// and position, under [`super::EkfConfig::max_attitude_var_rad2`] and
     /// [`super::EkfConfig::max_position_var_m2`]. A failure latches the fault.

@@ -46,8 +46,8 @@ impl Ekf {
     /// [`Self::gate_relative_pose`], keeping the innovation of every component (eq. 28-40, the
     /// costly `H P H'`) so that the interval can then be fused with other observed components
     /// or added variances by [`Self::fuse_kept_relative_pose`] without computing it again
-    /// (issue 18: the kinematic aiding without VO gates the interval at its own covariance,
-    /// then fuses it with a slip allowance).
+    /// (the kinematic aiding without VO gates the interval at its own covariance, then fuses
+    /// it with a slip allowance).
     pub fn gate_relative_pose_kept(
         &self,
         m: &RelativePose,

@@ -25,7 +25,7 @@
 //! The relative poses (368 B each) have their own list so that the small operations do not take
 //! their room: one list of 64 for both held the same 1.07 s in 15 KB more RAM. Longer
 //! recordings (1.28 and 1.6 s), to keep the VO results that rectifying the wide-angle pair makes
-//! late (issue 15), were tried and made the filter diverge on `cul-de-sac` seed 2 when those
+//! late, were tried and made the filter diverge on `cul-de-sac` seed 2 when those
 //! results were replayed (`docs/estimation.md`); results later than 1.07 s are dropped
 //! ([`ReplayProgress::Abandoned`], counted by the navigator). When a capacity is exceeded
 //! the recording is abandoned ([`Recorder::overflowed`])

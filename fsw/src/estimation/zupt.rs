@@ -62,7 +62,7 @@ impl Ekf {
         self.check_health()
     }
 
-    /// Horizontal position-covariance growth for travel nobody verified (issue 20: odometry
+    /// Horizontal position-covariance growth for travel nobody verified (odometry
     /// fused without VO while the gate says it slips): the north and east 1-sigma each grow by
     /// `delta_m` (`P += 2 sigma delta + delta^2` on both diagonals), a systematic error that
     /// does not average out like white noise. `delta_m` must be finite and non-negative.

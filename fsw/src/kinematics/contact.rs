@@ -116,7 +116,7 @@ impl Default for ContactConfig {
     /// prior 1 rad with the gyro and 0.1 rad without, 2 mrad minimum drive increment (0.2 mm rim travel), clamp at pi/2 - 0.05,
     /// two iterations (warm-started from the previous step's angles, a third changed the KIN-10
     /// results by at most 0.03 mm and 0.1 deg and cost about 4,000 rover-CPU instructions of RG2,
-    /// issue 18), angles relative to their mean.
+    /// against the timing budget), angles relative to their mean.
     fn default() -> Self {
         ContactConfig {
             residual_sigma_m: 1e-4,
@@ -202,8 +202,8 @@ fn skew(v: &Vec3) -> Mat3 {
     Mat3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
 
-/// One Gauss-Newton iteration's inputs with the body rotation known (the gyro's).
-struct TranslationProblem<'a> {
+/// The inputs of one contact-angle step that stay fixed over its Gauss-Newton iterations.
+struct StepProblem<'a> {
     frames: &'a [WheelFrames; WHEEL_COUNT],
     wheels: &'a [WheelStep; WHEEL_COUNT],
     increments: &'a SuspensionRates,
@@ -224,7 +224,7 @@ struct TranslationProblem<'a> {
 /// translation block, without the products by the zero and identity entries). Returns the
 /// `dp` increment and updates `delta` by the angle increments (unclamped).
 fn translation_step(
-    pr: &TranslationProblem,
+    pr: &StepProblem,
     dp: Vec3,
     dphi: Vec3,
     delta: &mut [f64; WHEEL_COUNT],
@@ -285,22 +285,87 @@ fn translation_step(
     Ok(d)
 }
 
-/// The contact-angle step for frames already evaluated at the mid-point configuration (the
-/// odometry's entry point; see [`contact_kinematics`] for the equations and the checks).
-/// `ContactStep::residual_rms_m` is computed only `with_residual` (0 otherwise).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn contact_step_frames(
-    geometry: &RoverGeometry,
-    frames: &[WheelFrames; WHEEL_COUNT],
+/// One Gauss-Newton iteration of the contact-angle step without the gyro: the unknowns are
+/// `[dp; dphi]` and the angles, the block-arrow normal matrix of the module doc with the angles
+/// eliminated per wheel and the 6x6 Schur complement factorised. Updates `dp`, `dphi` and
+/// `delta` (angles clamped to `+-max_angle`); `valid_wheels` is the error value of a singular
+/// complement ([`KinematicsError::Unobservable`]).
+fn body_step(
+    pr: &StepProblem,
+    max_angle: f64,
+    valid_wheels: u8,
+    dp: &mut Vec3,
+    dphi: &mut Vec3,
+    delta: &mut [f64; WHEEL_COUNT],
+) -> Result<(), KinematicsError> {
+    let jac = contact_jacobians(pr.frames, pr.radius, delta);
+    let b = contact_velocities(&jac, pr.increments, pr.drive);
+    let mut h_bb = Mat6::zeros();
+    let mut g_b = Vec6::zeros();
+    let mut h_bd = [Vec6::zeros(); WHEEL_COUNT];
+    let mut h_dd = [1.0; WHEEL_COUNT];
+    let mut g_d = [0.0; WHEEL_COUNT];
+    for i in 0..WHEEL_COUNT {
+        if !pr.valid[i] {
+            continue;
+        }
+        let c = jac[i].contact_point_m;
+        let e = *dp + dphi.cross(&c) - b[i];
+        let mut j_b = SMatrix::<f64, 3, 6>::zeros();
+        j_b.fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&Mat3::identity());
+        j_b.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-skew(&c)));
+        h_bb += j_b.transpose() * j_b;
+        g_b += j_b.transpose() * e;
+        if pr.estimated[i] {
+            let (_, tangent, d_tangent) = contact_geometry(&pr.wheels[i], pr.radius, delta[i]);
+            let rim = pr.radius * pr.drive[i];
+            let j_d = (*dphi + pr.wheels[i].suspension_rotation).cross(&(tangent * pr.radius))
+                - d_tangent * rim;
+            h_bd[i] = j_b.transpose() * j_d;
+            h_dd[i] = j_d.dot(&j_d) + pr.w_prev + pr.w_level;
+            g_d[i] = j_d.dot(&e) + pr.w_prev * (delta[i] - pr.prior[i]) + pr.w_level * delta[i];
+        }
+    }
+    // Schur complement: eliminate the angles (block-arrow normal matrix).
+    let mut s = h_bb;
+    let mut g = g_b;
+    for i in 0..WHEEL_COUNT {
+        if pr.estimated[i] {
+            s -= h_bd[i] * h_bd[i].transpose() / h_dd[i];
+            g -= h_bd[i] * (g_d[i] / h_dd[i]);
+        }
+    }
+    let chol = crate::linalg::cholesky(s).ok_or(KinematicsError::Unobservable { valid_wheels })?;
+    let step_body: Vec6 = chol.solve(&(-g));
+    *dp += Vec3::new(step_body[0], step_body[1], step_body[2]);
+    *dphi += Vec3::new(step_body[3], step_body[4], step_body[5]);
+    for i in 0..WHEEL_COUNT {
+        if pr.estimated[i] {
+            let dd = -(g_d[i] + h_bd[i].dot(&step_body)) / h_dd[i];
+            delta[i] = crate::linalg::clamp(delta[i] + dd, -max_angle, max_angle);
+        }
+    }
+    if dp.iter().chain(dphi.iter()).any(|x| !x.is_finite()) || delta.iter().any(|x| !x.is_finite())
+    {
+        return Err(KinematicsError::NonFinite);
+    }
+    Ok(())
+}
+
+/// The checks of [`contact_step_frames`]: a finite, positive configuration and wheel radius,
+/// finite joint inputs, gyro rotation and previous angles ([`KinematicsError::NonFinite`]),
+/// and at least three valid wheels ([`KinematicsError::Unobservable`]). Returns the number of
+/// valid wheels.
+fn check_step_inputs(
+    config: &ContactConfig,
+    radius: f64,
     increments: &SuspensionRates,
     drive_increment_rad: &[f64; WHEEL_COUNT],
     wheel_valid: &[bool; WHEEL_COUNT],
     gyro_rad: Option<Vec3>,
     previous_rad: &[f64; WHEEL_COUNT],
-    config: &ContactConfig,
-    with_residual: bool,
-) -> Result<ContactStep, KinematicsError> {
-    let radius = geometry.wheel_radius_m;
+) -> Result<u8, KinematicsError> {
     let cfg_values = [
         config.residual_sigma_m,
         config.step_sigma_rad,
@@ -339,29 +404,41 @@ pub(crate) fn contact_step_frames(
             valid_wheels: count,
         });
     }
+    Ok(count)
+}
+
+/// The clamp of the angles (`max_angle_rad`, below pi/2) and the prior weights of the cost
+/// relative to the rolling equations (scaled by `sigma_e^2`): `w_p` toward the previous angle
+/// and `w_0` toward 0 (the gyro's `sigma_level` when `with_gyro`).
+fn step_weights(config: &ContactConfig, with_gyro: bool) -> (f64, f64, f64) {
     let max_angle = if config.max_angle_rad < core::f64::consts::FRAC_PI_2 {
         config.max_angle_rad
     } else {
         core::f64::consts::FRAC_PI_2 - 1e-3
     };
-    let clamp = |d: f64| crate::linalg::clamp(d, -max_angle, max_angle);
-    // Weights relative to the rolling equations (scaled by sigma_e^2).
     let w_prev = {
         let k = config.residual_sigma_m / config.step_sigma_rad;
         k * k
     };
     let w_level = {
-        let sigma = match gyro_rad {
-            Some(_) => config.level_sigma_rad,
-            None => config.level_sigma_no_gyro_rad,
+        let sigma = if with_gyro {
+            config.level_sigma_rad
+        } else {
+            config.level_sigma_no_gyro_rad
         };
         let k = config.residual_sigma_m / sigma;
         k * k
     };
-    let estimated: [bool; WHEEL_COUNT] = core::array::from_fn(|i| {
-        wheel_valid[i] && libm::fabs(drive_increment_rad[i]) >= config.min_drive_increment_rad
-    });
-    let wheels: [WheelStep; WHEEL_COUNT] = core::array::from_fn(|i| {
+    (max_angle, w_prev, w_level)
+}
+
+/// The per-wheel data of a step ([`WheelStep`]): axle, contact-frame axes and the chain's
+/// rotation `sum_q dq_q k_q` over the step.
+fn wheel_steps(
+    frames: &[WheelFrames; WHEEL_COUNT],
+    increments: &SuspensionRates,
+) -> [WheelStep; WHEEL_COUNT] {
+    core::array::from_fn(|i| {
         let f = &frames[i];
         let bogie_inc = match f.bogie {
             Some(1) => increments.bogie_rad_s[1],
@@ -374,7 +451,64 @@ pub(crate) fn contact_step_frames(
             z_c: f.contact.z_axis(),
             suspension_rotation: f.rocker_axis * increments.rocker_rad_s + f.bogie_axis * bogie_inc,
         }
+    })
+}
+
+/// Root-mean-square of the rolling equations `e_i` of the valid wheels at the solution
+/// `(dp, dphi, delta)`, m.
+fn residual_rms(
+    pr: &StepProblem,
+    valid_wheels: u8,
+    dp: Vec3,
+    dphi: Vec3,
+    delta: &[f64; WHEEL_COUNT],
+) -> Result<f64, KinematicsError> {
+    let jac = contact_jacobians(pr.frames, pr.radius, delta);
+    let b = contact_velocities(&jac, pr.increments, pr.drive);
+    let mut sum = 0.0;
+    for i in 0..WHEEL_COUNT {
+        if pr.valid[i] {
+            sum += (dp + dphi.cross(&jac[i].contact_point_m) - b[i]).norm_squared();
+        }
+    }
+    let rms = crate::linalg::sqrt(sum / (3.0 * f64::from(valid_wheels)));
+    if !rms.is_finite() {
+        return Err(KinematicsError::NonFinite);
+    }
+    Ok(rms)
+}
+
+/// The contact-angle step for frames already evaluated at the mid-point configuration (the
+/// odometry's entry point; see [`contact_kinematics`] for the equations and the checks).
+/// `ContactStep::residual_rms_m` is computed only `with_residual` (0 otherwise).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn contact_step_frames(
+    geometry: &RoverGeometry,
+    frames: &[WheelFrames; WHEEL_COUNT],
+    increments: &SuspensionRates,
+    drive_increment_rad: &[f64; WHEEL_COUNT],
+    wheel_valid: &[bool; WHEEL_COUNT],
+    gyro_rad: Option<Vec3>,
+    previous_rad: &[f64; WHEEL_COUNT],
+    config: &ContactConfig,
+    with_residual: bool,
+) -> Result<ContactStep, KinematicsError> {
+    let radius = geometry.wheel_radius_m;
+    let count = check_step_inputs(
+        config,
+        radius,
+        increments,
+        drive_increment_rad,
+        wheel_valid,
+        gyro_rad,
+        previous_rad,
+    )?;
+    let (max_angle, w_prev, w_level) = step_weights(config, gyro_rad.is_some());
+    let clamp = |d: f64| crate::linalg::clamp(d, -max_angle, max_angle);
+    let estimated: [bool; WHEEL_COUNT] = core::array::from_fn(|i| {
+        wheel_valid[i] && libm::fabs(drive_increment_rad[i]) >= config.min_drive_increment_rad
     });
+    let wheels = wheel_steps(frames, increments);
     let prior: [f64; WHEEL_COUNT] = previous_rad.map(clamp);
     if gyro_rad.is_none() {
         // Without the gyro all six body DOF come from the contacts: the eq. 15 test for
@@ -393,116 +527,38 @@ pub(crate) fn contact_step_frames(
             0.0
         }
     });
+    let problem = StepProblem {
+        frames,
+        wheels: &wheels,
+        increments,
+        valid: wheel_valid,
+        estimated: &estimated,
+        drive: &drive,
+        prior: &prior,
+        radius,
+        w_prev,
+        w_level,
+    };
     for _ in 0..iterations {
-        if let Some(gyro) = gyro_rad {
-            // The rotation is the gyro's: only `dp` and the angles are unknown, and every
-            // block of the normal matrix that meets `dphi` drops out (`translation_step`).
-            let d = translation_step(
-                &TranslationProblem {
-                    frames,
-                    wheels: &wheels,
-                    increments,
-                    valid: wheel_valid,
-                    estimated: &estimated,
-                    drive: &drive,
-                    prior: &prior,
-                    radius,
-                    w_prev,
-                    w_level,
-                },
-                dp,
-                gyro,
-                &mut delta,
-            )?;
-            dp += d;
-            delta = delta.map(clamp);
-            if dp.iter().any(|x| !x.is_finite()) || delta.iter().any(|x| !x.is_finite()) {
-                return Err(KinematicsError::NonFinite);
-            }
+        let Some(gyro) = gyro_rad else {
+            body_step(&problem, max_angle, count, &mut dp, &mut dphi, &mut delta)?;
             continue;
-        }
-        let jac = contact_jacobians(frames, radius, &delta);
-        let b = contact_velocities(&jac, increments, &drive);
-        let mut h_bb = Mat6::zeros();
-        let mut g_b = Vec6::zeros();
-        let mut h_bd = [Vec6::zeros(); WHEEL_COUNT];
-        let mut h_dd = [1.0; WHEEL_COUNT];
-        let mut g_d = [0.0; WHEEL_COUNT];
-        for i in 0..WHEEL_COUNT {
-            if !wheel_valid[i] {
-                continue;
-            }
-            let c = jac[i].contact_point_m;
-            let e = dp + dphi.cross(&c) - b[i];
-            let mut j_b = SMatrix::<f64, 3, 6>::zeros();
-            j_b.fixed_view_mut::<3, 3>(0, 0)
-                .copy_from(&Mat3::identity());
-            j_b.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-skew(&c)));
-            h_bb += j_b.transpose() * j_b;
-            g_b += j_b.transpose() * e;
-            if estimated[i] {
-                let (_, tangent, d_tangent) = contact_geometry(&wheels[i], radius, delta[i]);
-                let rim = radius * drive[i];
-                let j_d = (dphi + wheels[i].suspension_rotation).cross(&(tangent * radius))
-                    - d_tangent * rim;
-                h_bd[i] = j_b.transpose() * j_d;
-                h_dd[i] = j_d.dot(&j_d) + w_prev + w_level;
-                g_d[i] = j_d.dot(&e) + w_prev * (delta[i] - prior[i]) + w_level * delta[i];
-            }
-        }
-        // Schur complement: eliminate the angles (block-arrow normal matrix).
-        let mut s = h_bb;
-        let mut g = g_b;
-        for i in 0..WHEEL_COUNT {
-            if estimated[i] {
-                s -= h_bd[i] * h_bd[i].transpose() / h_dd[i];
-                g -= h_bd[i] * (g_d[i] / h_dd[i]);
-            }
-        }
-        let step_body: Vec6 = if gyro_rad.is_some() {
-            // Built element-wise: nalgebra's view `into_owned` keeps an iterator-length
-            // assertion the optimiser does not remove (no panic path, issue 18).
-            let s3 = Mat3::from_fn(|r, c| s.get((r, c)).copied().unwrap_or(f64::NAN));
-            let g3 = Vec3::new(g.x, g.y, g.z);
-            let chol = crate::linalg::cholesky(s3).ok_or(KinematicsError::Singular)?;
-            let d = chol.solve(&(-g3));
-            Vec6::new(d.x, d.y, d.z, 0.0, 0.0, 0.0)
-        } else {
-            let chol = crate::linalg::cholesky(s).ok_or(KinematicsError::Unobservable {
-                valid_wheels: count,
-            })?;
-            chol.solve(&(-g))
         };
-        dp += Vec3::new(step_body[0], step_body[1], step_body[2]);
-        dphi += Vec3::new(step_body[3], step_body[4], step_body[5]);
-        for i in 0..WHEEL_COUNT {
-            if estimated[i] {
-                let dd = -(g_d[i] + h_bd[i].dot(&step_body)) / h_dd[i];
-                delta[i] = clamp(delta[i] + dd);
-            }
-        }
-        if dp.iter().chain(dphi.iter()).any(|x| !x.is_finite())
-            || delta.iter().any(|x| !x.is_finite())
-        {
+        // The rotation is the gyro's: only `dp` and the angles are unknown, and every
+        // block of the normal matrix that meets `dphi` drops out (`translation_step`).
+        let d = translation_step(&problem, dp, gyro, &mut delta)?;
+        dp += d;
+        delta = delta.map(clamp);
+        if dp.iter().any(|x| !x.is_finite()) || delta.iter().any(|x| !x.is_finite()) {
             return Err(KinematicsError::NonFinite);
         }
     }
     // Misfit at the solution (only when asked: the odometry does not use it).
-    let mut residual_rms_m = 0.0;
-    if with_residual {
-        let jac = contact_jacobians(frames, radius, &delta);
-        let b = contact_velocities(&jac, increments, &drive);
-        let mut sum = 0.0;
-        for i in 0..WHEEL_COUNT {
-            if wheel_valid[i] {
-                sum += (dp + dphi.cross(&jac[i].contact_point_m) - b[i]).norm_squared();
-            }
-        }
-        residual_rms_m = crate::linalg::sqrt(sum / (3.0 * f64::from(count)));
-        if !residual_rms_m.is_finite() {
-            return Err(KinematicsError::NonFinite);
-        }
-    }
+    let residual_rms_m = if with_residual {
+        residual_rms(&problem, count, dp, dphi, &delta)?
+    } else {
+        0.0
+    };
     Ok(ContactStep {
         body_step: Vec6::new(dp.x, dp.y, dp.z, dphi.x, dphi.y, dphi.z),
         contact_angles_rad: delta,

@@ -504,8 +504,8 @@ pub(crate) fn wheel_frames_trusted(
         ],
     };
     // `w` is only called with `i < WHEEL_COUNT`, the length of both arrays. The array is
-    // written element by element into the caller's slot: `core::array::from_fn` built it on the
-    // stack and copied its 1,632 bytes (about 1,220 rover-CPU instructions per call, issue 18).
+    // written element by element into the caller's slot: `core::array::from_fn` builds it on the
+    // stack and copies its 1,632 bytes (about 1,220 rover-CPU instructions per call).
     let w = |i: usize| {
         let q = ChainJoints {
             steer: sc(state.steer_rad[i]),

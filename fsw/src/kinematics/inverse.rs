@@ -200,8 +200,8 @@ impl ContactAngles {
 }
 
 /// Where each wheel touches the ground, for [`solve`]: monomorphised so that the level case
-/// ([`Level`]) compiles to the eq. 23-25 code without the contact-angle branches (issue 18's
-/// instruction budget).
+/// ([`Level`]) compiles to the eq. 23-25 code without the contact-angle branches (the timing
+/// budget).
 trait ContactModel {
     /// The rows of one wheel kept between the two passes of [`solve`]: `()` for level
     /// contacts, `Option<ContactRow>` with contact angles.
@@ -478,7 +478,7 @@ fn pivot_step<const K: usize>(a: &mut [[f64; 7]; 6]) -> Option<()> {
 /// `rate_check` the drive limit too ([`KinematicsError::WheelRateLimit`] for a wheel rate above
 /// it, with a relative tolerance of 1e-9 so that a command scaled by [`max_speed_scale`] to the
 /// limit passes). The six wheels are written out one by one, and the solution is checked in
-/// place (no per-wheel arrays to clear, no copies of the solution: issue 18's instruction
+/// place (no per-wheel arrays to clear, no copies of the solution: the timing
 /// budget).
 fn solve<C: ContactModel>(
     geometry: &RoverGeometry,
@@ -628,8 +628,8 @@ pub fn max_speed_scale_contact(
     Ok(scale_of(&solution, max_wheel_rate_rad_s))
 }
 
-/// Inverse kinematics scaled to the drive limit in one solve (issue 18: the navigator's
-/// [`max_speed_scale_contact`] then [`inverse_kinematics_contact`] on the scaled command was two
+/// Inverse kinematics scaled to the drive limit in one solve (the timing budget: the navigator's
+/// [`max_speed_scale_contact`] then [`inverse_kinematics_contact`] on the scaled command is two
 /// solves per RG2 cycle). With `contact` the rough-terrain inverse kinematics
 /// ([`inverse_kinematics_contact`]), with `None` eq. 16-25 ([`inverse_kinematics`]); frames,
 /// units and errors as there, and [`KinematicsError::NonFinite`] for a non-finite or
@@ -717,7 +717,7 @@ mod tests {
                     }
                 }
             }
-            // The old column order: [z roll pitch beta rho1 rho2].
+            // The reference's column order: [z roll pitch beta rho1 rho2].
             let m = Mat6::from_fn(|r, c| a[r][(c + 2) % 6]);
             let rhs = Vec6::from_fn(|r, _| a[r][RHS]);
             let Some(old) = crate::linalg::solve6(&m, &rhs) else {

@@ -408,7 +408,7 @@ impl KinematicOdometry {
         let windowed = (use_contacts && self.config.contact.window_travel_m > 0.0)
             .then(|| self.window_angles(prev, cur, &valid, gyro_rad));
         // Borrowed from the contact solution when it is the measurement (copying its Jacobians
-        // and least squares cost about 1,000 instructions per step on the rover CPU, issue 18).
+        // and least squares costs about 1,000 instructions per step on the rover CPU).
         let fallback;
         let (step, jacobians, lsq) = match (&contact, self.config.contact_angles) {
             (Some((step, jacobians, lsq, _)), true) => (*step, jacobians, lsq),
@@ -845,7 +845,7 @@ mod covariance_tests {
         q
     }
 
-    /// KIN-11: the step covariance built from the per-wheel maps (`wheel_map`, issue 18) equals
+    /// KIN-11: the step covariance built from the per-wheel maps (`wheel_map`) equals
     /// the per-pattern definition to 1e-12 relative, with steering, articulation, contact angles
     /// and a missing wheel.
     #[test]

@@ -27,7 +27,7 @@ pub fn planar_body_rates(
 
 /// [`planar_body_rates`] with the nominal contact points `points` (m, `R`: the contact points at
 /// the zero suspension state, [`wheel_contact_points`]) already evaluated: the caller that runs
-/// it every joint reading computes them once (issue 18).
+/// it every joint reading computes them once (the timing budget).
 pub(crate) fn planar_body_rates_at(
     geometry: &RoverGeometry,
     points: &[Vec3; WHEEL_COUNT],

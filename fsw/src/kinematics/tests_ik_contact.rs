@@ -356,8 +356,8 @@ fn kin_12_speed_scale_and_errors() {
     assert_eq!([used[2], used[3], used[5]], [0.0; 3]);
 }
 
-/// The rough-terrain inverse kinematics as it was before issue 18's instruction budget (main
-/// at 69f5f4b, `inverse.rs`): per-wheel rows copied into arrays, the unactuated rates from
+/// The rough-terrain inverse kinematics written plainly, without the single-pass shortcuts of
+/// `inverse.rs`: per-wheel rows copied into arrays, the unactuated rates from
 /// `linalg::solve6` in the column order `[z roll pitch beta rho1 rho2]`, `atan2` per wheel.
 /// `angles` and `max` as [`ContactAngles::new`]. The reference of
 /// `kin_12_matches_the_two_pass_reference`.
@@ -378,7 +378,7 @@ fn reference_ik(
     if !(c.x_dot_m_s.is_finite() && c.y_dot_m_s.is_finite() && c.yaw_rate_rad_s.is_finite()) {
         return Err(KinematicsError::NonFinite);
     }
-    // The state check of the old `solve`, then the frames at zero steering.
+    // The state check of `solve`, then the frames at zero steering.
     wheel_frames(g, s)?;
     let frames = wheel_frames(
         g,
@@ -495,7 +495,7 @@ fn reference_ik(
     })
 }
 
-/// KIN-12 (issue 18): the single-pass inverse kinematics (bogie columns first in the
+/// KIN-12: the single-pass inverse kinematics (bogie columns first in the
 /// elimination, products with structural zeros left out, `atan(b / a)` for `a > 0`) gives the
 /// results of the reference above to rounding: same outcome (solution or the same error) and
 /// every steering angle, wheel rate, body and suspension rate within 1e-12 (rad, rad/s, m/s;
@@ -569,8 +569,8 @@ fn kin_12_matches_the_two_pass_reference() {
     assert!(worst < 1e-12, "largest difference {worst}");
 }
 
-/// KIN-12 (issue 18): [`inverse::inverse_kinematics_scaled`] (one solve, rates scaled) gives
-/// what the navigator computed before with two solves ([`max_speed_scale_contact`], then
+/// KIN-12: [`inverse::inverse_kinematics_scaled`] (one solve, rates scaled) gives
+/// what two solves give ([`max_speed_scale_contact`], then
 /// [`inverse_kinematics_contact`] on the scaled command; [`max_speed_scale`] and
 /// [`inverse_kinematics`] without contact angles) to rounding: the same outcome, the same scale
 /// to 1e-12 relative, steering angles, wheel, body and suspension rates within 1e-12 (relative to

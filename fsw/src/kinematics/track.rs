@@ -1,5 +1,5 @@
 //! Track memory: the body's heave from the terrain its front wheels have already rolled over
-//! (V99 sec. 6 undulating-terrain odometry; issue 13).
+//! (V99 sec. 6 undulating-terrain odometry; KIN-13).
 //!
 //! The common mode of the contact angles (all wheel tangents tilted alike) is the direction of
 //! the body's motion in its own x-z plane, which the wheel rates observe only at second order

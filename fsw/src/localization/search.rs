@@ -46,6 +46,12 @@ use super::{
 use crate::perception::{GridFrame, TerrainGrid};
 use heapless::binary_heap::{BinaryHeap, Max};
 
+mod fix;
+mod likelihood;
+
+pub(crate) use fix::congruence;
+pub use fix::LocalizationFix;
+
 /// Yaw poses of the largest window.
 const YAW_POSES: usize = 2 * MAX_HALF_YAW_STEPS as usize + 1;
 /// Half-size of the neighbourhood of the covariance fit, pose steps (5 x 5 x 5 poses).
@@ -105,80 +111,6 @@ pub enum SearchProgress {
     },
     /// The search ended with a fix or an error.
     Finished(Result<LocalizationFix, LocalizationError>),
-}
-
-/// A localization: the pose of the grid frame `G` in `W` and its covariance.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LocalizationFix {
-    /// Pose of `G` in `W`: `[x north (m), y east (m), heading (rad)]` (sub-step peak).
-    pub pose: [f64; 3],
-    /// Covariance of `pose`, `[x, y, heading]` (m^2, m^2 rad, rad^2).
-    pub covariance: [[f64; 3]; 3],
-    /// The prior pose of `G` the search started from.
-    pub prior: [f64; 3],
-    /// Log-likelihood at the best discrete pose, nats (0 when every point is at distance 0).
-    pub log_likelihood: f64,
-    /// Gap to the best pose found outside the peak's neighbourhood, nats; `None` when no pose
-    /// outside it comes within [`LocalizerConfig::ambiguity_nats`].
-    pub runner_up_gap_nats: Option<f64>,
-    /// Points of the scan.
-    pub points: u16,
-    /// Inliers at the best discrete pose (distance at most `outlier_distance_m`).
-    pub inliers: u16,
-    /// Nodes evaluated (bounds and poses, both passes).
-    pub nodes: u32,
-    /// Point terms evaluated (nodes times points, plus the peak fit).
-    pub point_evaluations: u32,
-    /// Largest number of queued boxes.
-    pub queue_peak: u16,
-    /// Yaw step of the pose space, rad.
-    pub yaw_step_rad: f64,
-    /// Half-widths of the search window: cells, cells, yaw steps.
-    pub window: [i32; 3],
-}
-
-impl LocalizationFix {
-    /// The correction carried to another point of the rover rigidly attached to `G` (the
-    /// rover reference point of the estimator): given its estimated pose at capture
-    /// `estimated = [x, y, yaw]` (`W`, m, rad; estimated with the same error as the prior),
-    /// its corrected pose and covariance. With the lever arm `l = R(prior_yaw)' (xy - prior_xy)`
-    /// in `G`: `xy' = pose_xy + R(pose_yaw) l`, `yaw' = yaw + pose_yaw - prior_yaw`, covariance
-    /// `J P J'` with `J = [[1, 0, -(R l)_y], [0, 1, (R l)_x], [0, 0, 1]]`. `None` for a
-    /// non-finite input.
-    pub fn transfer(&self, estimated: [f64; 3]) -> Option<([f64; 3], [[f64; 3]; 3])> {
-        if !estimated.iter().all(|v| v.is_finite()) {
-            return None;
-        }
-        let (s0, c0) = libm::sincos(self.prior[2]);
-        let (dx, dy) = (estimated[0] - self.prior[0], estimated[1] - self.prior[1]);
-        let l = [c0 * dx + s0 * dy, -s0 * dx + c0 * dy];
-        let (s, c) = libm::sincos(self.pose[2]);
-        let rl = [c * l[0] - s * l[1], s * l[0] + c * l[1]];
-        let pose = [
-            self.pose[0] + rl[0],
-            self.pose[1] + rl[1],
-            estimated[2] + self.pose[2] - self.prior[2],
-        ];
-        let j = [[1.0, 0.0, -rl[1]], [0.0, 1.0, rl[0]], [0.0, 0.0, 1.0]];
-        Some((pose, congruence(&j, &self.covariance)))
-    }
-}
-
-/// `J P J'` for 3x3 matrices (also the navigator's lever-arm transfer).
-pub(crate) fn congruence(j: &[[f64; 3]; 3], p: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
-    let mut out = [[0.0; 3]; 3];
-    for (r, row) in out.iter_mut().enumerate() {
-        for (c, v) in row.iter_mut().enumerate() {
-            let mut acc = 0.0;
-            for a in 0..3 {
-                for b in 0..3 {
-                    acc += j[r][a] * p[a][b] * j[c][b];
-                }
-            }
-            *v = acc;
-        }
-    }
-    out
 }
 
 /// The terrain-map localizer: configuration, the likelihood table and the state of one
@@ -609,7 +541,7 @@ impl Localizer {
     /// Splits `node` and considers each child.
     fn expand(&mut self, global: &GlobalMap, node: &Node) -> Result<(), LocalizationError> {
         // By reference: a `heapless::Vec` consumed by value drops its iterator through a
-        // checked slice index (a panic path in the image, issue 18).
+        // checked slice index (a panic path in the image).
         for child in Self::children(node).iter() {
             self.consider(global, *child)?;
         }
@@ -730,220 +662,6 @@ impl Localizer {
 
     fn leaf_in_peak(&self, l: &Leaf) -> bool {
         self.within_peak(&[l.x, l.x, l.y, l.y, l.t, l.t])
-    }
-
-    /// `(cos, sin)` of yaw step `t` from the table (the same values for leaves and boxes).
-    fn trig(&self, t: i32) -> (f64, f64) {
-        let k = (t + MAX_HALF_YAW_STEPS) as usize;
-        (
-            self.cos_t.get(k).copied().unwrap_or(1.0),
-            self.sin_t.get(k).copied().unwrap_or(0.0),
-        )
-    }
-
-    /// Map cell (floor) of the point at `(u, v)` cells, `None` when far outside any map.
-    /// The floor by truncation (`as i32` rounds toward zero) and one correction for negative
-    /// non-integers, for the coordinates whose floor is within `+-1e6` (`x >= -1e6` and
-    /// `x < 1e6 + 1`): the same cells as `libm::floor`, in a handful of instructions instead of
-    /// libm's software floor (issue 18: two per point and pose).
-    pub(crate) fn floor_cell(u: f64, v: f64) -> Option<(i32, i32)> {
-        let lim = 1.0e6;
-        if !(u >= -lim && u < lim + 1.0 && v >= -lim && v < lim + 1.0) {
-            return None;
-        }
-        let floor = |x: f64| {
-            let i = x as i32;
-            if f64::from(i) > x {
-                i - 1
-            } else {
-                i
-            }
-        };
-        Some((floor(u), floor(v)))
-    }
-
-    /// Log-likelihood of the pose `(x, y, t)`, milli-nats (the sum of the points' terms).
-    pub(crate) fn score(&mut self, global: &GlobalMap, x: i32, y: i32, t: i32) -> i32 {
-        let (c, s) = self.trig(t);
-        let mut sum = 0i32;
-        for p in self.points.iter().take(self.n) {
-            let u = self.base[0] + c * p[0] - s * p[1];
-            let v = self.base[1] + s * p[0] + c * p[1];
-            let d2 = match Self::floor_cell(u, v) {
-                Some((i, j)) => global.d2_at(i.saturating_add(x), j.saturating_add(y)),
-                None => MAX_D2_CELLS,
-            };
-            sum = sum.saturating_add(self.term(d2));
-        }
-        self.point_evaluations = self.point_evaluations.saturating_add(self.n as u32);
-        sum
-    }
-
-    fn term(&self, d2: u8) -> i32 {
-        self.lut
-            .get(usize::from(d2))
-            .copied()
-            .unwrap_or(-(MAX_TERM_MILLI as i32))
-    }
-
-    /// Upper bound of the log-likelihood over the poses of `r` (milli-nats).
-    fn bound(&mut self, global: &GlobalMap, r: &[i32; 6]) -> i32 {
-        let [xa, xb, ya, yb, ta, tb] = *r;
-        let (c, s, half_span) = if ta == tb {
-            let (c, s) = self.trig(ta);
-            (c, s, 0.0)
-        } else {
-            let mid = 0.5 * (f64::from(ta) + f64::from(tb));
-            let (s, c) = libm::sincos(self.prior[2] + mid * self.yaw_step);
-            (c, s, 0.5 * f64::from(tb - ta) * self.yaw_step)
-        };
-        let mut sum = 0i32;
-        for (p, rad) in self.points.iter().zip(self.radius.iter()).take(self.n) {
-            let u = self.base[0] + c * p[0] - s * p[1];
-            let v = self.base[1] + s * p[0] + c * p[1];
-            let sweep = if half_span > 0.0 {
-                rad * half_span + SWEEP_SLACK_CELLS
-            } else {
-                0.0
-            };
-            let d2 = match (
-                Self::floor_cell(u - sweep, v - sweep),
-                Self::floor_cell(u + sweep, v + sweep),
-            ) {
-                (Some((i0, j0)), Some((i1, j1))) => global.min_d2_window(
-                    i0.saturating_add(xa),
-                    i1.saturating_add(xb),
-                    j0.saturating_add(ya),
-                    j1.saturating_add(yb),
-                ),
-                _ => MAX_D2_CELLS,
-            };
-            sum = sum.saturating_add(self.term(d2));
-        }
-        self.point_evaluations = self.point_evaluations.saturating_add(self.n as u32);
-        sum
-    }
-
-    /// Points within the outlier distance at the pose of `leaf`.
-    fn inliers(&self, global: &GlobalMap, leaf: &Leaf) -> u16 {
-        let (c, s) = self.trig(leaf.t);
-        let mut count = 0u16;
-        for p in self.points.iter().take(self.n) {
-            let u = self.base[0] + c * p[0] - s * p[1];
-            let v = self.base[1] + s * p[0] + c * p[1];
-            if let Some((i, j)) = Self::floor_cell(u, v) {
-                let d2 = global.d2_at(i.saturating_add(leaf.x), j.saturating_add(leaf.y));
-                if u32::from(d2) <= self.inlier_d2 {
-                    count += 1;
-                }
-            }
-        }
-        count
-    }
-
-    /// Sub-step peak, covariance and the fix (after both passes).
-    fn finish(&mut self, global: &GlobalMap) -> Result<LocalizationFix, LocalizationError> {
-        let b = self.best;
-        let s0 = f64::from(b.score);
-        // Parabola through the optimum and its neighbours on each axis.
-        let mut offset = [0.0f64; 3];
-        for (axis, o) in offset.iter_mut().enumerate() {
-            let step = |k: i32| match axis {
-                0 => (b.x + k, b.y, b.t),
-                1 => (b.x, b.y + k, b.t),
-                _ => (b.x, b.y, b.t + k),
-            };
-            let (xm, ym, tm) = step(-1);
-            let (xp, yp, tp) = step(1);
-            let sm = f64::from(self.score(global, xm, ym, tm));
-            let sp = f64::from(self.score(global, xp, yp, tp));
-            let curvature = sm - 2.0 * s0 + sp;
-            if curvature < 0.0 {
-                *o = (0.5 * (sm - sp) / curvature).clamp(-0.5, 0.5);
-            }
-        }
-        let peak = [
-            f64::from(b.x) + offset[0],
-            f64::from(b.y) + offset[1],
-            f64::from(b.t) + offset[2],
-        ];
-        // Second moment of exp(L - L_max) about the peak over the 5 x 5 x 5 poses.
-        let mut m = [[0.0f64; 3]; 3];
-        let mut w_sum = 0.0;
-        for dx in -FIT_HALF..=FIT_HALF {
-            for dy in -FIT_HALF..=FIT_HALF {
-                for dt in -FIT_HALF..=FIT_HALF {
-                    let (x, y, t) = (b.x + dx, b.y + dy, b.t + dt);
-                    if x.abs() > self.half[0] || y.abs() > self.half[1] || t.abs() > self.half[2] {
-                        continue;
-                    }
-                    let s = if dx == 0 && dy == 0 && dt == 0 {
-                        s0
-                    } else {
-                        f64::from(self.score(global, x, y, t))
-                    };
-                    let w = libm::exp((s - s0) / 1000.0);
-                    let d = [
-                        f64::from(x) - peak[0],
-                        f64::from(y) - peak[1],
-                        f64::from(t) - peak[2],
-                    ];
-                    for (r, row) in m.iter_mut().enumerate() {
-                        for (c, v) in row.iter_mut().enumerate() {
-                            *v += w * d[r] * d[c];
-                        }
-                    }
-                    w_sum += w;
-                }
-            }
-        }
-        if !(w_sum > 0.0) {
-            return Err(LocalizationError::DegenerateCovariance);
-        }
-        // Steps to m, m, rad; quantisation variance step^2 / 12 on the diagonal.
-        let unit = [MAP_CELL_M, MAP_CELL_M, self.yaw_step];
-        let mut cov_c = [[0.0f64; 3]; 3];
-        for (r, row) in cov_c.iter_mut().enumerate() {
-            for (c, v) in row.iter_mut().enumerate() {
-                let q = if r == c { 1.0 / 12.0 } else { 0.0 };
-                *v = (m[r][c] / w_sum + q) * unit[r] * unit[c] * self.config.covariance_scale;
-            }
-        }
-        // Centroid pose to the pose of G: o = T - R(yaw) c.
-        let origin = global.origin_m();
-        let t_w = [
-            origin[0] + (self.base[0] + peak[0]) * MAP_CELL_M,
-            origin[1] + (self.base[1] + peak[1]) * MAP_CELL_M,
-        ];
-        let yaw = self.prior[2] + peak[2] * self.yaw_step;
-        let (s, c) = libm::sincos(yaw);
-        let cg = self.centroid_g_m;
-        let rc = [c * cg[0] - s * cg[1], s * cg[0] + c * cg[1]];
-        let pose = [t_w[0] - rc[0], t_w[1] - rc[1], yaw];
-        let j = [[1.0, 0.0, rc[1]], [0.0, 1.0, -rc[0]], [0.0, 0.0, 1.0]];
-        let covariance = congruence(&j, &cov_c);
-        let finite = pose
-            .iter()
-            .chain(covariance.iter().flatten())
-            .all(|v| v.is_finite());
-        let positive = covariance[0][0] > 0.0 && covariance[1][1] > 0.0 && covariance[2][2] > 0.0;
-        if !(finite && positive) {
-            return Err(LocalizationError::DegenerateCovariance);
-        }
-        Ok(LocalizationFix {
-            pose,
-            covariance,
-            prior: self.prior,
-            log_likelihood: s0 / 1000.0,
-            runner_up_gap_nats: self.runner_up.map(|r| f64::from(b.score - r) / 1000.0),
-            points: self.n as u16,
-            inliers: self.inliers(global, &b),
-            nodes: self.nodes,
-            point_evaluations: self.point_evaluations,
-            queue_peak: self.queue_peak as u16,
-            yaw_step_rad: self.yaw_step,
-            window: self.half,
-        })
     }
 
     /// The optimum of the discretised pose space by exhaustive evaluation (tests): the same

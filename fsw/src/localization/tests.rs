@@ -700,7 +700,7 @@ fn in_place_init_equals_new() {
     assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
 }
 
-/// LOC-9: the search's cell of a point (truncation and one correction, issue 18) equals
+/// LOC-9: the search's cell of a point (truncation and one correction) equals
 /// `libm::floor` on both signs, at integers, next to them and at the edges of its range, and
 /// refuses what `libm::floor` would put outside +-1e6 or NaN.
 #[test]

@@ -17,7 +17,9 @@
 //! planner asks to turn the cameras there first (gaze control).
 
 use super::geometry::{dist, point_ok, ConvexPolygon, GeometryError, PointLocation, EPS_M};
-use super::ltg::{segment_clear, CandidateQuery, LocalTangentGraph, LOCAL_CAPACITY};
+use super::ltg::{
+    segment_clear, Candidate, CandidateQuery, CandidateSummary, LocalTangentGraph, LOCAL_CAPACITY,
+};
 use super::memory::{ObstacleMemory, MEMORY_CAPACITY};
 use super::wedge::Wedge;
 use crate::guidance::{Path, Point2};
@@ -451,7 +453,7 @@ impl Planner {
     }
 
     /// [`Self::plan`] with the new obstacles taken one at a time from an iterator (at most one
-    /// polygon on the caller's stack instead of a whole map's: issue 18's flight stack budget).
+    /// polygon on the caller's stack instead of a whole map's: the flight stack budget).
     /// The iterator is not advanced when the input is refused (non-finite pose, bad wedge, no
     /// goal); it is otherwise drained in order before anything else is planned.
     pub fn plan_each<I>(
@@ -465,7 +467,6 @@ impl Planner {
         I: IntoIterator,
         I::Item: core::borrow::Borrow<ConvexPolygon>,
     {
-        use core::borrow::Borrow;
         if !(position[0].is_finite() && position[1].is_finite() && heading_rad.is_finite()) {
             return Err(PlanError::NonFinitePose);
         }
@@ -475,22 +476,7 @@ impl Planner {
         wedge.validate().map_err(PlanError::BadWedge)?;
         let goal = self.goal.ok_or(PlanError::NoGoal)?;
         self.counters.calls = self.counters.calls.saturating_add(1);
-
-        let moved = self.last_position.map_or(0.0, |p| dist(p, position));
-        if moved > 0.5 * self.config.min_drive_m {
-            self.consecutive_gazes = 0;
-        }
-        self.last_position = Some(position);
-        if self.mode == Mode::BoundaryFollowing {
-            if let Some(f) = self.follow.as_mut() {
-                f.followed_m += moved;
-            }
-        }
-        let protected = self.follow.map(|f| f.reference);
-        for o in new_obstacles {
-            self.memory.insert(o.borrow(), position, protected);
-        }
-        self.memory.refresh_components();
+        self.take_obstacles(position, new_obstacles);
 
         if let Some(status) = self.halted {
             return Ok(self.output(status, None, None, None, None));
@@ -517,40 +503,7 @@ impl Planner {
         let radius = wedge.max_range_m;
 
         self.solve(start, radius, None);
-        // Progress threshold: d_min in motion-to-goal; while following, TangentBug's
-        // d_followed, which also counts the remembered boundary of the followed obstacle (a
-        // way on must beat every point of that boundary, else it is the disc's edge in front of
-        // the same obstacle).
-        let threshold = match (self.mode, self.followed_label()) {
-            (Mode::BoundaryFollowing, Some(label)) => {
-                let mut d = self.d_min_m;
-                for (i, poly) in self.memory.inflated().iter().enumerate() {
-                    if self.memory.component(i) == label {
-                        d = d.min(poly.distance(target));
-                    }
-                }
-                d
-            }
-            _ => self.d_min_m,
-        };
-        let summary = {
-            let query = CandidateQuery {
-                center: start,
-                radius_m: radius,
-                goal: target,
-                threshold_m: threshold,
-                epsilon_m: self.config.progress_epsilon_m,
-                // A way on the rover has (nearly) reached is no longer binding.
-                sticky: self
-                    .committed
-                    .last()
-                    .copied()
-                    .filter(|c| dist(*c, start) > self.config.switch_margin_m),
-            };
-            self.ltg.candidates(self.memory.inflated(), &query)
-        };
-
-        let mut route: Vec<Point2, ROUTE_CAPACITY> = Vec::new();
+        let summary = self.ways_on(start, radius, target);
         // Commitment: keep last step's way on unless another is better by the margin (the
         // best way on can jump between near-equal alternatives as the disc moves with the rover).
         let choice = match (summary.best, summary.sticky) {
@@ -560,25 +513,7 @@ impl Planner {
         };
         self.committed.clear();
         if let Some(best) = choice {
-            // Motion-to-goal: a way on makes progress.
-            if self.mode == Mode::BoundaryFollowing {
-                self.counters.follow_exits = self.counters.follow_exits.saturating_add(1);
-                self.mode = Mode::MotionToGoal;
-            }
-            let mut buf = [[0.0; 2]; ROUTE_CAPACITY];
-            let n = self.ltg.path_to(best.node, &mut buf[..ROUTE_CAPACITY - 1]);
-            for p in buf.iter().take(n) {
-                let _ = route.push(*p);
-            }
-            // Commit to the route's nodes (their polygons stay in the next LTG even when they
-            // are out of range, so that the route does not vanish as the rover moves).
-            for p in buf.iter().take(n).skip(1) {
-                let _ = self.committed.push(*p);
-            }
-            if n <= 1 {
-                let _ = self.committed.push(self.ltg.point(best.node));
-            }
-            let _ = route.push(best.exit);
+            let route = self.way_on_route(&best);
             return Ok(self.finish(position, start, &route, wedge, &summary));
         }
 
@@ -600,31 +535,131 @@ impl Planner {
                 Err(status) => return Ok(self.halt(status)),
             }
         }
+        match self.boundary_route(start, radius) {
+            Ok(route) => Ok(self.finish(position, start, &route, wedge, &summary)),
+            Err(status) => Ok(self.halt(status)),
+        }
+    }
+
+    /// The bookkeeping of a step's pose and the new obstacles: the gaze count restarts once
+    /// the rover has moved half a minimum drive, the distance followed grows by the motion
+    /// while following, and the obstacles (m in `N`) go into the memory in order (the followed
+    /// obstacle's reference polygon protected) before its components are refreshed.
+    fn take_obstacles<I>(&mut self, position: Point2, new_obstacles: I)
+    where
+        I: IntoIterator,
+        I::Item: core::borrow::Borrow<ConvexPolygon>,
+    {
+        use core::borrow::Borrow;
+        let moved = self.last_position.map_or(0.0, |p| dist(p, position));
+        if moved > 0.5 * self.config.min_drive_m {
+            self.consecutive_gazes = 0;
+        }
+        self.last_position = Some(position);
+        if self.mode == Mode::BoundaryFollowing {
+            if let Some(f) = self.follow.as_mut() {
+                f.followed_m += moved;
+            }
+        }
+        let protected = self.follow.map(|f| f.reference);
+        for o in new_obstacles {
+            self.memory.insert(o.borrow(), position, protected);
+        }
+        self.memory.refresh_components();
+    }
+
+    /// The ways on of the LTG just solved from `start` (disc of `radius`, m) towards `target`,
+    /// against the progress threshold: `d_min` in motion-to-goal; while following, TangentBug's
+    /// `d_followed`, which also counts the remembered boundary of the followed obstacle (a way
+    /// on must beat every point of that boundary, else it is the disc's edge in front of the
+    /// same obstacle).
+    fn ways_on(&self, start: Point2, radius: f64, target: Point2) -> CandidateSummary {
+        let threshold = match (self.mode, self.followed_label()) {
+            (Mode::BoundaryFollowing, Some(label)) => {
+                let mut d = self.d_min_m;
+                for (i, poly) in self.memory.inflated().iter().enumerate() {
+                    if self.memory.component(i) == label {
+                        d = d.min(poly.distance(target));
+                    }
+                }
+                d
+            }
+            _ => self.d_min_m,
+        };
+        let query = CandidateQuery {
+            center: start,
+            radius_m: radius,
+            goal: target,
+            threshold_m: threshold,
+            epsilon_m: self.config.progress_epsilon_m,
+            // A way on the rover has (nearly) reached is no longer binding.
+            sticky: self
+                .committed
+                .last()
+                .copied()
+                .filter(|c| dist(*c, start) > self.config.switch_margin_m),
+        };
+        self.ltg.candidates(self.memory.inflated(), &query)
+    }
+
+    /// Motion-to-goal along the way on `best` (it makes progress; a boundary-following episode
+    /// ends): the route along the LTG to its node, then its exit point; the route's nodes
+    /// become the committed ones.
+    fn way_on_route(&mut self, best: &Candidate) -> Vec<Point2, ROUTE_CAPACITY> {
+        let mut route: Vec<Point2, ROUTE_CAPACITY> = Vec::new();
+        if self.mode == Mode::BoundaryFollowing {
+            self.counters.follow_exits = self.counters.follow_exits.saturating_add(1);
+            self.mode = Mode::MotionToGoal;
+        }
+        let mut buf = [[0.0; 2]; ROUTE_CAPACITY];
+        let n = self.ltg.path_to(best.node, &mut buf[..ROUTE_CAPACITY - 1]);
+        for p in buf.iter().take(n) {
+            let _ = route.push(*p);
+        }
+        // Commit to the route's nodes (their polygons stay in the next LTG even when they
+        // are out of range, so that the route does not vanish as the rover moves).
+        for p in buf.iter().take(n).skip(1) {
+            let _ = self.committed.push(*p);
+        }
+        if n <= 1 {
+            let _ = self.committed.push(self.ltg.point(best.node));
+        }
+        let _ = route.push(best.exit);
+        route
+    }
+
+    /// Boundary following from `start` (LTG disc of `radius`, m): the winding and the followed
+    /// distance checked against their limits, then the route along the LTG to the obstacle's
+    /// tangent vertex and on to the next one as seen from it (keeps guidance going). The
+    /// verdict to halt with otherwise.
+    fn boundary_route(
+        &mut self,
+        start: Point2,
+        radius: f64,
+    ) -> Result<Vec<Point2, ROUTE_CAPACITY>, PlanStatus> {
         self.update_winding(start);
         if let Some(f) = self.follow {
             if libm::fabs(f.winding_rad) >= 2.0 * PI {
-                return Ok(self.halt(PlanStatus::Unreachable(UnreachableReason::LoopCompleted)));
+                return Err(PlanStatus::Unreachable(UnreachableReason::LoopCompleted));
             }
             if f.followed_m > self.config.max_follow_m {
-                return Ok(self.halt(PlanStatus::Unreachable(UnreachableReason::FollowLimit)));
+                return Err(PlanStatus::Unreachable(UnreachableReason::FollowLimit));
             }
         }
-        let first = match self.follow_target(start) {
-            Ok(t) => t,
-            Err(status) => return Ok(self.halt(status)),
-        };
+        let first = self.follow_target(start)?;
         let Some(node) = self.ensure_local_node(start, radius, first) else {
-            return Ok(self.halt(PlanStatus::Blocked(
+            return Err(PlanStatus::Blocked(
                 BlockedReason::BoundaryTargetUnreachable,
-            )));
+            ));
         };
         let mut buf = [[0.0; 2]; ROUTE_CAPACITY];
         let n = self.ltg.path_to(node, &mut buf[..ROUTE_CAPACITY - 1]);
         if n == 0 {
-            return Ok(self.halt(PlanStatus::Blocked(
+            return Err(PlanStatus::Blocked(
                 BlockedReason::BoundaryTargetUnreachable,
-            )));
+            ));
         }
+        let mut route: Vec<Point2, ROUTE_CAPACITY> = Vec::new();
         for p in buf.iter().take(n) {
             let _ = route.push(*p);
         }
@@ -636,7 +671,7 @@ impl Planner {
                 let _ = route.push(q2);
             }
         }
-        Ok(self.finish(position, start, &route, wedge, &summary))
+        Ok(route)
     }
 
     /// Solves the LTG from `start` over the remembered polygons within `radius` (nearest

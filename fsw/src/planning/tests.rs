@@ -701,10 +701,10 @@ fn pln_in_place_init_equals_new() {
 /// away, measured straight from the rover to the path's end, however the route bends. Swept
 /// over rovers inside the clearance band in front of a rock (escape leg first, which skips the
 /// gaze test) and beside it, headings of -60 to 60 deg and goals round the rock, with the
-/// default configuration and the flight's (`min_reach_m` 0.1 m, clearance 0.15 m). Before the
-/// rule a boundary-following route cut by the wedge right after the escape leg gave a 6.7 cm
-/// polyline ending 5 cm away, inside guidance's stopping tolerance (`rockfield-goal`, a rover
-/// holding and mapping on one spot until fault protection stopped it).
+/// default configuration and the flight's (`min_reach_m` 0.1 m, clearance 0.15 m). Without the
+/// rule a boundary-following route cut by the wedge right after the escape leg gives a 6.7 cm
+/// polyline ending 5 cm away, inside guidance's stopping tolerance (`rockfield-goal`: a rover
+/// holding and mapping on one spot until fault protection stops it).
 #[test]
 fn pln_6_every_driven_path_ends_min_reach_away() {
     let rock = rect(0.5, -1.0, 1.5, 1.0);

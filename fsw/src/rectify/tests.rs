@@ -394,8 +394,8 @@ fn rect_5_items_are_quantum_independent() {
     );
 }
 
-/// The per-pixel row kernel as it was before the cell fast path (issue 18), kept verbatim as
-/// the oracle of RECT-7 (checked arithmetic: the test maps stay far from i32 overflow).
+/// The per-pixel row kernel of the module doc's formula, without the cell fast path: the oracle
+/// of RECT-7 (checked arithmetic: the test maps stay far from i32 overflow).
 fn reference_row(nodes: &[MapNode], row: usize, raw: &[u8], out: &mut [u8]) {
     let step = LATTICE_STEP_PX as i32;
     let j = row / LATTICE_STEP_PX;
@@ -489,7 +489,7 @@ fn random_map(rng: &mut impl rand::Rng, kind: u32) -> Vec<MapNode> {
     map
 }
 
-/// RECT-7: the row kernel with the cell fast path (issue 18) is bit-identical to the per-pixel
+/// RECT-7: the row kernel with the cell fast path is bit-identical to the per-pixel
 /// reference for random maps (inside the image, partly outside, random nodes anywhere), random
 /// raw images and every row (including rows past the lattice), and for short or long raw and
 /// output buffers.

@@ -1,4 +1,4 @@
-//! SEQ-1..4: the sequencer's repairs keep every constraint on random plans (issue 17), drop by
+//! SEQ-1..4: the sequencer's repairs keep every constraint on random plans, drop by
 //! priority, reorder after an obstacle (V99 Fig. 3) and put a localization first.
 
 use super::*;

@@ -9,9 +9,28 @@
 //! one image row per work item, so the operator needs three rows of 640 sums instead of an
 //! interest image.
 
+#[cfg(any(target_arch = "arm", test))]
+#[macro_use]
+mod interleaved;
+#[cfg(not(target_arch = "arm"))]
+mod planar;
+mod selection;
+
 use super::image::Image;
 use super::{VoConfig, TEMPLATE_HALF};
+#[cfg(test)]
+use interleaved::ColumnSums;
+#[cfg(any(target_arch = "arm", test))]
+use interleaved::{add_window, score_full, score_partial, slide_rows, Interleaved, SPAN};
+#[cfg(not(target_arch = "arm"))]
+use planar::Planar;
+#[cfg(test)]
+use planar::{det_trace, pretest};
 use rover_hal::{IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX};
+#[cfg(test)]
+use selection::ranks_before;
+pub use selection::{heap_sort_descending, select_more, select_with_min_distance};
+use selection::{sift_down, sift_down_best};
 
 /// Side of a grid cell, pixels (much smaller than the minimum feature distance).
 pub const GRID_PX: usize = 10;
@@ -72,14 +91,6 @@ impl ForstnerDetector {
     };
 }
 
-#[cfg(any(target_arch = "arm", test))]
-/// A compiler-only scheduling barrier (no instruction) on the rover CPU; nothing elsewhere.
-#[inline(always)]
-fn rover_barrier() {
-    #[cfg(target_arch = "arm")]
-    core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
-}
-
 /// One image row as an array.
 type Row<'a> = &'a [u8; IMAGE_WIDTH_PX];
 
@@ -91,13 +102,6 @@ fn gradient_rows<'a>(image: &Image<'a>, y: usize) -> Option<[Row<'a>; 3]> {
     let down = image.row(y + 1)?.try_into().ok()?;
     Some([up, mid, down])
 }
-
-#[cfg(any(target_arch = "arm", test))]
-/// The column sums of the gradient products, `[xx, yy, xy]` per column, interleaved (the
-/// rover CPU's layout, see [`Interleaved`]; kept for the columns
-/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`], the only ones a scored window reaches; the others
-/// stay 0).
-type ColumnSums = [[i32; 3]; IMAGE_WIDTH_PX];
 
 /// First column a scored window reaches (the first centre [`BORDER_PX`] minus the half window).
 const SUM_FIRST_COL: usize = BORDER_PX - WINDOW_HALF;
@@ -111,143 +115,6 @@ const SUM_END_COL: usize = IMAGE_WIDTH_PX - BORDER_PX;
 #[inline(always)]
 fn gradient(up: u8, down: u8, m0: i32, m2: i32) -> (i32, i32) {
     (m2 - m0, i32::from(down) - i32::from(up))
-}
-
-#[cfg(any(target_arch = "arm", test))]
-/// Adds the gradient products of image row `y` to the column sums (columns
-/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`]; nothing at the first and last rows).
-fn add_row(image: &Image, y: usize, sums: &mut ColumnSums) {
-    let Some([up, mid, down]) = gradient_rows(image, y) else {
-        return;
-    };
-    for c in SUM_FIRST_COL..SUM_END_COL {
-        let (Some(s), Some(&u), Some(&d), Some(&m0), Some(&m2)) = (
-            sums.get_mut(c),
-            up.get(c),
-            down.get(c),
-            mid.get(c - 1),
-            mid.get(c + 1),
-        ) else {
-            break;
-        };
-        let (gx, gy) = gradient(u, d, i32::from(m0), i32::from(m2));
-        s[0] = s[0].wrapping_add(gx * gx);
-        s[1] = s[1].wrapping_add(gy * gy);
-        s[2] = s[2].wrapping_add(gx * gy);
-        // One column at a time (a compiler-only barrier, as in `slide_rows`).
-        rover_barrier();
-    }
-}
-
-#[cfg(any(target_arch = "arm", test))]
-/// Adds the gradient products of the window rows `y - WINDOW_HALF..=y + WINDOW_HALF` to the
-/// column sums (the first row of a pass): one pass over the columns with the five rows' sums in
-/// registers; row by row ([`add_row`]) when a row has no neighbour in the image. Out of line:
-/// it runs once per pass and would otherwise change the register use of the per-row code.
-#[inline(never)]
-fn add_window(image: &Image, y: usize, sums: &mut ColumnSums) {
-    let row = |k: Option<usize>| {
-        k.and_then(|k| image.row(k))
-            .and_then(|r| <&[u8; IMAGE_WIDTH_PX]>::try_from(r).ok())
-    };
-    let first = y.checked_sub(WINDOW_HALF + 1);
-    let at = |d: usize| row(first.map(|f| f + d));
-    let (Some(r0), Some(r1), Some(r2), Some(r3), Some(r4), Some(r5), Some(r6)) =
-        (at(0), at(1), at(2), at(3), at(4), at(5), at(6))
-    else {
-        for r in y.saturating_sub(WINDOW_HALF)..=y + WINDOW_HALF {
-            add_row(image, r, sums);
-        }
-        return;
-    };
-    let rows = [r0, r1, r2, r3, r4, r5, r6];
-    for c in SUM_FIRST_COL..SUM_END_COL {
-        let Some(s) = sums.get_mut(c) else {
-            break;
-        };
-        let mut acc = *s;
-        for j in 0..2 * WINDOW_HALF + 1 {
-            let (Some(up), Some(mid), Some(down)) = (rows.get(j), rows.get(j + 1), rows.get(j + 2))
-            else {
-                break;
-            };
-            let (Some(&u), Some(&d), Some(&m0), Some(&m2)) =
-                (up.get(c), down.get(c), mid.get(c - 1), mid.get(c + 1))
-            else {
-                break;
-            };
-            let (gx, gy) = gradient(u, d, i32::from(m0), i32::from(m2));
-            acc[0] = acc[0].wrapping_add(gx * gx);
-            acc[1] = acc[1].wrapping_add(gy * gy);
-            acc[2] = acc[2].wrapping_add(gx * gy);
-        }
-        *s = acc;
-        rover_barrier();
-    }
-}
-
-#[cfg(any(target_arch = "arm", test))]
-/// Moves the window down one row: adds the products of row `add`, removes those of row
-/// `remove` (one pass over the sums).
-#[inline(never)]
-fn slide_rows(image: &Image, add: usize, remove: usize, sums: &mut ColumnSums) {
-    let (Some([au, am, ad]), Some([ru, rm, rd])) =
-        (gradient_rows(image, add), gradient_rows(image, remove))
-    else {
-        return;
-    };
-    for c in SUM_FIRST_COL..SUM_END_COL {
-        let (Some(s), Some(&ru), Some(&rd), Some(&rl), Some(&rr)) = (
-            sums.get_mut(c),
-            ru.get(c),
-            rd.get(c),
-            rm.get(c - 1),
-            rm.get(c + 1),
-        ) else {
-            break;
-        };
-        // The leaving row, then (compiler fences: no instruction) the entering row, and the
-        // next column only after this one's stores: few values live at a time, no spills.
-        let (rx, ry) = gradient(ru, rd, i32::from(rl), i32::from(rr));
-        let [s0, s1, s2] = *s;
-        let (s0, s1, s2) = (
-            s0.wrapping_sub(rx * rx),
-            s1.wrapping_sub(ry * ry),
-            s2.wrapping_sub(rx * ry),
-        );
-        rover_barrier();
-        let (Some(&au), Some(&ad), Some(&al), Some(&ar)) =
-            (au.get(c), ad.get(c), am.get(c - 1), am.get(c + 1))
-        else {
-            break;
-        };
-        let (ax, ay) = gradient(au, ad, i32::from(al), i32::from(ar));
-        *s = [
-            s0.wrapping_add(ax * ax),
-            s1.wrapping_add(ay * ay),
-            s2.wrapping_add(ax * ay),
-        ];
-        rover_barrier();
-    }
-}
-
-#[cfg(any(target_arch = "arm", test))]
-/// Columns of a full cell's span: its [`GRID_PX`] centres and [`WINDOW_HALF`] on each side.
-const SPAN: usize = GRID_PX + 2 * WINDOW_HALF;
-
-#[cfg(any(target_arch = "arm", test))]
-/// Integer lower bounds a pixel must exceed to pass the thresholds and beat a cell's best
-/// interest `best` (all conservative: a pixel failing one of them fails the exact tests).
-#[derive(Clone, Copy)]
-struct Floors {
-    /// `floor(4 best)`, or `floor(4 min_interest) - 1` if larger: a pixel needs
-    /// `trace > min_trace`, since `w = det / trace <= trace / 4` (det <= (trace / 2)^2 for a
-    /// 2x2 normal matrix) and `w > best`, `w >= min_interest`. At least 0.
-    min_trace: i32,
-    /// `floor(best)`, or `floor(min_interest) - 1` if larger: a pixel needs
-    /// `det > w_floor trace` and `min(nxx, nyy) > w_floor` (`w <= nxx nyy / (nxx + nyy) <=
-    /// min(nxx, nyy)`).
-    w_floor: i32,
 }
 
 /// The thresholds of one call: `min_interest` and `min_roundness` (f64 of the config's f32)
@@ -274,234 +141,7 @@ impl Thresholds {
             w_floor: (min_interest as i32).saturating_sub(1),
         }
     }
-
-    /// The floors of a cell whose best interest is `best` (non-negative).
-    #[cfg(any(target_arch = "arm", test))]
-    #[inline(always)]
-    fn floors(&self, best: f32) -> Floors {
-        let w = f64::from(best);
-        Floors {
-            min_trace: ((4.0 * w) as i32).max(self.trace_floor),
-            w_floor: (w as i32).max(self.w_floor),
-        }
-    }
 }
-
-#[cfg(any(target_arch = "arm", test))]
-/// The exact tests of one pixel that passed the trace and diagonal bounds: `(nxx, nyy, nxy)`
-/// are its window sums, `trace = nxx + nyy > 0`. Returns the pixel's interest when it passes
-/// the interest and roundness thresholds and beats `best`.
-#[inline(always)]
-fn score_pixel(
-    (nxx, nyy, nxy): (i32, i32, i32),
-    trace: i32,
-    best: f32,
-    w_floor: i32,
-    t: &Thresholds,
-) -> Option<f32> {
-    // det exactly in i64 (|products| < 2^42). Integer pre-test of the interest: w_floor <= best
-    // and w_floor < min_interest, so det <= w_floor trace fails an f64 test below as well.
-    let det = i64::from(nxx) * i64::from(nyy) - i64::from(nxy) * i64::from(nxy);
-    if det <= i64::from(w_floor) * i64::from(trace) {
-        return None;
-    }
-    // The definition's tests, in f64 (exact: det and trace below 2^53).
-    let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
-    let det_f = fxx * fyy - fxy * fxy;
-    let trace_f = f64::from(trace);
-    if det_f > 0.0
-        && det_f > f64::from(best) * trace_f
-        && !(det_f < t.min_interest * trace_f)
-        && !(4.0 * det_f < t.min_roundness * trace_f * trace_f)
-    {
-        let interest = (det_f / trace_f) as f32;
-        if interest > best {
-            return Some(interest);
-        }
-    }
-    None
-}
-
-#[cfg(any(target_arch = "arm", test))]
-/// Scores the window centres of one grid cell in one row: `span` holds the column sums of the
-/// columns `first - WINDOW_HALF .. first + n + WINDOW_HALF` for the `n` centres
-/// `first..first + n` (`n = span.len() - 2 WINDOW_HALF`, at most [`GRID_PX`]); keeps the
-/// best pixel passing the thresholds in `cell` (the first one in scan order on equal
-/// interests, as a sequential scan with a strict `>`).
-///
-/// Window sums in i32: a gradient product is at most 255^2, a column sum five of them, a
-/// window sum 25 (< 1.7e6, no overflow on any image). Their products are below 2^53, so det
-/// and trace are exact in f64 (and in i64).
-#[inline(always)]
-fn score_span(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t: &Thresholds) {
-    const W: usize = 2 * WINDOW_HALF;
-    let (mut nxx, mut nyy, mut nxy) = (0i32, 0i32, 0i32);
-    for &[a, b, c] in span.iter().take(W) {
-        nxx = nxx.wrapping_add(a);
-        nyy = nyy.wrapping_add(b);
-        nxy = nxy.wrapping_add(c);
-    }
-    let mut best = cell.interest;
-    let mut best_k = None;
-    let mut floors = t.floors(best);
-    for k in 0..GRID_PX {
-        let Some(&[a, b, c]) = span.get(k + W) else {
-            break;
-        };
-        // Window over the columns centre-2..=centre+2.
-        nxx = nxx.wrapping_add(a);
-        nyy = nyy.wrapping_add(b);
-        nxy = nxy.wrapping_add(c);
-        let trace = nxx.wrapping_add(nyy);
-        // min_trace >= 0, so this also gives trace > 0.
-        if trace > floors.min_trace && nxx > floors.w_floor && nyy > floors.w_floor {
-            if let Some(interest) = score_pixel((nxx, nyy, nxy), trace, best, floors.w_floor, t) {
-                best = interest;
-                best_k = Some(k);
-                floors = t.floors(interest);
-            }
-        }
-        // Keeps the leaving column's loads after the tests (a compiler-only barrier, no
-        // instruction): loaded before them, they stay live across the rare path and spill.
-        rover_barrier();
-        let Some(&[oa, ob, oc]) = span.get(k) else {
-            break;
-        };
-        nxx = nxx.wrapping_sub(oa);
-        nyy = nyy.wrapping_sub(ob);
-        nxy = nxy.wrapping_sub(oc);
-    }
-    if let Some(k) = best_k {
-        *cell = Candidate {
-            interest: best,
-            x: (first + k) as u16,
-            y: y as u16,
-        };
-    }
-}
-
-#[cfg(any(target_arch = "arm", test))]
-/// [`score_span`] of a full cell ([`GRID_PX`] centres, the span of [`SPAN`] columns),
-/// unrolled: no loop counter, every column at a fixed offset.
-#[inline(always)]
-fn score_full(
-    span: &[[i32; 3]; SPAN],
-    first: usize,
-    y: usize,
-    cell: &mut Candidate,
-    t: &Thresholds,
-) {
-    let [s0, s1, s2, s3, s4, s5, s6, s7, s8, s9, s10, s11, s12, s13] = span;
-    // The leaving columns read through an opaque copy of the reference: the optimiser would
-    // otherwise keep each column in registers from its entering to its leaving (4 columns,
-    // 12 values) and spill them; loading it again is one instruction.
-    let [_, _, _, _, o4, o5, o6, o7, o8, o9, ..] = core::hint::black_box(span);
-    let mut n = [0i32; 3];
-    for col in [s0, s1, s2, s3] {
-        for (n, &v) in n.iter_mut().zip(col) {
-            *n = n.wrapping_add(v);
-        }
-    }
-    let [mut nxx, mut nyy, mut nxy] = n;
-    let mut best = cell.interest;
-    let mut best_k = None;
-    let mut floors = t.floors(best);
-    // Centre k: the window over the columns k..=k+4 of the span (entering column `new`,
-    // leaving column `old`), tests as in `score_span`.
-    macro_rules! centre {
-        ($k:expr, $new:ident, $old:ident) => {
-            let [a, b, c] = *$new;
-            nxx = nxx.wrapping_add(a);
-            nyy = nyy.wrapping_add(b);
-            nxy = nxy.wrapping_add(c);
-            let trace = nxx.wrapping_add(nyy);
-            if trace > floors.min_trace && nxx > floors.w_floor && nyy > floors.w_floor {
-                if let Some(interest) = score_pixel((nxx, nyy, nxy), trace, best, floors.w_floor, t)
-                {
-                    best = interest;
-                    best_k = Some($k);
-                    floors = t.floors(interest);
-                }
-            }
-            rover_barrier();
-            let [oa, ob, oc] = *$old;
-            nxx = nxx.wrapping_sub(oa);
-            nyy = nyy.wrapping_sub(ob);
-            nxy = nxy.wrapping_sub(oc);
-        };
-    }
-    centre!(0usize, s4, s0);
-    centre!(1, s5, s1);
-    centre!(2, s6, s2);
-    centre!(3, s7, s3);
-    centre!(4, s8, o4);
-    centre!(5, s9, o5);
-    centre!(6, s10, o6);
-    centre!(7, s11, o7);
-    centre!(8, s12, o8);
-    centre!(9, s13, o9);
-    // The last update of the sums is not read.
-    let _ = (nxx, nyy, nxy, floors);
-    if let Some(k) = best_k {
-        *cell = Candidate {
-            interest: best,
-            x: (first + k) as u16,
-            y: y as u16,
-        };
-    }
-}
-
-#[cfg(any(target_arch = "arm", test))]
-/// [`score_span`] of a partial cell (fewer than [`GRID_PX`] centres: the loop stops at the
-/// end of `span`).
-#[inline(never)]
-fn score_partial(span: &[[i32; 3]], first: usize, y: usize, cell: &mut Candidate, t: &Thresholds) {
-    score_span(span, first, y, cell, t);
-}
-
-/// The rover CPU's layout of the column sums: `[xx, yy, xy]` together per column
-/// ([`ColumnSums`]). On the Cortex-M7 one base pointer walks all three sums (post-indexed loads
-/// and stores) and the per-pixel tests run as a sequential scan with early exits
-/// ([`score_full`]); the host's [`Planar`] layout gives the same sums and cells bit for bit
-/// (integer sums, the same exact tests in the same order; `vo_1_optimised_operator_equals_the_reference`
-/// runs both on the host).
-#[cfg(any(target_arch = "arm", test))]
-#[derive(Debug, Clone)]
-struct Interleaved(ColumnSums);
-
-#[cfg(any(target_arch = "arm", test))]
-impl Interleaved {
-    /// Zero sums.
-    const ZERO: Self = Self([[0; 3]; IMAGE_WIDTH_PX]);
-
-    /// Sets every sum to 0.
-    #[cfg(target_arch = "arm")]
-    fn clear(&mut self) {
-        self.0.fill([0; 3]);
-    }
-}
-
-/// The host's layout of the column sums: one array per product (`[xx, yy, xy]` planes of
-/// [`IMAGE_WIDTH_PX`] columns) and the window sums of the current row, so the compiler
-/// vectorises the slide, the window sums and a pre-test of every centre; each cell then scans
-/// only the centres that pass it. Kept off the rover CPU: a planar slide cost it 16 % more
-/// (docs/vo.md), and the f64 pre-test of every centre would run scalar there, where the
-/// integer floors of [`score_full`] reject most centres in a few instructions.
-#[cfg(not(target_arch = "arm"))]
-#[derive(Debug, Clone)]
-struct Planar {
-    /// Column sums `[xx, yy, xy]` of the window rows, per column.
-    sums: [[i32; IMAGE_WIDTH_PX]; 3],
-    /// Window (5x5) sums `[xx, yy, xy]` of the current row, per centre column.
-    window: [[i32; IMAGE_WIDTH_PX]; 3],
-    /// Entry floor of each centre column's cell (interest units, grey levels^2).
-    floor: [f32; IMAGE_WIDTH_PX],
-    /// 1 where a centre may beat its cell's best (the row's vectorised pre-test).
-    pass: [u8; IMAGE_WIDTH_PX],
-}
-
-// The planar scan packs a cell's flags into one 8-byte and one 2-byte word.
-const _: () = assert!(GRID_PX == 10);
 
 /// The column sums of this build's target: [`Interleaved`] on the rover CPU (32-bit Arm).
 #[cfg(target_arch = "arm")]
@@ -514,344 +154,6 @@ type NativeSums = Planar;
 /// the rover-CPU size of a structure holding a detector is its host size minus this.
 pub const HOST_LAYOUT_EXTRA_BYTES: usize =
     core::mem::size_of::<NativeSums>() - core::mem::size_of::<[[i32; 3]; IMAGE_WIDTH_PX]>();
-
-/// One past the last centre the operator scores in a row (its window ends inside the border).
-#[cfg(not(target_arch = "arm"))]
-const CENTRE_END: usize = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
-
-#[cfg(not(target_arch = "arm"))]
-/// `(det, trace)` of the normal matrix with the window sums `(nxx, nyy, nxy)`, in f64 (exact:
-/// see [`score_span`]).
-#[inline(always)]
-fn det_trace(nxx: i32, nyy: i32, nxy: i32) -> (f64, f64) {
-    let (fxx, fyy, fxy) = (f64::from(nxx), f64::from(nyy), f64::from(nxy));
-    (fxx * fyy - fxy * fxy, fxx + fyy)
-}
-
-#[cfg(not(target_arch = "arm"))]
-/// The image columns [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] of a row shifted by `shift` - 1
-/// (0: one column left, 1: in place, 2: one column right).
-#[inline(always)]
-fn sum_columns<'a>(row: Row<'a>, shift: usize) -> &'a [u8] {
-    row.get(SUM_FIRST_COL + shift - 1..SUM_END_COL + shift - 1)
-        .unwrap_or(&[])
-}
-
-/// The planes' columns [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] (`None` only if these constant
-/// ranges left the arrays, which they do not).
-#[cfg(not(target_arch = "arm"))]
-#[inline(always)]
-fn sum_planes(
-    sums: &mut [[i32; IMAGE_WIDTH_PX]; 3],
-) -> Option<(&mut [i32], &mut [i32], &mut [i32])> {
-    let [xx, yy, xy] = sums;
-    Some((
-        xx.get_mut(SUM_FIRST_COL..SUM_END_COL)?,
-        yy.get_mut(SUM_FIRST_COL..SUM_END_COL)?,
-        xy.get_mut(SUM_FIRST_COL..SUM_END_COL)?,
-    ))
-}
-
-/// The pixels `((up, down), (left, right))` of the central differences of the columns
-/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] of a row whose neighbours are `[up, mid, down]`.
-#[cfg(not(target_arch = "arm"))]
-#[inline(always)]
-fn difference_pixels<'a>(
-    [up, mid, down]: [Row<'a>; 3],
-) -> impl Iterator<Item = ((&'a u8, &'a u8), (&'a u8, &'a u8))> {
-    sum_columns(up, 1)
-        .iter()
-        .zip(sum_columns(down, 1))
-        .zip(sum_columns(mid, 0).iter().zip(sum_columns(mid, 2)))
-}
-
-/// `sums += products of image row y` over the planes' columns
-/// [`SUM_FIRST_COL`]`..`[`SUM_END_COL`] (the first rows of a pass).
-#[cfg(not(target_arch = "arm"))]
-fn planar_add_row(sums: &mut [[i32; IMAGE_WIDTH_PX]; 3], rows: [Row; 3]) {
-    let Some((xx, yy, xy)) = sum_planes(sums) else {
-        return;
-    };
-    let planes = xx.iter_mut().zip(yy.iter_mut()).zip(xy.iter_mut());
-    for (((sxx, syy), sxy), ((&u, &d), (&l, &r))) in planes.zip(difference_pixels(rows)) {
-        let (gx, gy) = gradient(u, d, i32::from(l), i32::from(r));
-        *sxx = sxx.wrapping_add(gx * gx);
-        *syy = syy.wrapping_add(gy * gy);
-        *sxy = sxy.wrapping_add(gx * gy);
-    }
-}
-
-/// The host's f32 pre-test of a centre with the window sums `(nxx, nyy, nxy)` against its
-/// cell's entry `floor` (see [`Planar::score_row`]): true whenever the exact tests of
-/// [`score_pixel`] pass for a best interest at most `floor` and a `min_interest` at most
-/// `floor`, with the roundness threshold `min_roundness`.
-#[cfg(not(target_arch = "arm"))]
-#[inline(always)]
-fn pretest((nxx, nyy, nxy): (i32, i32, i32), floor: f32, min_roundness: f32) -> bool {
-    /// 2^-21: eight units in the last place of f32.
-    const MARGIN: f32 = 1.0 / (1u32 << 21) as f32;
-    let (a, b, x) = (nxx as f32, nyy as f32, nxy as f32);
-    let (ab, xx, trace) = (a * b, x * x, a + b);
-    let (bound, round) = (floor * trace, min_roundness * trace * trace);
-    let (det, spread) = (ab - xx, ab + xx);
-    let det_w = det + (spread + bound) * MARGIN;
-    let det_q = det + (spread + round.abs()) * MARGIN;
-    !(det_w < bound) & !(4.0 * det_q < round)
-}
-
-#[cfg(not(target_arch = "arm"))]
-impl Planar {
-    /// Zero sums.
-    const ZERO: Self = Self {
-        sums: [[0; IMAGE_WIDTH_PX]; 3],
-        window: [[0; IMAGE_WIDTH_PX]; 3],
-        floor: [f32::INFINITY; IMAGE_WIDTH_PX],
-        pass: [0; IMAGE_WIDTH_PX],
-    };
-
-    /// Sets every sum to 0 (and the scratch rows to their initial values: a cleared detector
-    /// is [`ForstnerDetector::EMPTY`]).
-    fn clear(&mut self) {
-        *self = Self::ZERO;
-    }
-
-    /// Adds the products of the window rows around `y` (the first row of a pass).
-    fn add_window(&mut self, image: &Image, y: usize) {
-        for r in y.saturating_sub(WINDOW_HALF)..=y + WINDOW_HALF {
-            if let Some(rows) = gradient_rows(image, r) {
-                planar_add_row(&mut self.sums, rows);
-            }
-        }
-    }
-
-    /// Moves the window down one row (adds the products of row `add`, removes row `remove`).
-    fn slide_rows(&mut self, image: &Image, add: usize, remove: usize) {
-        let (Some(added), Some(removed), Some((xx, yy, xy))) = (
-            gradient_rows(image, add),
-            gradient_rows(image, remove),
-            sum_planes(&mut self.sums),
-        ) else {
-            return;
-        };
-        let planes = xx.iter_mut().zip(yy.iter_mut()).zip(xy.iter_mut());
-        let rows = difference_pixels(added).zip(difference_pixels(removed));
-        for (((sxx, syy), sxy), (((&au, &ad), (&al, &ar)), ((&ru, &rd), (&rl, &rr)))) in
-            planes.zip(rows)
-        {
-            let (ax, ay) = gradient(au, ad, i32::from(al), i32::from(ar));
-            let (rx, ry) = gradient(ru, rd, i32::from(rl), i32::from(rr));
-            // a^2 - r^2 = (a - r)(a + r): the same integer, one product fewer.
-            *sxx = sxx.wrapping_add((ax - rx) * (ax + rx));
-            *syy = syy.wrapping_add((ay - ry) * (ay + ry));
-            *sxy = sxy.wrapping_add((ax * ay).wrapping_sub(rx * ry));
-        }
-    }
-
-    /// Scores the centres of image row `y` into its grid row's `cells`, skipping the cells
-    /// whose bit is set in `skip_cells` (bit `c` for grid column `c`): the same cells, bit for
-    /// bit, as the rover CPU's sequential scan ([`score_full`], [`score_partial`]).
-    fn score_row(&mut self, cells: &mut [Candidate], y: usize, skip_cells: u64, t: &Thresholds) {
-        // The window sums of every centre BORDER_PX..CENTRE_END (columns centre-2..=centre+2).
-        for (plane, window) in self.sums.iter().zip(self.window.iter_mut()) {
-            let (Some(out), Some(s)) = (
-                window.get_mut(BORDER_PX..CENTRE_END),
-                plane.get(SUM_FIRST_COL..SUM_END_COL),
-            ) else {
-                continue;
-            };
-            let s1 = s.get(1..).unwrap_or(&[]);
-            let s2 = s.get(2..).unwrap_or(&[]);
-            let s3 = s.get(3..).unwrap_or(&[]);
-            let s4 = s.get(4..).unwrap_or(&[]);
-            for (o, ((((&a, &b), &c), &d), &e)) in
-                out.iter_mut().zip(s.iter().zip(s1).zip(s2).zip(s3).zip(s4))
-            {
-                *o = a
-                    .wrapping_add(b)
-                    .wrapping_add(c)
-                    .wrapping_add(d)
-                    .wrapping_add(e);
-            }
-        }
-        // Each centre's entry floor: its cell's best on entry or the interest threshold,
-        // whichever is higher. Cell c covers the columns
-        // c GRID_PX.. of every per-column array.
-        // In f32: `min_interest` is a configured f32 and `best` an f32, so the floor is exact.
-        let (min_interest, min_roundness) = (t.min_interest as f32, t.min_roundness as f32);
-        for (floor, cell) in self.floor.chunks_exact_mut(GRID_PX).zip(cells.iter()) {
-            floor.fill(cell.interest.max(min_interest));
-        }
-        // The centres that may beat their cell's best, branch-free over the row (vectorised,
-        // four f32 lanes): the interest and roundness tests of `score_pixel` in f32 with a
-        // margin, `det + m_w >= floor trace` and `4 (det + m_q) >= min_roundness trace^2`,
-        // `m_w = 2^-21 (nxx nyy + nxy^2 + floor trace)`, `m_q = 2^-21 (nxx nyy + nxy^2 +
-        // |min_roundness trace^2|)`, each written as `!(x < y)` so that a NaN threshold passes
-        // as in `score_pixel`. A centre passing the exact tests (det > best trace and
-        // det >= min_interest trace, so det >= floor trace up to 2^-53; the roundness test)
-        // passes these: the window sums and the trace are exact in f32 (below 2^24), the f32
-        // det is within 2.0001 2^-24 (nxx nyy + nxy^2) of the true one, each f32 product
-        // within 2^-23 of its value, and each margin about 8 2^-24 of the sum it bounds. A
-        // centre failing them fails the exact tests for every later, higher best too. Only the
-        // scored centres are written: the others stay 0.
-        let [wxx, wyy, wxy] = &self.window;
-        let range = BORDER_PX..CENTRE_END;
-        let (Some(pass), Some(floor), Some(nxx), Some(nyy), Some(nxy)) = (
-            self.pass.get_mut(range.clone()),
-            self.floor.get(range.clone()),
-            wxx.get(range.clone()),
-            wyy.get(range.clone()),
-            wxy.get(range),
-        ) else {
-            return;
-        };
-        for ((p, &floor), ((&a, &b), &x)) in
-            pass.iter_mut().zip(floor).zip(nxx.iter().zip(nyy).zip(nxy))
-        {
-            *p = u8::from(pretest((a, b, x), floor, min_roundness));
-        }
-        let cell_sums = wxx
-            .chunks_exact(GRID_PX)
-            .zip(wyy.chunks_exact(GRID_PX))
-            .zip(wxy.chunks_exact(GRID_PX));
-        let mut skip = skip_cells;
-        for (c, ((cell, pass), ((nxx, nyy), nxy))) in cells
-            .iter_mut()
-            .zip(self.pass.chunks_exact(GRID_PX))
-            .zip(cell_sums)
-            .enumerate()
-        {
-            let skipped = skip & 1 != 0;
-            skip >>= 1;
-            if skipped {
-                continue;
-            }
-            // The cell's flags (0 or 1) as a bit mask, bit k for centre k: most cells have no
-            // candidate in a row, two loads tell. Byte i of `lo` moves to bit 56 + i of the
-            // product (the other partial products land on distinct lower bits or overflow).
-            let lo = pass
-                .get(..8)
-                .and_then(|b| <[u8; 8]>::try_from(b).ok())
-                .map_or(0, u64::from_le_bytes);
-            let hi = pass
-                .get(8..)
-                .and_then(|b| <[u8; GRID_PX - 8]>::try_from(b).ok())
-                .map_or(0, u16::from_le_bytes);
-            if lo == 0 && hi == 0 {
-                continue;
-            }
-            let mut candidates = (lo.wrapping_mul(0x0102_0408_1020_4080) >> 56) as u32
-                | u32::from(hi & 1) << 8
-                | u32::from(hi >> 8) << 9;
-            // The sequential scan of `score_span` over the passing centres, in order, with
-            // the exact tests of `score_pixel`.
-            let mut best = cell.interest;
-            let mut best_k = None;
-            for _ in 0..GRID_PX {
-                if candidates == 0 {
-                    break;
-                }
-                let k = candidates.trailing_zeros() as usize;
-                candidates &= candidates - 1;
-                let (Some(&a), Some(&b), Some(&x)) = (nxx.get(k), nyy.get(k), nxy.get(k)) else {
-                    break;
-                };
-                let (det, trace) = det_trace(a, b, x);
-                if det > f64::from(best) * trace
-                    && !(det < t.min_interest * trace)
-                    && !(4.0 * det < t.min_roundness * trace * trace)
-                {
-                    let interest = (det / trace) as f32;
-                    if interest > best {
-                        best = interest;
-                        best_k = Some(k);
-                    }
-                }
-            }
-            if let Some(k) = best_k {
-                *cell = Candidate {
-                    interest: best,
-                    x: (c * GRID_PX + k) as u16,
-                    y: y as u16,
-                };
-            }
-        }
-    }
-
-    /// The sums `[xx, yy, xy]` of column `c` (tests).
-    #[cfg(test)]
-    fn column(&self, c: usize) -> [i32; 3] {
-        [self.sums[0][c], self.sums[1][c], self.sums[2][c]]
-    }
-}
-
-/// The rover CPU's row of [`ForstnerDetector::process_row_masked`] on `$op` (a detector whose
-/// `columns` are [`Interleaved`]): one macro so that the flight code and the host's check of
-/// it (`vo_1_optimised_operator_equals_the_reference`) are the same source. Written in the
-/// method itself: routed through a generic function, the rover CPU build spent 1.6 % more
-/// instructions per row (issue 18, session 18).
-#[cfg(any(target_arch = "arm", test))]
-macro_rules! interleaved_row {
-    ($op:ident, $image:ident, $y:ident, $config:ident, $skip_cells:ident) => {{
-        let (image, y, config, skip_cells) = ($image, $y, $config, $skip_cells);
-        let cell_row = y / GRID_PX;
-        let cells = $op
-            .cells
-            .get_mut(cell_row * GRID_COLS..(cell_row + 1) * GRID_COLS)
-            .unwrap_or(&mut []);
-        if y == FIRST_ROW || y % GRID_PX == 0 {
-            // A grid row's cells are cleared at its first row (the pass reaches every grid
-            // row, so all cells are cleared by its end, as by `reset` at its start, without a
-            // 37 KB clear in the first item).
-            cells.fill(NO_CANDIDATE);
-        }
-        if y == FIRST_ROW {
-            $op.columns.0.fill([0; 3]);
-            $op.candidate_count = 0;
-            add_window(image, FIRST_ROW, &mut $op.columns.0);
-        } else {
-            slide_rows(
-                image,
-                y + WINDOW_HALF,
-                y - WINDOW_HALF - 1,
-                &mut $op.columns.0,
-            );
-        }
-        let thresholds = Thresholds::new(config);
-        // Scored centres: BORDER_PX..IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF (the window of the
-        // last one ends inside the border), cell by cell. The skip mask is shifted one cell
-        // per step (bit 0 is the current cell).
-        let end = IMAGE_WIDTH_PX - BORDER_PX - WINDOW_HALF;
-        let mut skip = skip_cells;
-        for (c, cell) in cells.iter_mut().enumerate() {
-            let skipped = skip & 1 != 0;
-            skip >>= 1;
-            if skipped {
-                continue;
-            }
-            let first = c * GRID_PX;
-            if let Some(span) = $op
-                .columns
-                .0
-                .get(first.wrapping_sub(WINDOW_HALF)..first + GRID_PX + WINDOW_HALF)
-                .and_then(|s| <&[[i32; 3]; SPAN]>::try_from(s).ok())
-                .filter(|_| first >= BORDER_PX && first + GRID_PX <= end)
-            {
-                // A full cell: fixed offsets, no checks.
-                score_full(span, first, y, cell, &thresholds);
-            } else {
-                // The partial cells at the borders stop at the end of their shorter span.
-                let first = first.max(BORDER_PX);
-                let stop = (c * GRID_PX + GRID_PX).min(end);
-                if first >= stop {
-                    continue;
-                }
-                if let Some(span) = $op.columns.0.get(first - WINDOW_HALF..stop + WINDOW_HALF) {
-                    score_partial(span, first, y, cell, &thresholds);
-                }
-            }
-        }
-    }};
-}
 
 impl ForstnerDetector {
     /// Clears the cells and the running sums (in place: the detector becomes
@@ -962,7 +264,7 @@ impl ForstnerDetector {
     /// [`Self::compact_candidates`]. Then [`Self::pop_best`] gives the candidates in the order
     /// of [`Self::sort_candidates`] (the rank is a strict total order: no two cells share a
     /// pixel), one at a time, so the selection stops as soon as it has its features instead of
-    /// sorting every cell (issue 18).
+    /// sorting every cell (the timing budget).
     pub fn best_heapify_step(&mut self, start: usize) {
         let n = self.candidate_count;
         if let Some(list) = self.cells.get_mut(..n) {
@@ -991,118 +293,13 @@ impl ForstnerDetector {
     }
 }
 
-/// `a` ranks before `b` (higher interest first, then row, then column).
-fn ranks_before(a: &Candidate, b: &Candidate) -> bool {
-    if a.interest != b.interest {
-        return a.interest > b.interest;
-    }
-    (a.y, a.x) < (b.y, b.x)
-}
-
-/// Moves element `root` down the heap of the first `end` elements (min-heap on the rank, so the
-/// final order is best first).
-fn sift_down(list: &mut [Candidate], root: usize, end: usize) {
-    sift_down_by(list, root, end, ranks_before);
-}
-
-/// Moves element `root` down the best-first heap of the first `end` elements (max-heap on the
-/// rank: the child that ranks earlier goes up).
-fn sift_down_best(list: &mut [Candidate], root: usize, end: usize) {
-    sift_down_by(list, root, end, |a, b| ranks_before(b, a));
-}
-
-/// The sift-down of both heaps: the right child is taken when `before(left, right)`, and the
-/// element stops when `before(child, element)` (`ranks_before` for the min-heap on the rank,
-/// its converse for the max-heap).
-#[inline(always)]
-fn sift_down_by(
-    list: &mut [Candidate],
-    mut root: usize,
-    end: usize,
-    before: impl Fn(&Candidate, &Candidate) -> bool,
-) {
-    for _ in 0..usize::BITS {
-        let left = 2 * root + 1;
-        if left >= end {
-            return;
-        }
-        let right = left + 1;
-        let mut child = left;
-        if right < end {
-            if let (Some(l), Some(r)) = (list.get(left), list.get(right)) {
-                if before(l, r) {
-                    child = right;
-                }
-            }
-        }
-        let (Some(c), Some(p)) = (list.get(child), list.get(root)) else {
-            return;
-        };
-        if before(c, p) {
-            return;
-        }
-        list.swap(root, child);
-        root = child;
-    }
-}
-
-/// In-place heap sort, best ranked first (bounded loops, no recursion).
-pub fn heap_sort_descending(list: &mut [Candidate]) {
-    let n = list.len();
-    for start in (0..n / 2).rev() {
-        sift_down(list, start, n);
-    }
-    for end in (1..n).rev() {
-        list.swap(0, end);
-        sift_down(list, 0, end);
-    }
-}
-
-/// Greedy selection continued over another chunk of the sorted candidates: `out[..count]`
-/// holds the features kept so far; returns the new count (see [`select_with_min_distance`]).
-pub fn select_more(
-    candidates: &[Candidate],
-    min_distance_px: f32,
-    out: &mut [(u16, u16)],
-    count: usize,
-) -> usize {
-    let min_d2 = min_distance_px * min_distance_px;
-    let mut count = count.min(out.len());
-    for c in candidates {
-        if count >= out.len() {
-            break;
-        }
-        let far = out.get(..count).unwrap_or(&[]).iter().all(|&(x, y)| {
-            let dx = f32::from(x) - f32::from(c.x);
-            let dy = f32::from(y) - f32::from(c.y);
-            dx * dx + dy * dy >= min_d2
-        });
-        if far {
-            if let Some(slot) = out.get_mut(count) {
-                *slot = (c.x, c.y);
-                count += 1;
-            }
-        }
-    }
-    count
-}
-
-/// Greedy selection (H04 sec. 2): walks the sorted candidates and keeps each one at least
-/// `min_distance_px` from every feature kept so far, until `out` is full. Returns the count.
-pub fn select_with_min_distance(
-    candidates: &[Candidate],
-    min_distance_px: f32,
-    out: &mut [(u16, u16)],
-) -> usize {
-    select_more(candidates, min_distance_px, out, 0)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The operator as it was before session 12 (commit de4e5b8), verbatim but for the state
-    /// passed in: the reference of `vo_1_optimised_operator_equals_the_reference`.
+    /// The reference operator, written plainly (running sums of every interior column, a
+    /// trace bound and the f64 tests at every centre), with the state passed in: the
+    /// reference of `vo_1_optimised_operator_equals_the_reference`.
     mod reference {
         use super::super::*;
 
@@ -1452,8 +649,8 @@ mod tests {
 
     #[test]
     fn vo_1_optimised_operator_equals_the_reference() {
-        // The session-12 operator (integer pre-tests, fixed-length cell loops, per-column slide)
-        // against the former code, verbatim in `reference`: the same column sums and the same
+        // The flight operator (integer pre-tests, fixed-length cell loops, per-column slide)
+        // against the straightforward one in `reference`: the same column sums and the same
         // cells (interest bits, positions) on random and rendered images, with and without skip
         // masks, for the flight thresholds and for extreme ones.
         use crate::types::Vec3;

@@ -140,8 +140,7 @@ impl<'a> Image<'a> {
     /// `-TEMPLATE_HALF..=TEMPLATE_HALF`, grey levels and grey levels per pixel. All samples share
     /// one pair of interpolation weights in `f32` (the sub-pixel offset of `x, y` is taken in
     /// `f64` first, so it carries no rounding of the absolute position). `None` (and no call)
-    /// if the grid leaves the image or `x, y` are not finite. (The `f64` version it replaced in
-    /// issue 18 is gone.)
+    /// if the grid leaves the image or `x, y` are not finite.
     #[inline]
     pub fn grid_bilinear_f32(
         &self,
@@ -186,7 +185,7 @@ impl<'a> Image<'a> {
     }
 
     /// The template centred on integer `(x, y)`, `None` if it leaves the image. Inlined, so
-    /// that the template is built in the caller's frame (issue 18: a 121-byte copy per call).
+    /// that the template is built in the caller's frame (not a 121-byte copy per call).
     #[inline(always)]
     pub fn template(&self, x: i32, y: i32) -> Option<Template> {
         let half = TEMPLATE_HALF as i32;
@@ -202,7 +201,7 @@ impl<'a> Image<'a> {
 
     /// The template centred on the sub-pixel position `(x, y)` by bilinear sampling in single
     /// precision ([`Self::grid_bilinear_f32`]), `None` if it leaves the image. Inlined, so that
-    /// the template is built in the caller's frame (issue 18: a 484-byte copy per call).
+    /// the template is built in the caller's frame (not a 484-byte copy per call).
     #[inline(always)]
     pub fn template_f(&self, x: f64, y: f64) -> Option<TemplateF> {
         let mut out = [0f32; TEMPLATE_PIXELS];
@@ -262,7 +261,7 @@ pub const CHECK_BANDS: usize = 4;
 
 /// Rows between the rows the image check samples (every 4th: 19,200 samples of a 640x480 image,
 /// plenty for its mean, spread and clipped fraction and for the repeated-frame checksum; every
-/// 2nd row until issue 18, twice the work).
+/// 2nd row would be twice the work).
 pub const CHECK_ROW_STEP: usize = 4;
 
 /// Running sums of the image check ([`Image::check_band`]). The sample count, sum and sum of
@@ -273,8 +272,8 @@ pub struct CheckSums {
     sum_sq: u32,
     count: u32,
     clipped: u32,
-    /// 32-bit FNV-1a of the samples (a 64-bit one cost a 64-bit multiply per sample on the
-    /// 32-bit core: twice the check, issue 18; a repeated-frame false alarm stays at 2^-32).
+    /// 32-bit FNV-1a of the samples (a 64-bit one costs a 64-bit multiply per sample on the
+    /// 32-bit core: twice the check; a repeated-frame false alarm stays at 2^-32).
     hash: u32,
 }
 
@@ -503,7 +502,7 @@ impl ScanTemplate {
 
     /// [`Self::new`] with the template's [`template_stats`] already at hand. Inlined, so that
     /// the packed rows are built in the caller's frame rather than copied out of this one (a
-    /// 660-byte `memcpy` per scan on the rover CPU, issue 18).
+    /// 660-byte `memcpy` per scan on the rover CPU).
     #[inline(always)]
     pub fn with_stats(template: &Template, stats: (i64, i64), step: usize) -> Option<Self> {
         if !(1..=SCAN_MAX_STEP).contains(&step) {
@@ -622,7 +621,7 @@ const SHORT_SPAN: usize = 32;
 
 /// Columns of a medium scan span ([`scan_rows`]): the stereo scans of a disparity range up to
 /// about 100 px, whose prefix arrays are zeroed at this size, not at [`SCAN_MAX_COLUMNS`]
-/// (issue 18: 3 % of the hazard mapper's instructions).
+/// (at the larger size the zeroing is 3 % of the hazard mapper's instructions).
 const MEDIUM_SPAN: usize = 112;
 
 /// The scan of [`scan_rows`] over the span `[c_lo, c_hi)` (window columns `c_first + k * STEP`)

@@ -237,7 +237,7 @@ fn vo_14_middlebury_disparity() {
                 stats.features
             ));
         }
-        // Acceptance (issue 15): gross errors at most 3 % of the matched features. The share of
+        // Acceptance (VO-14): gross errors at most 3 % of the matched features. The share of
         // the matches with ground truth is printed as well (it is the stricter figure).
         if gross * 100 > 3 * matched {
             failures.push(std::format!("{name}: {gross} gross of {matched} matched"));

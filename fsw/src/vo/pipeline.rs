@@ -12,17 +12,16 @@
 //! carried features' templates (chunks of 64), stereo match one new feature (1 each), finish (1).
 //! The sequence of items depends only on the input, so the number of steps is deterministic.
 
-use super::features::{
-    select_more, ForstnerDetector, BORDER_PX, CELL_COUNT, END_ROW, FIRST_ROW, GRID_COLS, GRID_PX,
-};
+mod estimate;
+mod keyframe;
+mod tracking;
+
+use super::features::{ForstnerDetector, CELL_COUNT, END_ROW, FIRST_ROW};
 use super::image::{CheckSums, Image, Template, CHECK_BANDS};
 use super::motion::{
-    finish_estimate, mark_inliers, ml_iteration, relative_pose, residual_median, robust_gate,
-    robust_variance_scale, CameraMount, Correspondence, Gating, Kept, Lmeds, MotionEstimate,
-    RigidMotion, ML_ROUNDS,
+    CameraMount, Correspondence, Gating, Kept, Lmeds, MotionEstimate, RigidMotion, ML_ROUNDS,
 };
-use super::stereo::{match_and_triangulate, triangulate_config, PinholeStereo};
-use super::track::{refine_warp, search_near, Affine2, WarpModel};
+use super::stereo::PinholeStereo;
 use super::{VoConfig, VoError, VoOutput, VoQuality, TEMPLATE_PIXELS};
 use crate::types::RelativePose;
 use rover_hal::{StereoCalibration, StereoFrame};
@@ -513,572 +512,115 @@ impl<const N: usize> VisualOdometry<N> {
         self.phase = Phase::Detect { row: FIRST_ROW };
     }
 
-    /// One work item. Returns the result when the update is finished.
+    /// One work item, by the phase of the update (the items of each phase in the module doc).
+    /// Returns the result when the update is finished.
     fn work_item(&mut self, left: &Image, right: &Image) -> Option<Result<VoOutput, VoError>> {
         match self.phase {
             Phase::Idle => return Some(Err(VoError::NotStarted)),
-            Phase::Check { band, mut sums } => {
-                let checked = left
-                    .check_band(usize::from(band), &mut sums)
-                    .and_then(|()| {
-                        if usize::from(band) + 1 < CHECK_BANDS {
-                            Ok(None)
-                        } else {
-                            sums.finish(&self.config).map(Some)
-                        }
-                    });
-                match checked {
-                    Ok(None) => {
-                        self.phase = Phase::Check {
-                            band: band + 1,
-                            sums,
-                        }
-                    }
-                    Ok(Some(left_sum)) => {
-                        self.phase = Phase::CheckRight {
-                            left_sum,
-                            band: 0,
-                            sums: CheckSums::default(),
-                        }
-                    }
-                    Err(e) => {
-                        self.key_valid = false;
-                        return Some(Err(e));
-                    }
-                }
-            }
+            Phase::Check { band, sums } => return self.check_left_item(left, band, sums),
             Phase::CheckRight {
                 left_sum,
                 band,
-                mut sums,
-            } => {
-                let checked = right.check_band(usize::from(band), &mut sums);
-                if checked.is_ok() && usize::from(band) + 1 < CHECK_BANDS {
-                    self.phase = Phase::CheckRight {
-                        left_sum,
-                        band: band + 1,
-                        sums,
-                    };
-                    return None;
-                }
-                let checks = checked
-                    .and_then(|()| sums.finish(&self.config))
-                    .map(|_| left_sum);
-                match checks {
-                    Ok(sum) if self.key_valid && sum == self.key_checksum => {
-                        self.key_valid = false;
-                        return Some(Err(VoError::RepeatedFrame));
-                    }
-                    Ok(sum) => {
-                        self.frame_checksum = sum;
-                        self.phase = if self.key_valid {
-                            Phase::Track { next: 0 }
-                        } else {
-                            Phase::Detect { row: FIRST_ROW }
-                        };
-                    }
-                    Err(e) => {
-                        self.key_valid = false;
-                        return Some(Err(e));
-                    }
-                }
-            }
-            Phase::Track { next } => {
-                if next < self.key_count.min(N) {
-                    self.track_feature(next, left, right);
-                    self.phase = Phase::Track { next: next + 1 };
-                } else {
-                    self.quality.tracked = self.pair_count as u16;
-                    if self.pair_count < usize::from(self.config.min_tracked) {
-                        self.fail_motion(VoError::TooFewTracked {
-                            found: self.pair_count as u16,
-                        });
-                    } else {
-                        self.phase = Phase::Hypotheses { done: 0 };
-                    }
-                }
-            }
-            Phase::Hypotheses { done } => {
-                if done < self.config.lmeds_hypotheses {
-                    let n = self.pair_count.min(N);
-                    let pairs = self.pairs.get(..n).unwrap_or(&[]);
-                    self.lmeds.hypothesis(pairs, &mut self.scratch);
-                    self.phase = Phase::Hypotheses { done: done + 1 };
-                } else {
-                    self.after_hypotheses();
-                }
-            }
+                sums,
+            } => return self.check_right_item(right, left_sum, band, sums),
+            Phase::Track { next } => self.track_item(next, left, right),
+            Phase::Hypotheses { done } => self.hypothesis_item(done),
             Phase::Refine { round, iteration } => self.refine_item(round, iteration),
-            Phase::Seed { next } => {
-                let stop = (next + SORT_CHUNK).min(self.pair_count.min(N));
-                for index in next..stop {
-                    self.seed_carried(index);
-                }
-                self.phase = if stop < self.pair_count.min(N) {
-                    Phase::Seed { next: stop }
-                } else {
-                    Phase::Detect { row: FIRST_ROW }
-                };
-            }
-            Phase::Detect { row } => {
-                if row < END_ROW {
-                    if row == FIRST_ROW || row % GRID_PX == 0 {
-                        self.skip_cells = self.skip_mask(row / GRID_PX);
-                    }
-                    let skip = self.skip_cells;
-                    self.detector
-                        .process_row_masked(left, row, &self.config, skip);
-                    self.phase = Phase::Detect { row: row + 1 };
-                } else {
-                    self.phase = Phase::Select;
-                }
-            }
-            Phase::Select => {
-                // Sort and select in bounded chunks (at most SORT_CHUNK heap steps or
-                // candidates per item), the same operations in the same order as one sort.
-                let n = self.detector.compact_candidates();
-                self.selected_count = self.carried.min(N);
-                self.phase = Phase::Heapify { next: n / 2 };
-            }
-            Phase::Heapify { next } => {
-                let stop = next.saturating_sub(SORT_CHUNK);
-                for start in (stop..next).rev() {
-                    self.detector.best_heapify_step(start);
-                }
-                self.phase = if stop == 0 {
-                    Phase::Choose {
-                        left: self.detector.candidates().len(),
-                    }
-                } else {
-                    Phase::Heapify { next: stop }
-                };
-            }
-            Phase::Choose { mut left } => {
-                // The candidates best first, popped from the heap only as far as the greedy
-                // selection needs them (the order of the full sort, `features::pop_best`).
-                let mut count = self.selected_count;
-                for _ in 0..SORT_CHUNK {
-                    if count >= self.selected.len() {
-                        break;
-                    }
-                    let Some(c) = self.detector.pop_best(left) else {
-                        break;
-                    };
-                    left -= 1;
-                    count = select_more(
-                        core::slice::from_ref(&c),
-                        self.config.min_distance_px,
-                        &mut self.selected,
-                        count,
-                    );
-                }
-                self.selected_count = count;
-                if left > 0 && count < self.selected.len() {
-                    self.phase = Phase::Choose { left };
-                    return None;
-                }
-                self.quality.features = count as u16;
-                self.key_valid = false;
-                self.key_count = 0;
-                if count < usize::from(self.config.min_features) {
-                    let e = VoError::TooFewFeatures {
-                        found: count as u16,
-                    };
-                    return Some(Err(self.pending.unwrap_or(e)));
-                }
-                self.phase = Phase::Carry { next: 0 };
-            }
-            Phase::Carry { next } => {
-                let end = self.carried.min(self.selected_count).min(N);
-                let stop = (next + SORT_CHUNK).min(end);
-                for index in next..stop {
-                    self.carry_feature(index, left);
-                }
-                self.phase = if stop < end {
-                    Phase::Carry { next: stop }
-                } else {
-                    Phase::StereoNew { next: end }
-                };
-            }
-            Phase::StereoNew { next } => {
-                if next < self.selected_count.min(N) {
-                    self.stereo_new_feature(next, left, right);
-                    self.phase = Phase::StereoNew { next: next + 1 };
-                } else {
-                    self.phase = Phase::Finish;
-                }
-            }
+            Phase::Seed { next } => self.seed_item(next),
+            Phase::Detect { row } => self.detect_item(row, left),
+            Phase::Select => self.select_item(),
+            Phase::Heapify { next } => self.heapify_item(next),
+            Phase::Choose { left } => return self.choose_item(left),
+            Phase::Carry { next } => self.carry_item(next, left),
+            Phase::StereoNew { next } => self.stereo_item(next, left, right),
             Phase::Finish => return Some(self.finish()),
         }
         None
     }
 
-    /// Tracks keyframe feature `index` into the new pair and stores the correspondence.
-    fn track_feature(&mut self, index: usize, left: &Image, right: &Image) {
-        let Some(feature) = self.key.get(index).copied() else {
-            return;
-        };
-        let [xl, yl, xr, yr] = feature.pixels.map(f64::from);
-        let Ok(previous) = triangulate_config(&self.camera, [xl, yl, xr, yr], &self.config) else {
-            return;
-        };
-        // The feature's offset from its template centre (0 for a detected feature, at most half
-        // a pixel for a carried one): template coordinates (du, dv) of eq. 9.
-        let (du, dv) = (xl - libm::round(xl), yl - libm::round(yl));
-        // Projection with the motion prior (eq. 11 without noise).
-        let predicted = self.motion.rotation * previous.position_m + self.motion.translation_m;
-        let Some((xp, yp)) = self.camera.project_left(&predicted) else {
-            return;
-        };
-        if !(xp.abs() < 1e5 && yp.abs() < 1e5) {
-            return;
-        }
-        let radius = i32::from(self.config.search_radius_px);
-        let (x0, y0) = (libm::round(xp - du) as i32, libm::round(yp - dv) as i32);
-        let (x0, y0) = (
-            x0.saturating_add(self.flow_px.0),
-            y0.saturating_add(self.flow_px.1),
-        );
-        let Some((xs, ys, score)) = search_near(
-            &feature.template,
-            left,
-            x0,
-            y0,
-            radius,
-            self.config.min_correlation,
-        ) else {
-            return;
-        };
-        if score < self.config.min_correlation {
-            return;
-        }
-        self.flow_px = (
-            (xs - x0 + self.flow_px.0).clamp(-radius, radius),
-            (ys - y0 + self.flow_px.1).clamp(-radius, radius),
-        );
-        let template_f = feature.template.map(f32::from);
-        let init = Affine2::translation(f64::from(xs), f64::from(ys));
-        let Some(refined) = refine_warp(&template_f, left, init, WarpModel::Affine, 10) else {
-            return;
-        };
-        let (xt, yt) = refined.warp.apply(du, dv);
-        let shift = libm::hypot(
-            refined.warp.c - f64::from(xs),
-            refined.warp.f - f64::from(ys),
-        );
-        if !(shift <= self.config.max_refine_shift_px) {
-            return;
-        }
-        // Disparity of the predicted point: the stereo search of a tracked feature only covers a
-        // window around it (the prior already placed the feature within the tracking radius).
-        let predicted_disparity = self.camera.fx_px * self.camera.baseline_m / predicted.z;
-        let window = (self.config.track_disparity_margin_px > 0).then_some(predicted_disparity);
-        let (current, (xr1, yr1)) = match match_and_triangulate(
-            &self.camera,
-            left,
-            right,
-            (xt, yt),
-            window,
-            &self.config,
-        ) {
-            Ok(matched) => matched,
-            Err(reason) => return self.quality.stereo_rejects.count(reason),
-        };
-        let pair = Correspondence::new(
-            previous.position_m,
-            previous.covariance,
-            current.position_m,
-            current.covariance,
-            &self.motion.rotation,
-        );
-        if let (Some(pair), Some(slot), Some(px)) = (
-            pair,
-            self.pairs.get_mut(self.pair_count),
-            self.current_px.get_mut(self.pair_count),
-        ) {
-            *slot = pair;
-            *px = [xt as f32, yt as f32, xr1 as f32, yr1 as f32];
-            self.pair_count += 1;
-        }
-    }
-
-    /// Feature persistence: correspondence `index`, when it is an inlier of the motion, becomes a
-    /// feature of the next keyframe at its tracked position in the new pair (its stereo match
-    /// there, from the tracking item, is kept), unless its template centre is within the border
-    /// or it is closer than `min_distance_px` to a feature carried before it. Carried features
-    /// fill `selected` and `current_px` from the front, so the detector only adds new features
-    /// away from them ([`select_more`]).
-    fn seed_carried(&mut self, index: usize) {
-        if !self.inliers.get(index).copied().unwrap_or(false) {
-            return;
-        }
-        let Some(&px) = self.current_px.get(index) else {
-            return;
-        };
-        let (xc, yc) = (libm::round(f64::from(px[0])), libm::round(f64::from(px[1])));
-        let border = BORDER_PX as f64;
-        let inside = xc >= border
-            && xc < (rover_hal::IMAGE_WIDTH_PX - BORDER_PX) as f64
-            && yc >= border
-            && yc < (rover_hal::IMAGE_HEIGHT_PX - BORDER_PX) as f64;
-        if !inside {
-            return;
-        }
-        let candidate = super::features::Candidate {
-            interest: 1.0,
-            x: xc as u16,
-            y: yc as u16,
-        };
-        let count = self.carried.min(N);
-        let kept = select_more(
-            core::slice::from_ref(&candidate),
-            self.config.min_distance_px,
-            &mut self.selected,
-            count,
-        );
-        if kept > count {
-            // `count <= index`: the slot was read (or is this one) already.
-            if let Some(slot) = self.current_px.get_mut(count) {
-                *slot = px;
-            }
-            self.carried = kept;
-        }
-    }
-
-    /// The grid cells of grid row `cell_row` (bit per grid column) that are covered by the
-    /// carried features' exclusion disks: each of 9 sample pixels of the cell (a 3x3 lattice:
-    /// corners, edge midpoints, centre) is closer than `min_distance_px` to some carried feature.
-    /// The greedy selection ([`select_more`]) drops every candidate within those disks, so the
-    /// detector need not score these cells (it could only miss a candidate in a sliver of a
-    /// cell between the samples).
-    fn skip_mask(&self, cell_row: usize) -> u64 {
-        const OFFSETS: [usize; 3] = [0, GRID_PX / 2, GRID_PX - 1];
-        let min_d = f64::from(self.config.min_distance_px);
-        let min_d2 = min_d * min_d;
-        let top = cell_row * GRID_PX;
-        let reach = libm::ceil(min_d).min(1e4) as usize;
-        let mut covered = [0u16; GRID_COLS];
-        for &(x, y) in self.selected.get(..self.carried.min(N)).unwrap_or(&[]) {
-            let (fx, fy) = (f64::from(x), f64::from(y));
-            // Rows of the samples closer than min_d.
-            let mut row_dy2 = [f64::INFINITY; 3];
-            let mut any = false;
-            for (slot, off) in row_dy2.iter_mut().zip(OFFSETS) {
-                let dy = fy - (top + off) as f64;
-                if dy * dy < min_d2 {
-                    *slot = dy * dy;
-                    any = true;
+    /// One band of the left image's check ([`Image::check_band`]); after the last band, the
+    /// whole image's checks ([`CheckSums::finish`]), then on to the right image. A failed check
+    /// ends the update and forgets the keyframe.
+    #[inline(always)]
+    fn check_left_item(
+        &mut self,
+        left: &Image,
+        band: u8,
+        mut sums: CheckSums,
+    ) -> Option<Result<VoOutput, VoError>> {
+        let checked = left
+            .check_band(usize::from(band), &mut sums)
+            .and_then(|()| {
+                if usize::from(band) + 1 < CHECK_BANDS {
+                    Ok(None)
+                } else {
+                    sums.finish(&self.config).map(Some)
+                }
+            });
+        match checked {
+            Ok(None) => {
+                self.phase = Phase::Check {
+                    band: band + 1,
+                    sums,
                 }
             }
-            if !any {
-                continue;
-            }
-            let first = usize::from(x).saturating_sub(reach) / GRID_PX;
-            let last = ((usize::from(x) + reach) / GRID_PX).min(GRID_COLS - 1);
-            for c in first..=last {
-                let Some(bits) = covered.get_mut(c) else {
-                    continue;
-                };
-                for (i, off_x) in OFFSETS.iter().enumerate() {
-                    let dx = fx - (c * GRID_PX + off_x) as f64;
-                    for (j, dy2) in row_dy2.iter().enumerate() {
-                        if dx * dx + dy2 < min_d2 {
-                            *bits |= 1 << (3 * j + i);
-                        }
-                    }
+            Ok(Some(left_sum)) => {
+                self.phase = Phase::CheckRight {
+                    left_sum,
+                    band: 0,
+                    sums: CheckSums::default(),
                 }
             }
-        }
-        let mut mask = 0u64;
-        for (c, &bits) in covered.iter().enumerate() {
-            if bits == 0x1ff && c < u64::BITS as usize {
-                mask |= 1u64 << c;
+            Err(e) => {
+                self.key_valid = false;
+                return Some(Err(e));
             }
         }
-        mask
+        None
     }
 
-    /// Writes carried feature `index` (see [`Self::seed_carried`]) into the new keyframe: its
-    /// pixels in this pair and the template around its nearest integer pixel.
-    fn carry_feature(&mut self, index: usize, left: &Image) {
-        let (Some(&(x, y)), Some(&pixels)) = (self.selected.get(index), self.current_px.get(index))
-        else {
-            return;
-        };
-        let Some(template) = left.template(i32::from(x), i32::from(y)) else {
-            return;
-        };
-        if let Some(slot) = self.key.get_mut(self.key_count) {
-            *slot = KeyFeature { pixels, template };
-            self.key_count += 1;
-        }
-    }
-
-    /// Ends the least-median-of-squares search: best hypothesis, robust inlier gate
-    /// ([`robust_gate`] of the best median).
-    fn after_hypotheses(&mut self) {
-        let Some((motion, median)) = self.lmeds.best() else {
-            self.fail_motion(VoError::DegenerateGeometry);
-            return;
-        };
-        self.motion = motion;
-        let n = self.pair_count.min(N);
-        let pairs = self.pairs.get(..n).unwrap_or(&[]);
-        self.gating = Gating {
-            motion,
-            gate: robust_gate(self.config.inlier_gate_chi2, median, n),
-        };
-        let count = mark_inliers(pairs, &self.motion, self.gating.gate, &mut self.inliers);
-        self.quality.inliers = count;
-        if count < self.config.min_inliers {
-            self.fail_motion(VoError::TooFewInliers { found: count });
-        } else {
-            self.phase = Phase::Refine {
-                round: 0,
-                iteration: 0,
+    /// One band of the right image's check; after the last band, the whole image's checks and
+    /// the repeated-frame test of the left image's checksum against the keyframe's, then on to
+    /// tracking (or, without a keyframe, to detection). A failed check ends the update and
+    /// forgets the keyframe.
+    #[inline(always)]
+    fn check_right_item(
+        &mut self,
+        right: &Image,
+        left_sum: u64,
+        band: u8,
+        mut sums: CheckSums,
+    ) -> Option<Result<VoOutput, VoError>> {
+        let checked = right.check_band(usize::from(band), &mut sums);
+        if checked.is_ok() && usize::from(band) + 1 < CHECK_BANDS {
+            self.phase = Phase::CheckRight {
+                left_sum,
+                band: band + 1,
+                sums,
             };
+            return None;
         }
-    }
-
-    /// Drops the running round: the previous round's motion and inlier set come back and the
-    /// next item computes the covariance there. Without a completed round, fails with `error`.
-    fn revert_round(&mut self, error: VoError) {
-        let n = self.pair_count.min(N);
-        let pairs = self.pairs.get(..n).unwrap_or(&[]);
-        match self.kept {
-            Some(kept) => {
-                self.motion = kept.restore(pairs, &mut self.inliers);
-                self.rounds_reverted = 1;
-                self.phase = Phase::Refine {
-                    round: ML_ROUNDS,
-                    iteration: 0,
+        let checks = checked
+            .and_then(|()| sums.finish(&self.config))
+            .map(|_| left_sum);
+        match checks {
+            Ok(sum) if self.key_valid && sum == self.key_checksum => {
+                self.key_valid = false;
+                return Some(Err(VoError::RepeatedFrame));
+            }
+            Ok(sum) => {
+                self.frame_checksum = sum;
+                self.phase = if self.key_valid {
+                    Phase::Track { next: 0 }
+                } else {
+                    Phase::Detect { row: FIRST_ROW }
                 };
             }
-            None => self.fail_motion(error),
-        }
-    }
-
-    /// One maximum-likelihood iteration (eq. 11); `ML_ROUNDS` rounds, each re-gated with the
-    /// robust gate at its motion; a round that fails or leaves too few inliers is dropped
-    /// ([`Self::revert_round`]); the last item evaluates the covariance at the converged motion
-    /// (scaled by the robust scale over all correspondences, see `motion::finish_estimate`).
-    fn refine_item(&mut self, round: u8, iteration: u8) {
-        let n = self.pair_count.min(N);
-        let pairs = self.pairs.get(..n).unwrap_or(&[]);
-        let inliers = self.inliers.get(..n).unwrap_or(&[]);
-        let it = match ml_iteration(pairs, inliers, &self.motion) {
-            Ok(it) => it,
-            Err(e) if round < ML_ROUNDS => return self.revert_round(e),
-            Err(e) => return self.fail_motion(e),
-        };
-        let max_iterations = self.config.ml_iterations.min(MAX_ML_ITERATIONS);
-        if round >= ML_ROUNDS {
-            // Covariance and quality at the converged motion (the update is not applied).
-            let median =
-                residual_median(pairs, &self.motion, &mut self.scratch).unwrap_or(f64::INFINITY);
-            let scale = robust_variance_scale(median, n);
-            match finish_estimate(self.motion, &it, scale) {
-                Ok(mut estimate) => {
-                    estimate.rounds_reverted = self.rounds_reverted;
-                    self.quality.inliers = estimate.inliers;
-                    self.quality.residual_rms_m = estimate.residual_rms_m;
-                    self.quality.chi2_per_dof = estimate.chi2_per_dof;
-                    self.quality.covariance_scale = estimate.covariance_scale;
-                    self.quality.rounds_reverted = estimate.rounds_reverted;
-                    self.estimate = Some(estimate);
-                    self.carried = 0;
-                    self.phase = Phase::Seed { next: 0 };
-                }
-                Err(e) => self.fail_motion(e),
+            Err(e) => {
+                self.key_valid = false;
+                return Some(Err(e));
             }
-            return;
         }
-        self.motion = it.motion;
-        let next = iteration.saturating_add(1);
-        if it.step >= 1e-12 && next < max_iterations {
-            self.phase = Phase::Refine {
-                round,
-                iteration: next,
-            };
-            return;
-        }
-        self.kept = Some(Kept {
-            solution: self.motion,
-            gating: self.gating,
-        });
-        if round + 1 < ML_ROUNDS {
-            let median =
-                residual_median(pairs, &self.motion, &mut self.scratch).unwrap_or(f64::INFINITY);
-            let gating = Gating {
-                motion: self.motion,
-                gate: robust_gate(self.config.inlier_gate_chi2, median, n),
-            };
-            let count = mark_inliers(pairs, &self.motion, gating.gate, &mut self.inliers);
-            if count < self.config.min_inliers {
-                return self.revert_round(VoError::TooFewInliers { found: count });
-            }
-            self.gating = gating;
-            self.quality.inliers = count;
-        }
-        self.phase = Phase::Refine {
-            round: round + 1,
-            iteration: 0,
-        };
-    }
-
-    /// Stereo matches selected feature `index` of the new left image into the keyframe.
-    fn stereo_new_feature(&mut self, index: usize, left: &Image, right: &Image) {
-        let Some(&(x, y)) = self.selected.get(index) else {
-            return;
-        };
-        let (xl, yl) = (f64::from(x), f64::from(y));
-        let (xr, yr) =
-            match match_and_triangulate(&self.camera, left, right, (xl, yl), None, &self.config) {
-                Ok((_, right_px)) => right_px,
-                Err(reason) => return self.quality.stereo_rejects.count(reason),
-            };
-        let Some(template) = left.template(i32::from(x), i32::from(y)) else {
-            return;
-        };
-        if let Some(slot) = self.key.get_mut(self.key_count) {
-            *slot = KeyFeature {
-                pixels: [xl as f32, yl as f32, xr as f32, yr as f32],
-                template,
-            };
-            self.key_count += 1;
-        }
-    }
-
-    /// Commits the new keyframe and builds the output.
-    fn finish(&mut self) -> Result<VoOutput, VoError> {
-        self.quality.stereo_matches = self.key_count as u16;
-        let t0_us = self.key_t_us;
-        let had_keyframe_motion = self.estimate;
-        if self.key_count < usize::from(self.config.min_matches) {
-            self.key_valid = false;
-            let e = VoError::TooFewMatches {
-                found: self.key_count as u16,
-            };
-            return Err(self.pending.unwrap_or(e));
-        }
-        self.key_valid = true;
-        self.key_t_us = self.frame_t_us;
-        self.key_checksum = self.frame_checksum;
-        if let Some(e) = self.pending {
-            return Err(e);
-        }
-        let pose = match had_keyframe_motion {
-            Some(estimate) => Some(relative_pose(
-                &self.mount,
-                &estimate,
-                t0_us,
-                self.frame_t_us,
-            )?),
-            None => None,
-        };
-        Ok(VoOutput {
-            pose,
-            quality: self.quality,
-        })
+        None
     }
 }

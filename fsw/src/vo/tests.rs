@@ -1,5 +1,5 @@
 //! Tests of the VO as a whole: synthetic point clouds through triangulation and motion (the
-//! acceptance figures of issue 5), rendered image pairs through the full pipeline, bad inputs.
+//! acceptance figures of VO-6 to VO-8), rendered image pairs through the full pipeline, bad inputs.
 
 use super::motion::{estimate_motion, relative_pose, CameraMount, Correspondence};
 use super::render::{hazcam, render_pair, RoverPose};
@@ -247,7 +247,7 @@ fn vo_18_nees_is_consistent_with_known_noise() {
 
 #[test]
 fn vo_17_noise_beyond_the_model_neither_fails_nor_is_overconfident() {
-    // The real-data failure of issue 15: the pixels carry 1 px of noise while the covariances
+    // VO-17, the failure seen on real data: the pixels carry 1 px of noise while the covariances
     // assume 0.3 px (11x too small in variance), 40 tracks of which 20 % are wrong.
     let (solved, m6, m3, failures) = nees_statistics(200, 1700, 40, 1.0, 0.3, 0.2);
     println!(

@@ -149,10 +149,10 @@ fn refine_translation(
 /// matrix is factored once per call ([`template_system`]); each iteration samples `I2` (bilinear
 /// values, no gradients: [`residual_sums`]), solves with the stored factor and composes
 /// `W(p) <- W(p) o W(dp)^-1` ([`compose`]). `alpha = 1 / gain`, `beta = -bias / gain`: the
-/// same model as eq. 10, its residual scaled by `1 / gain`. The forward-additive iteration it
-/// replaced (issue 18) rebuilt the 8x8 normal matrix from the bilinear gradient of `I2`, which
-/// jumps at pixel boundaries: 27 % of the tracks on the real tilt pairs cycled between two
-/// warps until the iteration limit.
+/// same model as eq. 10, its residual scaled by `1 / gain`. A forward-additive iteration
+/// rebuilds the 8x8 normal matrix from the bilinear gradient of `I2`, which jumps at pixel
+/// boundaries: with it 27 % of the tracks on the real tilt pairs cycle between two warps until
+/// the iteration limit.
 ///
 /// A step that raises the sum of squares is taken back and halved (the bilinear surface is
 /// only piecewise smooth); a halved step whose centre move is below 0.02 px ends the iteration

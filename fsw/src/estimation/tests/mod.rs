@@ -763,7 +763,7 @@ fn est_8_subset_update_gates_whole_and_fuses_part() {
     assert_eq!(rejected.state(), base.state());
 }
 
-/// EST-8b (issue 18): a relative pose gated with its innovation kept
+/// EST-8b: a relative pose gated with its innovation kept
 /// (`gate_relative_pose_kept`) gives the gate's decision bit for bit, and fusing the kept
 /// innovation with another set of observed components and added variances
 /// (`fuse_kept_relative_pose`, the kinematic aiding without VO) equals the ungated update of

@@ -1,4 +1,4 @@
-//! Monte Carlo acceptance tests of the estimator (issue 4 acceptance, EST-8 to EST-12).
+//! Monte Carlo acceptance tests of the estimator (EST-8 to EST-12).
 
 use super::harness::{run, RunStats, Scenario};
 use super::truth::{Motion, Truth};

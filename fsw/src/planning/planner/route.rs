@@ -169,9 +169,10 @@ impl Planner {
         }
         // A cut path must take the rover at least `min_reach` away, measured straight to its
         // end: guidance stops within its tolerance of a path's end, so a path whose end is that
-        // close is no drive at all, however long its polyline (a boundary-following route cut
-        // by the wedge right after a bend went 6.7 cm to an end 5 cm away on `rockfield-goal`;
-        // the rover held, mapped and got the same path back until fault protection stopped it).
+        // close is no drive at all, however long its polyline (without the rule, a
+        // boundary-following route cut by the wedge right after a bend on `rockfield-goal` goes
+        // 6.7 cm to an end 5 cm away, and the rover holds, maps and gets the same path back
+        // until fault protection stops it).
         let reach = path_pts.last().map_or(0.0, |end| dist(position, *end));
         if length < self.config.min_drive_m || reach < self.config.min_reach_m {
             if let Some(y) = cut_yaw {
