@@ -13,10 +13,9 @@ use super::measure::{
     repaint_stack, stack_high_water, stack_region, Meter, Stats, INSNS_PER_COUNT,
 };
 use super::semihost::HostFile;
-use super::{report, CORE_CLOCK_HZ, SYSTICKS};
+use super::{report, SYSTICKS};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_semihosting::hio;
-use fsw::exec::ExecConfig;
 use fsw::flight::{Devices, GROUP_COUNT};
 use fsw_image::flight_replay::{FlightSetup, Replay};
 use rover_replay::devices::{
@@ -70,11 +69,18 @@ fn print_stats(kind: &str, name: &str, s: &Stats) {
     ));
 }
 
+/// SysTick reload of the timing run, counts (the register holds `reload - 1`, 24 bits).
+const TIMING_RELOAD: u32 = 1 << 24;
+
 /// The timing run over the tape at `path`; true when the calibration held and the replay
 /// matched the recording frame for frame.
 pub fn run(mut core: cortex_m::Peripherals, path: Option<&str>) -> bool {
-    let config = ExecConfig::default();
-    let reload = CORE_CLOCK_HZ / 1_000_000 * config.frame_period_us;
+    // The timing run replays frames back to back: SysTick is only its time base, so it runs
+    // with the longest period the 24-bit reload register holds (2^24 counts, 671 M
+    // instructions). The clock's reads near a reload are the ambiguous ones (QEMU raises the
+    // pending bit after the counter has reloaded, `SystickClock::counter`): at the 5 ms period
+    // of the still run one reload in about 4,000 reads left a measurement one period off.
+    let reload = TIMING_RELOAD;
     core.SYST.set_clock_source(SystClkSource::Core);
     core.SYST.set_reload(reload - 1);
     core.SYST.clear_current();
