@@ -184,6 +184,17 @@ enum Verdict {
     Ignored,
 }
 
+impl Verdict {
+    /// [`Verdict::Plausible`] when `plausible`, [`Verdict::Invalid`] otherwise.
+    fn of(plausible: bool) -> Self {
+        if plausible {
+            Verdict::Plausible
+        } else {
+            Verdict::Invalid
+        }
+    }
+}
+
 /// What [`checked`] made of a device call.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Checked<T> {
@@ -264,11 +275,7 @@ impl<P: Platform> Work<'_, P> {
                 let plausible = s.valid
                     && in_range(&s.gyro_rad_s, l.gyro_max_rad_s)
                     && in_range(&s.accel_m_s2, l.accel_max_m_s2);
-                if plausible {
-                    Verdict::Plausible
-                } else {
-                    Verdict::Invalid
-                }
+                Verdict::of(plausible)
             },
         );
         let rebased = self.state.health[i].resyncs != resyncs;
@@ -344,11 +351,7 @@ impl<P: Platform> Work<'_, P> {
                     && j.bogie_rad
                         .iter()
                         .all(|a| libm::fabs(*a) <= limits.bogie_rad + m);
-                if finite && plausible && j.suspension_valid {
-                    Verdict::Plausible
-                } else {
-                    Verdict::Invalid
-                }
+                Verdict::of(finite && plausible && j.suspension_valid)
             },
         );
         if let Checked::Accepted(j) = result {
@@ -432,11 +435,7 @@ impl<P: Platform> Work<'_, P> {
                     && r.energy_used_j - e0_j <= max_w * elapsed_s
                     && r.bus_power_w >= 0.0
                     && r.bus_power_w <= max_w;
-                if plausible {
-                    Verdict::Plausible
-                } else {
-                    Verdict::Invalid
-                }
+                Verdict::of(plausible)
             },
         );
         if let Checked::Accepted(r) = result {

@@ -407,8 +407,7 @@ impl Navigator {
                 // bookkeeping releases the clone).
                 let pose = self.filter.clone_pose(clone);
                 self.stereo = StereoStage::Idle;
-                let heading_known =
-                    self.filter.ekf_config().sun.is_none() || self.sun.counters().sun_applied > 0;
+                let heading_known = self.heading_known();
                 let fused = self.vo.finished(
                     clone,
                     result,
@@ -417,16 +416,28 @@ impl Navigator {
                     &mut self.diag,
                     &mut self.cal,
                 );
-                if fused {
-                    self.kin.vo_fused();
-                }
-                self.latch_safe();
+                self.after_vo(fused);
                 if self.start_map(frame, pose) {
                     return (quantum.max(1), false);
                 }
                 (quantum.max(1), true)
             }
         }
+    }
+
+    /// The EKF heading has had its first sun update, or the drive has no sun sensor (the
+    /// VO-only trajectory is anchored only then).
+    fn heading_known(&self) -> bool {
+        self.filter.ekf_config().sun.is_none() || self.sun.counters().sun_applied > 0
+    }
+
+    /// After a VO update: a fused pose ends the kinematic aiding's rejection streak; a filter
+    /// fault it raised latches the safe mode.
+    fn after_vo(&mut self, fused: bool) {
+        if fused {
+            self.kin.vo_fused();
+        }
+        self.latch_safe();
     }
 
     /// The goal-directed navigation's view of the rest of the navigator for one step.
@@ -510,8 +521,7 @@ impl Navigator {
     /// A VO relative pose `raw` between VO's keyframe and the pending capture, fused as at the
     /// end of a VO update (tests of the VO gate and the late update).
     pub(super) fn vo_fuse(&mut self, raw: &crate::types::RelativePose) {
-        let heading_known =
-            self.filter.ekf_config().sun.is_none() || self.sun.counters().sun_applied > 0;
+        let heading_known = self.heading_known();
         let fused = self.vo.fuse(
             raw,
             heading_known,
@@ -519,9 +529,6 @@ impl Navigator {
             &mut self.diag,
             &mut self.cal,
         );
-        if fused {
-            self.kin.vo_fused();
-        }
-        self.latch_safe();
+        self.after_vo(fused);
     }
 }
