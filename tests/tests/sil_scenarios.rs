@@ -1,41 +1,52 @@
-//! SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..6, SIL-SLIP-1..2, SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7, SIL-HAZ-1..3, SIL-LOC-1..2, SIL-SEQ-1..2: closed-loop scenario runs of the flight software on the
-//! simulator with rendered stereo, against the thresholds of `sim_host::commands::sil::CASES` (the same
-//! table `sim-host sil` writes to `docs/results/sil-results.md`).
+//! The CI tier of the SIL acceptance (SIL-GNC-1..4, SIL-NAV-1..2, SIL-KIN-1..6, SIL-SLIP-1..2,
+//! SIL-GATE-1..2, SIL-RB-1, SIL-FP-1..7, SIL-HAZ-1..3, SIL-LOC-1..2, SIL-SEQ-1..2): each case
+//! runs closed loop on the first `CI_SEEDS` acceptance seeds with rendered stereo, and every
+//! check value must be the value the release tier recorded for that case and seed in
+//! `docs/results/sil-seeds.jsonl` (bit for bit: the flight software and the simulator are
+//! deterministic). A change of flight or simulator behaviour fails here until the release tier
+//! is run again (`sim-host sil`), and the release tier's verdicts must agree with the table's
+//! `open` flags (`sim_host::commands::sil::seeds::consistency`, a unit test of `sim-host`).
 
-use sim_host::commands::sil::{case, run_case, CaseResult};
+use sim_host::commands::sil::seeds::{acceptance_seeds, read_rows, CI_SEEDS, RELEASE_ROWS};
+use sim_host::commands::sil::{case, run_case};
 use std::path::PathBuf;
 
-fn scenarios() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
 fn check(id: &str) {
     let Some(c) = case(id) else {
         panic!("no SIL case {id}");
     };
-    let result: CaseResult = match run_case(c, &scenarios()) {
+    let rows = match read_rows(&root().join(RELEASE_ROWS)) {
         Ok(r) => r,
-        Err(e) => panic!("{id}: run failed: {e:#}"),
+        Err(e) => panic!("{e:#}: run the release tier (`sim-host sil`)"),
     };
-    for r in &result.checks {
-        println!(
-            "{id} {}: {:?} {} (threshold {:?} {}) -> {}{}",
-            r.check.what,
-            r.value,
-            r.check.unit,
-            r.check.compare,
-            r.check.threshold,
-            if r.pass { "pass" } else { "FAIL" },
-            if r.check.required {
-                ""
-            } else if r.check.open {
-                " (open requirement)"
-            } else {
-                " (goal)"
-            }
+    for seed in acceptance_seeds(CI_SEEDS) {
+        let run = match run_case(c, &root().join("scenarios"), seed, None) {
+            Ok(r) => r,
+            Err(e) => panic!("{id} seed {seed}: run failed: {e:#}"),
+        };
+        let Some(recorded) = rows.iter().find(|r| r.case == id && r.seed == seed) else {
+            panic!(
+                "{id} seed {seed}: not in {RELEASE_ROWS}: run the release tier (`sim-host sil`)"
+            );
+        };
+        for ((k, v), r) in c.checks.iter().zip(&run.values).zip(&recorded.values) {
+            println!(
+                "{id} seed {seed} {}: {v:?} {} (release tier {r:?}; per seed {})",
+                k.what,
+                k.unit,
+                if k.passes(*v) { "pass" } else { "FAIL" }
+            );
+        }
+        assert_eq!(
+            run.values, recorded.values,
+            "{id} seed {seed}: the check values differ from the release tier's \
+             ({RELEASE_ROWS}): flight or simulator behaviour changed; run `sim-host sil` again"
         );
     }
-    assert!(result.passed(), "{id}: a required check failed");
 }
 
 #[test]

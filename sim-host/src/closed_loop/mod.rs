@@ -24,6 +24,7 @@ use std::collections::VecDeque;
 use std::rc::Rc;
 
 mod flight_config;
+pub mod isolated;
 mod result;
 
 pub use flight_config::{flight_config, DriveOptions, Mission};
@@ -187,6 +188,8 @@ pub fn run_with<H: RunHooks>(
         step_world(&world, &mut source, &mut stop_countdown, &mut log.history);
         fsw.tick();
         hooks.after_tick(&fsw);
+        log.observe_joints(&world);
+        log.observe_gate(fsw.nav(), &world);
         log.observe(fsw.nav(), &world, scenario);
         if matches!(source, CommandSource::Flight)
             && matches!(
@@ -387,6 +390,16 @@ struct RunLog {
     loc_checks: Vec<LocCheck>,
     /// The truth-side hazard check.
     hazard_monitor: crate::hazards::HazardMonitor,
+    /// H04 eq. 15 odometry on the encoder readings, and the time of the last reading it saw.
+    eq15: isolated::Eq15Odometry,
+    eq15_t_us: Option<u64>,
+    /// The VO pipeline's relative poses chained raw.
+    vo_raw: isolated::VoRawChain,
+    /// The slip gate's intervals against the truth, the gate decisions seen and where the
+    /// current interval started.
+    slip_intervals: Vec<isolated::SlipInterval>,
+    kin_tested_seen: u32,
+    slip_mark: Option<isolated::SlipMark>,
 }
 
 impl RunLog {
@@ -407,6 +420,48 @@ impl RunLog {
             loc_seen: 0,
             loc_checks: Vec::new(),
             hazard_monitor,
+            eq15: isolated::Eq15Odometry::new(),
+            eq15_t_us: None,
+            vo_raw: isolated::VoRawChain::default(),
+            slip_intervals: Vec::new(),
+            kin_tested_seen: 0,
+            slip_mark: None,
+        }
+    }
+
+    /// After a frame: a new gate decision closes a slip interval against the truth.
+    fn observe_gate(&mut self, nav: &fsw::flight::nav::Navigator, world: &SharedWorld) {
+        let Some(eq15) = self.eq15.pose() else {
+            return;
+        };
+        let w = world.borrow();
+        let mark = isolated::SlipMark::new(isolated::Pose::of_body(&w.truth.pose), eq15);
+        let tested = nav.counters().kin_tested;
+        if tested == self.kin_tested_seen {
+            if self.slip_mark.is_none() {
+                self.slip_mark = Some(mark);
+            }
+            return;
+        }
+        self.kin_tested_seen = tested;
+        if let Some(start) = self.slip_mark {
+            let s = nav.slip();
+            self.slip_intervals.push(start.interval(
+                &mark,
+                w.truth.t_us as f64 * 1e-6,
+                [s.x_m, s.y_m, s.phi_rad],
+                nav.gate().accepted,
+            ));
+        }
+        self.slip_mark = Some(mark);
+    }
+
+    /// After a frame: a new encoder reading into the eq. 15 odometry.
+    fn observe_joints(&mut self, world: &SharedWorld) {
+        let w = world.borrow();
+        if self.eq15_t_us != Some(w.joints.t_us) {
+            self.eq15_t_us = Some(w.joints.t_us);
+            self.eq15.update(&w.joints, &w.truth.pose);
         }
     }
 
@@ -429,6 +484,19 @@ impl RunLog {
                     check.vo_pose = nav
                         .vo_pose()
                         .map(|v| ([v.p_n.x, v.p_n.y, v.p_n.z], quat_xyzw(&v.q_nr)));
+                    if let Some(rp) = out.pose.as_ref() {
+                        let history = &self.history;
+                        let truth_at = |t: u64| {
+                            history
+                                .iter()
+                                .find(|(ht, _)| *ht == t)
+                                .map(|(_, p)| isolated::Pose::of_body(p))
+                        };
+                        check.raw_pose = self
+                            .vo_raw
+                            .push(rp.t0_us, rp.t1_us, &rp.trans_0_1_m, &rp.rot_0_1, truth_at)
+                            .map(|p| p.arrays());
+                    }
                     self.vo_checks.push(check);
                 }
             }
@@ -464,7 +532,9 @@ impl RunLog {
     fn record<P: Platform>(&mut self, world: &SharedWorld, scenario: &Scenario, fsw: &Fsw<P>) {
         let w = world.borrow();
         if w.steps % 10 == 0 {
-            self.records.push(record(&w, &scenario.waypoints, fsw));
+            let mut r = record(&w, &scenario.waypoints, fsw);
+            r.kin_eq15 = self.eq15.pose().map(|p| p.arrays());
+            self.records.push(r);
             self.hazard_monitor
                 .check(w.truth.t_us as f64 * 1e-6, &w.truth.pose, &w.geometry);
         }
@@ -548,6 +618,9 @@ impl RunEnd<'_> {
             },
             vo_last_error: nav.vo().last_error().map(|e| format!("{e:?}")),
             vo_checks: log.vo_checks,
+            vo_raw_gaps: log.vo_raw.gaps,
+            eq15_refused: log.eq15.refused,
+            slip_intervals: log.slip_intervals,
             rocks: w
                 .terrain
                 .rocks()

@@ -35,6 +35,9 @@ pub struct Record {
     pub wheel_average_m: f64,
     /// Flight estimates at this time (`None` before the flight software is aligned).
     pub est: Option<Estimates>,
+    /// H04 eq. 15 odometry alone on the encoder readings (host side,
+    /// [`super::isolated::Eq15Odometry`]): position and attitude `[x, y, z, w]`.
+    pub kin_eq15: Option<([f64; 3], [f64; 4])>,
 }
 
 /// The flight software's estimates at one record time, `N` (= the simulator's `W`).
@@ -48,6 +51,8 @@ pub struct Estimates {
     pub ekf_pos_sigma_m: [f64; 3],
     /// EKF 1-sigma heading, rad.
     pub ekf_heading_sigma_rad: f64,
+    /// EKF horizontal position covariance `[nn, ne, ee]`, m^2.
+    pub ekf_pos_cov_ne: [f64; 3],
     /// VO-only pose (position, attitude), once VO has delivered.
     pub vo: Option<([f64; 3], [f64; 4])>,
     /// 3D kinematic dead reckoning (position, attitude).
@@ -90,6 +95,9 @@ pub struct VoCheck {
     pub vo_pose: Option<([f64; 3], [f64; 4])>,
     /// The true pose at the capture time `t_s`.
     pub truth_pose: ([f64; 3], [f64; 4]),
+    /// The raw VO chain after this relative pose ([`super::isolated::VoRawChain`]): the
+    /// pipeline's poses before the boresight correction and without the EKF's anchor.
+    pub raw_pose: Option<([f64; 3], [f64; 4])>,
 }
 
 /// Per-rate-group timing of the flight executive.
@@ -182,6 +190,13 @@ pub struct RunResult {
     pub vo_last_error: Option<String>,
     /// Every VO relative pose checked against the truth.
     pub vo_checks: Vec<VoCheck>,
+    /// Relative poses the raw VO chain bridged with the true motion (a failed update before
+    /// them).
+    pub vo_raw_gaps: u32,
+    /// Encoder readings the eq. 15 odometry refused.
+    pub eq15_refused: u32,
+    /// The slip gate's intervals against the truth.
+    pub slip_intervals: Vec<super::isolated::SlipInterval>,
     /// Rocks of the terrain `[north, east, radius]` for the top view.
     pub rocks: Vec<[f64; 3]>,
     /// Truth-side hazard contacts ([`crate::hazards`]), in time order.
@@ -368,6 +383,7 @@ pub(super) fn vo_check(
     let q1 = nalgebra::UnitQuaternion::from_rotation_matrix(&r1);
     Some(VoCheck {
         vo_pose: None,
+        raw_pose: None,
         truth_pose: (p1.pos_m, [q1.i, q1.j, q1.k, q1.w]),
         t_s: rp.t1_us as f64 * 1e-6,
         step_m: trans_true.norm(),
@@ -396,6 +412,7 @@ fn estimates<P: Platform>(fsw: &Fsw<P>) -> Option<Estimates> {
         ekf_quat_xyzw: quat_xyzw(&x.q_nr),
         ekf_pos_sigma_m: [sigma(0), sigma(1), sigma(2)],
         ekf_heading_sigma_rad: ekf.heading_sigma_rad(),
+        ekf_pos_cov_ne: [p[(i, i)], p[(i, i + 1)], p[(i + 1, i + 1)]],
         vo: nav
             .vo_pose()
             .map(|v| ([v.p_n.x, v.p_n.y, v.p_n.z], quat_xyzw(&v.q_nr))),
@@ -436,6 +453,7 @@ pub(super) fn record<P: Platform>(w: &World, path: &[[f64; 2]], fsw: &Fsw<P>) ->
         distance_m: t.distance_m,
         wheel_average_m: w.wheel_average_m,
         est: estimates(fsw),
+        kin_eq15: None,
     }
 }
 

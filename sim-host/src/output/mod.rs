@@ -1,6 +1,7 @@
 //! Output files of a run: `truth.tum`, `ekf.tum`, `vo.tum`, `kin3d.tum`, `kin2d.tum`, `dr.tum`,
 //! `vo_checks.csv`, `summary.json`, `report.html`.
 
+pub mod components;
 pub mod report;
 pub mod summary;
 pub mod tum;

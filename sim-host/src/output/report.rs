@@ -223,7 +223,7 @@ pub fn estimated_slip(records: &[Record]) -> Vec<(f64, f64, f64)> {
 
 /// The true slip averaged over the same windows as [`estimated_slip`]:
 /// `(t, slip ratio, slip angle rad)`.
-fn true_slip(records: &[Record]) -> Vec<(f64, f64, f64)> {
+pub(crate) fn true_slip(records: &[Record]) -> Vec<(f64, f64, f64)> {
     records
         .windows(SLIP_WINDOW + 1)
         .map(|w| {
@@ -728,6 +728,7 @@ mod tests {
                         ekf_quat_xyzw: q,
                         ekf_pos_sigma_m: [0.01; 3],
                         ekf_heading_sigma_rad: 0.01,
+                        ekf_pos_cov_ne: [1e-4, 0.0, 1e-4],
                         vo: None,
                         kin3d: ([d * cp, d * sp, 0.0], q),
                         kin2d: [d * cp, d * sp, psi],
@@ -738,6 +739,7 @@ mod tests {
                         gate_d2: 1.0,
                         gate_dof: 5,
                     }),
+                    kin_eq15: None,
                 }
             })
             .collect()

@@ -212,6 +212,17 @@ pub struct Summary {
     pub fault_protection: FaultProtectionSummary,
     /// Navigation counters of the flight software.
     pub nav: fsw::flight::nav::NavCounters,
+    /// H04 eq. 15 kinematics alone, integrated with its own attitude
+    /// ([`crate::output::components`]).
+    pub kin_eq15: crate::output::components::Eq15Summary,
+    /// The VO pipeline's relative poses chained raw.
+    pub vo_raw: crate::output::components::VoRawSummary,
+    /// Distance errors with their sign.
+    pub signed_distance_error_pct: crate::output::components::SignedDistanceErrors,
+    /// Slip estimation against the simulator's truth.
+    pub slip_vs_truth: crate::output::components::SlipTruthSummary,
+    /// The EKF's consistency in closed loop.
+    pub nees: crate::output::components::NeesSummary,
     /// Wall-clock time of the run, s (the only field that differs between identical runs when
     /// the counter is simulated time).
     pub wall_time_s: f64,
@@ -680,6 +691,11 @@ pub fn summarise(run: &RunResult) -> Summary {
         nav_mode: format!("{:?}", run.nav_mode),
         fault_protection: fault_protection_summary(run),
         nav: run.nav,
+        kin_eq15: crate::output::components::eq15(run),
+        vo_raw: crate::output::components::vo_raw(run),
+        signed_distance_error_pct: crate::output::components::signed_distance(run),
+        slip_vs_truth: crate::output::components::slip_truth(run),
+        nees: crate::output::components::nees(run),
         wall_time_s: run.wall_time_s,
     }
 }

@@ -1,6 +1,6 @@
 //! The table of SIL cases ([`CASES`]) with the variants and checks they share.
 
-use super::{Case, Check, Compare, Variant};
+use super::{Case, Check, Compare, Runs, Stat, Variant, VERDICT_FRACTION};
 use crate::output::summary::Summary;
 
 const BASE: Variant = Variant {
@@ -77,15 +77,23 @@ const KINEMATIC: Variant = Variant {
     ..BASE
 };
 
+/// As [`KINEMATIC`] without VO: the dead reckoning keeps its nominal wheel radius (no
+/// VO-learnt scale), so kinematics is compared with kinematics (V99 sec. 6).
+const KINEMATIC_NO_VO: Variant = Variant {
+    no_vo: true,
+    ..KINEMATIC
+};
+
 /// The lumped slip model (reference).
 const LUMPED: Variant = Variant {
     lumped: true,
     ..BASE
 };
 
+/// A requirement on a quantity, judged at its percentile over the seeds ([`Stat::Percentile`]).
 const fn req(
     what: &'static str,
-    value: fn(&Summary) -> Option<f64>,
+    value: fn(&Runs) -> Option<f64>,
     compare: Compare,
     threshold: f64,
     unit: &'static str,
@@ -96,35 +104,39 @@ const fn req(
         compare,
         threshold,
         unit,
-        required: true,
+        stat: Stat::Percentile,
         open: false,
     }
 }
 
-const fn goal(
+/// A verdict (a flag: 1 when it holds) that [`VERDICT_FRACTION`] of the seeds pass.
+const fn verdict(what: &'static str, value: fn(&Runs) -> Option<f64>) -> Check {
+    Check {
+        stat: Stat::Fraction(VERDICT_FRACTION),
+        ..req(what, value, Compare::AtLeast, 1.0, "")
+    }
+}
+
+/// A requirement every seed meets ([`Stat::Every`]).
+const fn every(
     what: &'static str,
-    value: fn(&Summary) -> Option<f64>,
+    value: fn(&Runs) -> Option<f64>,
     compare: Compare,
     threshold: f64,
     unit: &'static str,
 ) -> Check {
     Check {
-        required: false,
+        stat: Stat::Every,
         ..req(what, value, compare, threshold, unit)
     }
 }
 
-/// A requirement not met yet (see [`Check::open`]).
-const fn open(
-    what: &'static str,
-    value: fn(&Summary) -> Option<f64>,
-    compare: Compare,
-    threshold: f64,
-    unit: &'static str,
-) -> Check {
+/// `check` marked open (see [`Check`]).
+#[allow(dead_code)]
+const fn opened(check: Check) -> Check {
     Check {
         open: true,
-        ..goal(what, value, compare, threshold, unit)
+        ..check
     }
 }
 
@@ -133,16 +145,12 @@ fn flag(b: bool) -> Option<f64> {
 }
 
 /// Requirement: the RoverBug planner's verdict is `reached`.
-const PLANNER_REACHED: Check = req(
-    "planner status reached",
-    |s| flag(s.planner.as_ref()?.status == "reached"),
-    Compare::AtLeast,
-    1.0,
-    "",
-);
+const PLANNER_REACHED: Check = verdict("planner status reached", |s| {
+    flag(s.planner.as_ref()?.status == "reached")
+});
 
 /// Requirement: no truth-side collision with a hazard (`sim_host::hazards`).
-const NO_COLLISION: Check = req(
+const NO_COLLISION: Check = every(
     "truth-side collisions",
     |s| Some(f64::from(s.collisions)),
     Compare::AtMost,
@@ -152,7 +160,7 @@ const NO_COLLISION: Check = req(
 
 /// H04 Fig. 17 (open): planar 2D odometry at least 30 % of the distance off over an extreme
 /// traverse without slip...
-const KIN2D_H04: Check = open(
+const KIN2D_H04: Check = req(
     "2D kinematics error / distance",
     |s| s.error_pct.kin2d,
     Compare::AtLeast,
@@ -161,7 +169,7 @@ const KIN2D_H04: Check = open(
 );
 
 /// ... while the flight 3D kinematics stays within 3 % (open).
-const KIN3D_H04: Check = open(
+const KIN3D_H04: Check = req(
     "3D kinematics error / distance",
     |s| s.error_pct.kin3d,
     Compare::AtMost,
@@ -170,18 +178,12 @@ const KIN3D_H04: Check = open(
 );
 
 /// Requirement: the rover reached the goal within the scenario's tolerance.
-const GOAL_REACHED: Check = req(
-    "goal reached",
-    |s| flag(s.goal_reached),
-    Compare::AtLeast,
-    1.0,
-    "",
-);
+const GOAL_REACHED: Check = verdict("goal reached", |s| flag(s.goal_reached));
 
 /// Requirement (SIL-FP-1..7): the drive ends honestly: either `Arrived` with the goal reached in
 /// truth, or stopped by fault protection or safed (with its reason in the summary); never
 /// `Arrived` outside the goal tolerance, never still driving.
-const HONEST_END: Check = req(
+const HONEST_END: Check = every(
     "arrived within tolerance, or stopped safe",
     |s| {
         flag(
@@ -196,7 +198,7 @@ const HONEST_END: Check = req(
 );
 
 /// Requirement (SIL-FP-1..7): never `Arrived` outside the goal tolerance.
-const NO_FALSE_ARRIVAL: Check = req(
+const NO_FALSE_ARRIVAL: Check = every(
     "no Arrived outside the tolerance",
     |s| flag(s.nav_mode != "Arrived" || s.goal_reached),
     Compare::AtLeast,
@@ -210,6 +212,7 @@ const fn fault_case(id: &'static str, scenario: &'static str, title: &'static st
         id,
         scenario,
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title,
         checks: &[HONEST_END, NO_FALSE_ARRIVAL],
@@ -226,7 +229,7 @@ const EKF_ONE_PERCENT: Check = req(
 );
 
 /// Goal: EKF final error at most 0.5 % of the distance.
-const EKF_HALF_PERCENT: Check = goal(
+const EKF_HALF_PERCENT: Check = req(
     "EKF error / distance",
     |s| s.error_pct.ekf,
     Compare::AtMost,
@@ -240,6 +243,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-GNC-1",
         scenario: "slope-10-cross",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "10 deg sand cross slope, slip compensation on (H05 Fig. 9)",
         checks: &[
@@ -257,7 +261,7 @@ pub const CASES: [Case; 31] = [
                 0.10,
                 "m",
             ),
-            goal(
+            req(
                 "cross-track rms",
                 |s| Some(s.cross_track_m.rms),
                 Compare::AtMost,
@@ -277,6 +281,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-GATE-1",
         scenario: "flat-firm",
         no_slip_comp: false,
+        paired: false,
         variant: NO_SLIP,
         title: "firm flat ground without slip: the gate's false alarms near its 5 % design",
         checks: &[
@@ -301,6 +306,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-GATE-2",
         scenario: "rough-kinematics",
         no_slip_comp: false,
+        paired: false,
         variant: NO_SLIP,
         title: "firm rough ground without slip: few false alarms",
         checks: &[
@@ -318,6 +324,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-RB-1",
         scenario: "dunes-long",
         no_slip_comp: false,
+        paired: false,
         variant: NO_VO,
         title: "long sandy traverse without VO: EKF (IMU, sun, gated kinematics) against dead \
                 reckoning (wheel odometry with gyro attitude; RB)",
@@ -329,7 +336,7 @@ pub const CASES: [Case; 31] = [
                 0.6,
                 "x",
             ),
-            goal(
+            req(
                 "EKF error / DR error (not worse)",
                 |s| Some(s.error_pct.ekf? / s.error_pct.dr?.max(1e-9)),
                 Compare::AtMost,
@@ -352,21 +359,37 @@ pub const CASES: [Case; 31] = [
     Case {
         id: "SIL-GNC-2",
         scenario: "slope-10-cross",
-        no_slip_comp: true,
+        no_slip_comp: false,
+        paired: true,
         variant: BASE,
-        title: "10 deg sand cross slope, slip compensation off: drifts downhill (H05 Fig. 9)",
-        checks: &[open(
-            "cross-track max (downhill drift)",
-            |s| Some(s.cross_track_m.max),
-            Compare::AtLeast,
-            0.5,
-            "m",
-        )],
+        title: "10 deg sand cross slope, the same seed with and without slip compensation: \
+                without it the rover drifts downhill (H05 Fig. 9)",
+        checks: &[
+            req(
+                "downhill drift without compensation / with it (cross-track max; H05 Fig. 9: \
+                 0.5 m against SIL-GNC-1's 0.15 m)",
+                |s| {
+                    let without = s.no_comp.as_ref()?.cross_track_m.max;
+                    Some(without / s.cross_track_m.max.max(1e-9))
+                },
+                Compare::AtLeast,
+                3.3,
+                "x",
+            ),
+            req(
+                "cross-track max without compensation (H05's drift)",
+                |s| Some(s.no_comp.as_ref()?.cross_track_m.max),
+                Compare::AtLeast,
+                0.5,
+                "m",
+            ),
+        ],
     },
     Case {
         id: "SIL-NAV-1",
         scenario: "marsyard-25m",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "25 m Mars Yard path with rocks (H04 sec. 6)",
         checks: &[
@@ -400,6 +423,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-KIN-1",
         scenario: "rough-kinematics",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "very rough terrain: 3D kinematics against planar 2D (H04 Fig. 17)",
         checks: &[
@@ -410,7 +434,7 @@ pub const CASES: [Case; 31] = [
                 3.0,
                 "%",
             ),
-            goal(
+            req(
                 "2D error / 3D error",
                 |s| Some(s.error_pct.kin2d? / s.error_pct.kin3d?.max(1e-9)),
                 Compare::AtLeast,
@@ -423,6 +447,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-GNC-3",
         scenario: "slope-20-cross",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "20 deg sand cross slope: heavy slip, the gate rejects kinematics",
         checks: &[
@@ -447,16 +472,11 @@ pub const CASES: [Case; 31] = [
         id: "SIL-GNC-4",
         scenario: "slope-10-faults",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "10 deg slope with black frames, IMU dropout, NaN joints and no sun: fallbacks",
         checks: &[
-            req(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
+            GOAL_REACHED,
             req(
                 "cross-track max",
                 |s| Some(s.cross_track_m.max),
@@ -466,33 +486,30 @@ pub const CASES: [Case; 31] = [
             ),
             HONEST_END,
             NO_FALSE_ARRIVAL,
-            req(
+            every(
                 "device faults counted",
                 |s| Some(f64::from(s.device_faults)),
                 Compare::AtLeast,
                 100.0,
                 "",
             ),
-            req(
+            every(
                 "VO failures counted",
                 |s| s.vo.failures.map(|f| f as f64),
                 Compare::AtLeast,
                 1.0,
                 "",
             ),
-            req(
+            every(
                 "sensor holds (rover stopped)",
                 |s| Some(f64::from(s.nav.sensor_holds)),
                 Compare::AtLeast,
                 1.0,
                 "",
             ),
-            req(
+            verdict(
                 "not safed",
                 |s| flag(s.nav_mode != "Safed"),
-                Compare::AtLeast,
-                1.0,
-                "",
             ),
         ],
     },
@@ -500,16 +517,11 @@ pub const CASES: [Case; 31] = [
         id: "SIL-NAV-2",
         scenario: "dunes-long",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "over 50 m across 15-25 deg sandy dunes",
         checks: &[
-            open(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
+            GOAL_REACHED,
             HONEST_END,
             EKF_HALF_PERCENT,
         ],
@@ -518,19 +530,13 @@ pub const CASES: [Case; 31] = [
         id: "SIL-KIN-2",
         scenario: "rough-kinematics",
         no_slip_comp: false,
+        paired: false,
         variant: KINEMATIC,
         title:
             "very rough terrain without slip, exact dimensions: flight 3D kinematics against the \
                 independent truth kinematics",
         checks: &[
             req(
-                "3D kinematics error / distance (not zero)",
-                |s| s.error_pct.kin3d,
-                Compare::AtLeast,
-                1e-6,
-                "%",
-            ),
-            open(
                 "3D kinematics error / distance",
                 |s| s.error_pct.kin3d,
                 Compare::AtMost,
@@ -543,6 +549,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-KIN-3",
         scenario: "rock-crawl",
         no_slip_comp: false,
+        paired: false,
         variant: KINEMATIC,
         title: "rock crawl without slip: planar 2D odometry against 3D kinematics (H04 Fig. 17)",
         checks: &[
@@ -554,31 +561,32 @@ pub const CASES: [Case; 31] = [
         id: "SIL-KIN-4",
         scenario: "undulating",
         no_slip_comp: false,
-        variant: KINEMATIC,
-        title: "undulating ground without slip: flight 3D kinematics against averaged wheel \
-                odometry (V99 sec. 6)",
+        paired: false,
+        variant: KINEMATIC_NO_VO,
+        title: "undulating ground without slip or VO: flight 3D kinematics against averaged wheel \
+                odometry, kinematics against kinematics (V99 sec. 6)",
         checks: &[
             GOAL_REACHED,
             req(
-                "3D kinematics distance error (track memory, KIN-13; 1.07 % without)",
+                "3D kinematics distance error (track memory, KIN-13)",
                 |s| s.distance_error_pct.kin3d,
                 Compare::AtMost,
                 0.5,
                 "%",
             ),
-            goal(
+            req(
                 "3D kinematics distance error (V99 estimator: 0.3 %)",
                 |s| s.distance_error_pct.kin3d,
                 Compare::AtMost,
                 0.3,
                 "%",
             ),
-            goal(
-                "averaged wheel odometry distance error (V99: 2 %)",
-                |s| Some(s.distance_error_pct.wheel_average),
-                Compare::AtLeast,
-                0.0,
-                "%",
+            req(
+                "3D kinematics distance error / averaged wheel odometry's (V99: 0.3 % against 2 %)",
+                |s| Some(s.distance_error_pct.kin3d? / s.distance_error_pct.wheel_average.max(1e-9)),
+                Compare::AtMost,
+                0.15,
+                "x",
             ),
         ],
     },
@@ -586,17 +594,12 @@ pub const CASES: [Case; 31] = [
         id: "SIL-KIN-5",
         scenario: "step-climb",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "right wheels over a vertical step of one wheel radius",
         checks: &[
+            GOAL_REACHED,
             req(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
-            goal(
                 "3D kinematics error / distance",
                 |s| s.error_pct.kin3d,
                 Compare::AtMost,
@@ -609,12 +612,13 @@ pub const CASES: [Case; 31] = [
         id: "SIL-KIN-6",
         scenario: "rock-field-crawl",
         no_slip_comp: false,
+        paired: false,
         variant: KINEMATIC,
         title: "2 m crawl without slip through a staggered field of boulders under both tracks \
                 (H04 Fig. 17's terrain: the suspension to its limits over a short traverse)",
         checks: &[
             HONEST_END,
-            open("goal reached", |s| flag(s.goal_reached), Compare::AtLeast, 1.0, ""),
+            GOAL_REACHED,
             KIN2D_H04,
             KIN3D_H04,
         ],
@@ -623,18 +627,13 @@ pub const CASES: [Case; 31] = [
         id: "SIL-SLIP-1",
         scenario: "slope-10-cross",
         no_slip_comp: false,
+        paired: false,
         variant: LUMPED,
         title: "10 deg sand cross slope with the lumped slip model \
                 (reference: its lateral constant was chosen for H05 Fig. 9's drift)",
         checks: &[
-            goal(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
-            goal(
+            GOAL_REACHED,
+            req(
                 "cross-track max",
                 |s| Some(s.cross_track_m.max),
                 Compare::AtMost,
@@ -647,6 +646,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-LOC-1",
         scenario: "marsyard-25m",
         no_slip_comp: false,
+        paired: false,
         variant: LOCALIZATION,
         title: "Mars Yard without VO, terrain-map localization against a MARDI map (V99 sec. 5)",
         checks: &[
@@ -666,7 +666,7 @@ pub const CASES: [Case; 31] = [
                 7.815,
                 "",
             ),
-            goal(
+            req(
                 "fused fix position error max",
                 |s| s.localization.as_ref().and_then(|l| l.fused_error_max_m),
                 Compare::AtMost,
@@ -679,6 +679,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-LOC-2",
         scenario: "marsyard-25m",
         no_slip_comp: false,
+        paired: false,
         variant: LOCALIZATION_WRONG_MAP,
         title: "As SIL-LOC-1 with the uplinked map registered 1.5 m off: failed matches are detected, not fused",
         checks: &[
@@ -695,7 +696,7 @@ pub const CASES: [Case; 31] = [
                 0.5,
                 "m",
             ),
-            goal(
+            req(
                 "searches ended without a fix, or fixes refused by the gate",
                 |s| {
                     s.localization
@@ -712,6 +713,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-SEQ-1",
         scenario: "multi-target",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "Three science targets, the first behind an unknown wall: the sequencer reorders (V99 sec. 3, Fig. 3)",
         checks: &[
@@ -729,7 +731,7 @@ pub const CASES: [Case; 31] = [
                 3.0,
                 "",
             ),
-            open(
+            req(
                 "replans that changed the order (Fig. 3)",
                 |s| s.targets.as_ref().map(|t| f64::from(t.counters.reorders)),
                 Compare::AtLeast,
@@ -744,22 +746,17 @@ pub const CASES: [Case; 31] = [
         id: "SIL-SEQ-2",
         scenario: "multi-target",
         no_slip_comp: false,
+        paired: false,
         variant: ENERGY_SHORT,
         title: "As SIL-SEQ-1 with energy for two targets only, which the a-priori model does not show: the power telemetry drops the least important (V99 sec. 3)",
         checks: &[
-            open(
+            verdict(
                 "least important target (T2) dropped for energy",
                 |s| target_is(s, 2, "DroppedEnergy"),
-                Compare::AtLeast,
-                1.0,
-                "",
             ),
-            req(
+            verdict(
                 "most important target (T0) visited",
                 |s| target_is(s, 0, "Visited"),
-                Compare::AtLeast,
-                1.0,
-                "",
             ),
             WITHIN_ENERGY_BUDGET,
             req(
@@ -769,7 +766,7 @@ pub const CASES: [Case; 31] = [
                 1.0,
                 "",
             ),
-            goal(
+            req(
                 "fitted power / truth mean power (drive)",
                 |s| s.targets.as_ref().map(|t| t.counters.drive_power_w / s.energy.mean_power_w),
                 Compare::AtMost,
@@ -783,17 +780,12 @@ pub const CASES: [Case; 31] = [
         id: "SIL-SLIP-2",
         scenario: "marsyard-25m",
         no_slip_comp: false,
+        paired: false,
         variant: LUMPED,
         title: "Mars Yard with the lumped slip model (reference)",
         checks: &[
-            goal(
-                "goal reached",
-                |s| flag(s.goal_reached),
-                Compare::AtLeast,
-                1.0,
-                "",
-            ),
-            goal(
+            GOAL_REACHED,
+            req(
                 "EKF error / distance",
                 |s| s.error_pct.ekf,
                 Compare::AtMost,
@@ -831,19 +823,17 @@ pub const CASES: [Case; 31] = [
         id: "SIL-FP-6",
         scenario: "fault-full-slip",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "100 % slip from 10 s: the drive stops within 10 s of the slip limit",
         checks: &[
             HONEST_END,
             NO_FALSE_ARRIVAL,
-            req(
+            verdict(
                 "stopped on the slip limit",
                 |s| flag(s.fault_protection.last_response == "SlipLimit"),
-                Compare::AtLeast,
-                1.0,
-                "",
             ),
-            req(
+            every(
                 "end of the run (onset 10 s + 10 s + 1 s of run-out)",
                 |s| Some(s.sim_time_s),
                 Compare::AtMost,
@@ -856,17 +846,15 @@ pub const CASES: [Case; 31] = [
         id: "SIL-FP-7",
         scenario: "fault-motor-stall",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "10 deg slope with wheel 3's motor stalled from 10 s",
         checks: &[
             HONEST_END,
             NO_FALSE_ARRIVAL,
-            req(
+            verdict(
                 "stopped on the stall",
                 |s| flag(s.fault_protection.last_response.starts_with("MotorStall")),
-                Compare::AtLeast,
-                1.0,
-                "",
             ),
         ],
     },
@@ -874,6 +862,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-HAZ-1",
         scenario: "rockfield-goal",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "go to a goal 20 m away behind hazard rocks: hazard maps and RoverBug (V99 \
                 sec. 4)",
@@ -897,6 +886,7 @@ pub const CASES: [Case; 31] = [
         id: "SIL-HAZ-2",
         scenario: "cul-de-sac",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "a concave obstacle across the straight line: boundary following takes the rover round \
                 it to the goal",
@@ -917,36 +907,25 @@ pub const CASES: [Case; 31] = [
         id: "SIL-HAZ-3",
         scenario: "unreachable",
         no_slip_comp: false,
+        paired: false,
         variant: BASE,
         title: "goal inside a closed ring of rocks: the rover goes round it, halts and reports the goal \
                 unreachable",
         checks: &[
-            req(
+            verdict(
                 "planner status unreachable",
                 |s| flag(s.planner.as_ref()?.status == "unreachable"),
-                Compare::AtLeast,
-                1.0,
-                "",
             ),
-            req(
+            verdict(
                 "stopped safe (GoalUnreachable)",
                 |s| {
                     flag(
                         s.fault_protection.stopped_safe
                             && s.fault_protection.last_response == "GoalUnreachable",
                     )
-                },
-                Compare::AtLeast,
-                1.0,
-                "",
+                }
             ),
-            open(
-                "truth-side collisions",
-                |s| Some(f64::from(s.collisions)),
-                Compare::AtMost,
-                0.0,
-                "",
-            ),
+            NO_COLLISION,
         ],
     },
 ];

@@ -1,25 +1,85 @@
-//! The results page `docs/results/sil-results.md`: its text is the template `page.md` (next to this
-//! file); [`markdown`] fills in the table of checks, the count of force-model fallbacks and the
-//! table of runs.
+//! The results page `docs/results/sil-results.md`, made from the rows of a tier
+//! ([`super::seeds::SeedRow`]): its text is the template `page.md` (next to this file);
+//! [`markdown`] fills in the header figures, the table of checks at their statistics with the
+//! worst seed of each, and the component metrics of each case over its seeds.
 
-use super::{CaseResult, Compare};
+use super::seeds::{judge_case, SeedRow};
+use super::{Compare, Stat, CASES};
 
 /// The template of the page.
 const PAGE: &str = include_str!("page.md");
 
-/// The results as a Markdown page.
-pub fn markdown(results: &[CaseResult]) -> String {
-    let fallbacks: u64 = results
+/// Nearest-rank percentile `p` of the finite values.
+fn pct(mut v: Vec<f64>, p: f64) -> Option<f64> {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let rank = ((p / 100.0) * v.len() as f64).ceil().max(1.0) as usize;
+    v.get(rank.min(v.len()) - 1).copied()
+}
+
+fn f(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".to_string(), |x| format!("{x:.digits$}"))
+}
+
+/// Requirements, open ones, and the runs' summed wall time (s).
+fn counts(rows: &[SeedRow]) -> (usize, usize, f64) {
+    let checks: usize = CASES.iter().map(|c| c.checks.len()).sum();
+    let open = CASES
         .iter()
-        .map(|r| r.summary.truth_force_fallbacks)
+        .map(|c| c.checks.iter().filter(|k| k.open).count())
         .sum();
+    let wall = rows.iter().map(|r| r.metrics.wall_time_s).sum();
+    (checks, open, wall)
+}
+
+/// One line for the terminal.
+pub fn digest(rows: &[SeedRow]) -> String {
+    let (checks, _, wall) = counts(rows);
+    let failing: usize = CASES
+        .iter()
+        .map(|c| judge_case(c, rows).iter().filter(|j| !j.pass).count())
+        .sum();
+    format!(
+        "{} runs: {failing} of {checks} requirements fail at their statistic; runs' wall time \
+         summed {:.1} min",
+        rows.len(),
+        wall / 60.0
+    )
+}
+
+/// The results as a Markdown page; `commit` is the commit the rows were made from.
+pub fn markdown(rows: &[SeedRow], commit: &str) -> String {
+    let (checks, open, wall) = counts(rows);
+    let mut seeds: Vec<u64> = rows.iter().map(|r| r.seed).collect();
+    seeds.sort_unstable();
+    seeds.dedup();
+    let per_case = CASES
+        .iter()
+        .map(|c| rows.iter().filter(|r| r.case == c.id).count())
+        .min()
+        .unwrap_or(0);
     let template = PAGE.strip_suffix('\n').unwrap_or(PAGE);
     let mut page = String::with_capacity(2 * template.len());
     let mut rest = template;
     for (key, value) in [
-        ("{check_rows}", check_rows(results)),
-        ("{fallbacks}", fallbacks.to_string()),
-        ("{run_rows}", run_rows(results)),
+        ("{commit}", commit.to_string()),
+        ("{runs}", rows.len().to_string()),
+        ("{per_case}", per_case.to_string()),
+        (
+            "{seed_range}",
+            match (seeds.first(), seeds.last()) {
+                (Some(a), Some(b)) => format!("{a}-{b}"),
+                _ => "-".to_string(),
+            },
+        ),
+        ("{wall_min}", format!("{:.0}", wall / 60.0)),
+        ("{checks}", checks.to_string()),
+        ("{open}", open.to_string()),
+        ("{check_rows}", check_rows(rows)),
+        ("{metric_rows}", metric_rows(rows)),
     ] {
         let (before, after) = rest.split_once(key).unwrap_or((rest, ""));
         page += before;
@@ -30,12 +90,12 @@ pub fn markdown(results: &[CaseResult]) -> String {
     page
 }
 
-/// One row per check of every case.
-fn check_rows(results: &[CaseResult]) -> String {
+/// One row per check of every case, at its statistic, with the worst seed.
+fn check_rows(rows: &[SeedRow]) -> String {
     let mut s = String::new();
-    for r in results {
-        let mut notes = r.case.variant.label();
-        if r.case.no_slip_comp {
+    for case in &CASES {
+        let mut notes = case.variant.label();
+        if case.no_slip_comp {
             notes = if notes.is_empty() {
                 "no slip comp".to_string()
             } else {
@@ -43,67 +103,105 @@ fn check_rows(results: &[CaseResult]) -> String {
             };
         }
         let scenario = if notes.is_empty() {
-            r.case.scenario.to_string()
+            case.scenario.to_string()
         } else {
-            format!("{} ({notes})", r.case.scenario)
+            format!("{} ({notes})", case.scenario)
         };
-        for c in &r.checks {
-            let op = match c.check.compare {
+        for (c, j) in case.checks.iter().zip(judge_case(case, rows)) {
+            let op = match c.compare {
                 Compare::AtMost => "<=",
                 Compare::AtLeast => ">=",
             };
-            let value = c
-                .value
-                .map_or("-".to_string(), |v| format!("{v:.3} {}", c.check.unit));
+            let (stat, measured) = match c.stat {
+                Stat::Percentile => (
+                    match c.compare {
+                        Compare::AtMost => "P95",
+                        Compare::AtLeast => "P5",
+                    }
+                    .to_string(),
+                    format!("{} {}", f(j.statistic, 3), c.unit),
+                ),
+                Stat::Fraction(x) => (
+                    format!("seeds passing >= {:.0} %", 100.0 * x),
+                    j.statistic
+                        .map_or("-".to_string(), |v| format!("{:.0} % passing", 100.0 * v)),
+                ),
+                Stat::Every => (
+                    "every seed".to_string(),
+                    format!("worst {} {}", f(j.statistic, 3), c.unit),
+                ),
+            };
+            let worst = j.worst.map_or("-".to_string(), |(seed, v)| {
+                format!(
+                    "{seed}: {} (`sil --case {} --seed {seed}`)",
+                    f(v, 3),
+                    case.id
+                )
+            });
             s += &format!(
-                "| {} | {} | {} | {} | {op} {} {} | {} | {} |\n",
-                r.case.id,
+                "| {} | {} | {} | {} | {op} {} {} | {} | {}/{} | {} | {} |\n",
+                case.id,
                 scenario,
-                c.check.what,
-                if c.check.required {
-                    "requirement"
-                } else if c.check.open {
-                    "requirement (open)"
-                } else {
-                    "goal"
-                },
-                c.check.threshold,
-                c.check.unit,
-                value.trim(),
-                if c.pass { "pass" } else { "FAIL" }
+                c.what,
+                stat,
+                c.threshold,
+                c.unit,
+                measured.trim(),
+                j.failing_seeds,
+                j.seeds,
+                worst,
+                match (j.pass, c.open) {
+                    (true, _) => "pass",
+                    (false, true) => "FAIL (open)",
+                    (false, false) => "FAIL",
+                }
             );
         }
     }
     s
 }
 
-/// One row per run: distances, errors, scrub, gate, VO and path.
-fn run_rows(results: &[CaseResult]) -> String {
+/// One row per case: the component metrics over its seeds (P50 / P95).
+fn metric_rows(rows: &[SeedRow]) -> String {
     let mut s = String::new();
-    let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.2}"));
-    for r in results {
-        let m = &r.summary;
+    for case in &CASES {
+        let mine: Vec<&SeedRow> = rows.iter().filter(|r| r.case == case.id).collect();
+        if mine.is_empty() {
+            continue;
+        }
+        let col = |g: &dyn Fn(&SeedRow) -> Option<f64>| -> Vec<f64> {
+            mine.iter().filter_map(|r| g(r)).collect()
+        };
+        let both = |g: &dyn Fn(&SeedRow) -> Option<f64>, d: usize| {
+            let v = col(g);
+            format!("{}/{}", f(pct(v.clone(), 50.0), d), f(pct(v, 95.0), d))
+        };
+        let median = |g: &dyn Fn(&SeedRow) -> Option<f64>, d: usize| f(pct(col(g), 50.0), d);
+        let (upd, fail) = mine.iter().fold((0, 0), |(u, k), r| {
+            (u + r.metrics.vo_updates, k + r.metrics.vo_failures)
+        });
         s += &format!(
-            "| {} | {:.2} | {:.1} | {} | {} | {} | {} | {} | {:.2} | {:.1}/{:+.1} | {} | {}/{} | {:.3}/{:.3} | {:.3} |\n",
-            r.case.id,
-            m.distance_m,
-            m.sim_time_s,
-            f(m.error_pct.ekf),
-            f(m.error_pct.vo),
-            f(m.error_pct.kin3d),
-            f(m.error_pct.kin2d),
-            f(m.distance_error_pct.kin3d),
-            m.distance_error_pct.wheel_average,
-            m.truth_scrub_pct,
-            m.truth_scrub_net_pct,
-            m.slip
-                .gate_reject_fraction
-                .map_or("-".to_string(), |x| format!("{:.0} %", 100.0 * x)),
-            m.vo.updates.unwrap_or(0),
-            m.vo.failures.unwrap_or(0),
-            m.cross_track_m.rms,
-            m.cross_track_m.max,
-            m.goal_miss_m
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {}/{} |\n",
+            case.id,
+            mine.len(),
+            both(&|r| r.metrics.ekf_pct, 2),
+            both(&|r| r.metrics.vo_pct, 2),
+            both(&|r| r.metrics.vo_raw_pct, 2),
+            both(&|r| r.metrics.kin3d_pct, 2),
+            both(&|r| r.metrics.kin_eq15_pct, 2),
+            median(&|r| r.metrics.kin3d_dist_signed_pct, 2),
+            median(&|r| r.metrics.kin_eq15_dist_signed_pct, 2),
+            both(&|r| r.metrics.nees_pos_mean, 2),
+            median(&|r| r.metrics.nees_pos_within_95, 2),
+            median(&|r| r.metrics.nees_heading_within_95, 2),
+            both(&|r| r.metrics.slip_rms_mm, 2),
+            format!(
+                "{}/{}",
+                median(&|r| r.metrics.slip_detection, 2),
+                median(&|r| r.metrics.slip_false_alarm, 2)
+            ),
+            upd,
+            fail
         );
     }
     s
@@ -116,12 +214,23 @@ mod tests {
     /// The page template has each placeholder once, in the order `markdown` fills them.
     #[test]
     fn template_placeholders_once_in_order() {
-        let at = |k: &str| {
+        let keys = [
+            "{commit}",
+            "{runs}",
+            "{per_case}",
+            "{seed_range}",
+            "{wall_min}",
+            "{checks}",
+            "{open}",
+            "{check_rows}",
+            "{metric_rows}",
+        ];
+        let mut last = 0;
+        for k in keys {
             assert_eq!(PAGE.matches(k).count(), 1, "{k}");
-            PAGE.find(k).unwrap_or(0)
-        };
-        assert!(at("{check_rows}") < at("{fallbacks}"));
-        assert!(at("{fallbacks}") < at("{run_rows}"));
-        assert!(PAGE.ends_with("{run_rows}\n"));
+            let at = PAGE.find(k).unwrap_or(0);
+            assert!(at >= last, "{k} out of order");
+            last = at;
+        }
     }
 }
