@@ -177,13 +177,13 @@ pub const METRICS: &[MetricDef] = &[
         "slip_vs_truth.detection",
         "-",
         "gate rejections over the intervals that truly slip",
-        true,
+        false,
     ),
     m(
         "slip_vs_truth.false_alarm",
         "-",
         "gate rejections over the intervals that truly do not slip",
-        true,
+        false,
     ),
     m(
         "slip.gate_reject_fraction",

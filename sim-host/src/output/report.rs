@@ -611,6 +611,32 @@ cross-track rms {rms:.3} m, max {max:.3} m; driver {driver}, slip compensation {
         driver = run.driver,
         comp = if run.slip_compensation { "on" } else { "off" },
     );
+    let o = |v: Option<f64>, d: usize| v.map_or("-".to_string(), |x| format!("{x:.d$}"));
+    let _ = writeln!(
+        html,
+        "<p>Components (error / distance, %): EKF {}, VO {}, VO raw {}, 3D kinematics {}, \
+         H04 eq. 15 alone {}; EKF NEES mean position {} (2 when consistent), heading {} (1), \
+         time within the 95 % bounds {} / {}; slip vector against the true slip rms {} m, \
+         gate detection {} and false alarm {} (<code>docs/sil.md</code>).</p>",
+        o(summary.error_pct.ekf, 2),
+        o(summary.error_pct.vo, 2),
+        o(summary.vo_raw.error_pct, 2),
+        o(summary.error_pct.kin3d, 2),
+        o(summary.kin_eq15.error_pct, 2),
+        o(summary.nees.position_mean, 2),
+        o(summary.nees.heading_mean, 2),
+        o(summary.nees.position_within_95, 2),
+        o(summary.nees.heading_within_95, 2),
+        o(
+            summary
+                .slip_vs_truth
+                .rms_m
+                .map(|[x, y]| (0.5 * (x * x + y * y)).sqrt()),
+            4
+        ),
+        o(summary.slip_vs_truth.detection, 2),
+        o(summary.slip_vs_truth.false_alarm, 2),
+    );
     for (heading, svg) in figures(run)? {
         if let Some(h) = heading {
             let _ = writeln!(html, "<h2>{h}</h2>");

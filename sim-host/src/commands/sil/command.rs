@@ -12,6 +12,10 @@ pub struct SilArgs {
     /// Seeds per case, from the first acceptance seed (1001). The release tier is at least 50.
     #[arg(long, default_value_t = seeds::RELEASE_SEEDS)]
     pub seeds: u64,
+    /// Skip the first K of the seeds (run seeds K..N): more seeds for rows made before, to
+    /// `--merge` with them.
+    #[arg(long, default_value_t = 0)]
+    pub skip_seeds: u64,
     /// Only this case (with `--seed`: replay it on that seed).
     #[arg(long)]
     pub case: Option<String>,
@@ -29,6 +33,9 @@ pub struct SilArgs {
     /// Make the page from these row files (the shards' rows) instead of running.
     #[arg(long, num_args = 1.., conflicts_with_all = ["shard", "seed"])]
     pub merge: Vec<PathBuf>,
+    /// With `--merge`: the commit the merged rows were made from (default: this checkout's).
+    #[arg(long, requires = "merge")]
+    pub made_from: Option<String>,
     /// Rows to write (JSON lines).
     #[arg(long, default_value = seeds::RELEASE_ROWS)]
     pub rows: PathBuf,
@@ -41,6 +48,10 @@ pub struct SilArgs {
     /// Runs at once (default: one per core).
     #[arg(long)]
     pub jobs: Option<usize>,
+    /// Also write each run's `summary.json` into this directory, as `<case id>-<seed>.json`
+    /// (for comparing the runs of two builds, `tools/behaviour.sh`).
+    #[arg(long)]
+    pub summaries: Option<PathBuf>,
 }
 
 /// Run `sim-host sil`.
@@ -49,8 +60,8 @@ pub fn main(args: SilArgs) -> anyhow::Result<()> {
         return replay(&args, id, seed);
     }
     // The commit of the code that runs (read before the runs, which take a while).
-    let commit = commit();
-    if args.shard.is_some() {
+    let commit = args.made_from.clone().unwrap_or_else(commit);
+    if args.shard.is_some() || args.skip_seeds > 0 {
         run_tier(&args)?;
         return Ok(());
     }
@@ -109,6 +120,7 @@ fn run_tier(args: &SilArgs) -> anyhow::Result<Vec<SeedRow>> {
         .collect();
     anyhow::ensure!(!cases.is_empty(), "no SIL case {:?}", args.case);
     let mut todo: Vec<(super::Case, u64)> = seeds::acceptance_seeds(args.seeds)
+        .skip(usize::try_from(args.skip_seeds)?)
         .flat_map(|s| cases.iter().map(move |c| (*c, s)))
         .collect();
     if let Some(shard) = &args.shard {
@@ -149,6 +161,9 @@ fn run_tier(args: &SilArgs) -> anyhow::Result<Vec<SeedRow>> {
                 let r = run_case(*c, &args.scenarios, *s, None)
                     .map_err(|e| anyhow::anyhow!("{} seed {s}: {e:#}", c.id));
                 bar.inc(1);
+                if let (Ok(r), Some(dir)) = (&r, &args.summaries) {
+                    write_summary(dir, r)?;
+                }
                 let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                 if lines && (20 * n / total.max(1)) > (20 * (n - 1) / total.max(1)) {
                     let min = start.elapsed().as_secs_f64() / 60.0;
@@ -167,11 +182,24 @@ fn run_tier(args: &SilArgs) -> anyhow::Result<Vec<SeedRow>> {
         rows.len(),
         start.elapsed().as_secs_f64() / 60.0
     );
-    if args.shard.is_some() {
+    if args.shard.is_some() || args.skip_seeds > 0 {
         write(&args.rows, &seeds::rows_text(&rows)?)?;
-        println!("shard rows in {}", args.rows.display());
+        println!("rows of these runs in {}", args.rows.display());
     }
     Ok(rows)
+}
+
+/// `summary.json` of `run` into `dir` as `<case id>-<seed>.json` (and the paired run's as
+/// `<case id>-<seed>-no-comp.json`).
+fn write_summary(dir: &std::path::Path, run: &super::CaseRun) -> anyhow::Result<()> {
+    let name = format!("{}-{}", run.case.id, run.seed);
+    let json = serde_json::to_string_pretty(&run.runs.main)?;
+    write(&dir.join(format!("{name}.json")), &(json + "\n"))?;
+    if let Some(n) = &run.runs.no_comp {
+        let json = serde_json::to_string_pretty(n)?;
+        write(&dir.join(format!("{name}-no-comp.json")), &(json + "\n"))?;
+    }
+    Ok(())
 }
 
 /// `sim-host sil --case ID --seed S`: the case on one seed, every output written, the checks
