@@ -26,7 +26,7 @@ enum Command {
     /// Run the flight executive on a rover standing still for N minor frames (200 Hz).
     Still(commands::still::StillArgs),
     /// Run the SIL acceptance cases (in parallel) and write the results page.
-    Sil(commands::sil::SilArgs),
+    Sil(Box<commands::sil::SilArgs>),
     /// Measure the slip gate's detection probability against the true slip magnitude (slope
     /// sweeps of slope-10-cross, two seeds, in parallel) and the slip-hold policy; write the
     /// results page and its figure.
@@ -49,7 +49,7 @@ fn main() -> anyhow::Result<()> {
         None => commands::compare::main(commands::compare::CompareArgs::default_run()),
         Some(Command::Compare(args)) => commands::compare::main(args),
         Some(Command::Still(args)) => commands::still::main(args),
-        Some(Command::Sil(args)) => commands::sil::main(args),
+        Some(Command::Sil(args)) => commands::sil::main(*args),
         Some(Command::Detection(args)) => commands::detection::main(args),
         Some(Command::Run(args)) => commands::run::main(args),
         Some(Command::Record(args)) => commands::record::main(args),

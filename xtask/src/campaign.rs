@@ -110,8 +110,29 @@ pub fn slurm_smoke() -> Result<()> {
             .args(["--throttle", "2", "--submit", "--wait", "--timeout", "900"])
             .env("SLURM_CONF", cluster.conf()))
         .context("the smoke campaign failed on Slurm")?;
+        println!("ok in {:.1} s", t.elapsed().as_secs_f64());
+        // The SIL tier's array and merge on the same cluster: one fast case on the CI seeds, in
+        // two shards; the merged rows must equal the release rows of those runs.
+        let t = step("SIL shards through sbatch (SIL-KIN-4, 2 seeds, 2 tasks) and their merge");
+        let sil = work.join("sil");
+        run(Command::new(&bin)
+            .args(["sil", "--case", "SIL-KIN-4", "--seeds", "2", "--slurm"])
+            .arg(&sil)
+            .args(["--tasks", "2", "--rows"])
+            .arg(sil.join("sil-seeds.jsonl"))
+            .arg("--out")
+            .arg(sil.join("sil-results.md"))
+            .args(["--expect", "docs/results/sil-seeds.jsonl"])
+            .args(["--submit", "--wait", "--timeout", "600"])
+            .env("SLURM_CONF", cluster.conf()))
+        .context("the SIL shards failed on Slurm")?;
+        let log = std::fs::read_to_string(sil.join("logs").join("gather.out"))
+            .context("the SIL merge's log")?;
+        if !log.contains("2 rows equal to") {
+            bail!("the SIL merge did not compare its rows with the release rows:\n{log}");
+        }
+        println!("ok in {:.1} s", t.elapsed().as_secs_f64());
     }
-    println!("ok in {:.1} s", t.elapsed().as_secs_f64());
     let t = step("campaign smoke test locally");
     run(Command::new(&bin)
         .args(["campaign", "local", SPEC, "--out"])

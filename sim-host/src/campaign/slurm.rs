@@ -103,21 +103,35 @@ fn header(lines: &mut Vec<String>, job: &str, o: &SlurmOptions, time: &str, log:
     }
 }
 
-/// The two scripts `(campaign.sbatch, gather.sbatch)` for the campaign `name` of `runs` runs
-/// in the absolute folder `dir`.
-pub fn scripts(name: &str, runs: u64, dir: &Path, o: &SlurmOptions) -> (String, String) {
-    let tasks = o.tasks.clamp(1, runs.max(1));
-    let sharded = tasks < runs;
-    let bin = shell_quote(&o.bin.display().to_string());
-    let d = shell_quote(&dir.display().to_string());
-    let mut array = format!("0-{}", tasks - 1);
+/// A job array and the job that runs after it: what [`array_scripts`] writes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArrayJob {
+    /// Job name prefix of the array (`<name>-runs`).
+    pub name: String,
+    /// Job name of the job after it.
+    pub after_name: String,
+    /// Array tasks (`0..tasks`).
+    pub tasks: u64,
+    /// Comment lines of the array script (without `# `).
+    pub about: Vec<String>,
+    /// The line each array task runs (it names its task by `$SLURM_ARRAY_TASK_ID`).
+    pub task_command: String,
+    /// Comment line of the second script (without `# `).
+    pub after_about: String,
+    /// The line the second script runs.
+    pub after_command: String,
+}
+
+/// The two scripts `(array, after)` of `job` with the logs in the absolute folder `dir/logs`.
+pub fn array_scripts(job: &ArrayJob, dir: &Path, o: &SlurmOptions) -> (String, String) {
+    let mut array = format!("0-{}", job.tasks.max(1) - 1);
     if o.throttle > 0 {
         array += &format!("%{}", o.throttle);
     }
     let mut a = Vec::new();
     header(
         &mut a,
-        &format!("{name}-runs"),
+        &format!("{}-runs", job.name),
         o,
         &o.time,
         &dir.join("logs").join("run-%a.out"),
@@ -125,48 +139,65 @@ pub fn scripts(name: &str, runs: u64, dir: &Path, o: &SlurmOptions) -> (String, 
     );
     a.push(format!("#SBATCH --array={array}"));
     a.push(String::new());
-    a.push(format!(
-        "# Campaign {name}: {runs} runs{}. Written by `sim-host campaign slurm`; submit with",
-        if sharded {
-            format!(" in {tasks} shards (task K runs the indices K, K + {tasks}, ...)")
-        } else {
-            ", one per array task".to_string()
-        }
-    ));
-    a.push(format!(
-        "#   jid=$(sbatch --parsable {d}/campaign.sbatch) && sbatch --dependency={}:$jid {d}/gather.sbatch",
-        o.gather_after.dependency()
-    ));
+    a.extend(job.about.iter().map(|l| format!("# {l}")));
     a.push("set -euo pipefail".into());
     a.push("# The renderer's threads: the CPUs Slurm gave the task.".into());
     a.push("export RAYON_NUM_THREADS=\"${SLURM_CPUS_PER_TASK:-1}\"".into());
-    if sharded {
-        a.push(format!(
-            "exec {bin} campaign run {d} --shard \"$SLURM_ARRAY_TASK_ID/{tasks}\""
-        ));
-    } else {
-        a.push(format!(
-            "exec {bin} campaign run {d} --index \"$SLURM_ARRAY_TASK_ID\""
-        ));
-    }
+    a.push(job.task_command.clone());
     let mut g = Vec::new();
     header(
         &mut g,
-        &format!("{name}-gather"),
+        &job.after_name,
         o,
         &o.gather_time,
         &dir.join("logs").join("gather.out"),
         1,
     );
     g.push(String::new());
-    g.push(format!(
-        "# Gather of campaign {name}: statistics, criteria, report. Submitted with \
-         --dependency={}:<array job>.",
-        o.gather_after.dependency()
-    ));
+    g.push(format!("# {}", job.after_about));
     g.push("set -euo pipefail".into());
-    g.push(format!("exec {bin} campaign gather {d}"));
+    g.push(job.after_command.clone());
     (a.join("\n") + "\n", g.join("\n") + "\n")
+}
+
+/// The two scripts `(campaign.sbatch, gather.sbatch)` for the campaign `name` of `runs` runs
+/// in the absolute folder `dir`.
+pub fn scripts(name: &str, runs: u64, dir: &Path, o: &SlurmOptions) -> (String, String) {
+    let tasks = o.tasks.clamp(1, runs.max(1));
+    let sharded = tasks < runs;
+    let bin = shell_quote(&o.bin.display().to_string());
+    let d = shell_quote(&dir.display().to_string());
+    let job = ArrayJob {
+        name: name.to_string(),
+        after_name: format!("{name}-gather"),
+        tasks,
+        about: vec![
+            format!(
+                "Campaign {name}: {runs} runs{}. Written by `sim-host campaign slurm`; submit with",
+                if sharded {
+                    format!(" in {tasks} shards (task K runs the indices K, K + {tasks}, ...)")
+                } else {
+                    ", one per array task".to_string()
+                }
+            ),
+            format!(
+                "  jid=$(sbatch --parsable {d}/campaign.sbatch) && sbatch --dependency={}:$jid {d}/gather.sbatch",
+                o.gather_after.dependency()
+            ),
+        ],
+        task_command: if sharded {
+            format!("exec {bin} campaign run {d} --shard \"$SLURM_ARRAY_TASK_ID/{tasks}\"")
+        } else {
+            format!("exec {bin} campaign run {d} --index \"$SLURM_ARRAY_TASK_ID\"")
+        },
+        after_about: format!(
+            "Gather of campaign {name}: statistics, criteria, report. Submitted with \
+             --dependency={}:<array job>.",
+            o.gather_after.dependency()
+        ),
+        after_command: format!("exec {bin} campaign gather {d}"),
+    };
+    array_scripts(&job, dir, o)
 }
 
 /// Write the scripts into `dir` (and `dir/logs`, which Slurm does not create).
@@ -202,15 +233,28 @@ fn sbatch(args: &[&str]) -> anyhow::Result<String> {
 
 /// Submit the scripts of `dir`: returns `(array job id, gather job id)`.
 pub fn submit(dir: &Path, after: GatherAfter) -> anyhow::Result<(String, String)> {
-    let array = sbatch(&[&dir.join("campaign.sbatch").display().to_string()])?;
+    submit_files(
+        &dir.join("campaign.sbatch"),
+        &dir.join("gather.sbatch"),
+        &dir.join("slurm-jobs.txt"),
+        after,
+    )
+}
+
+/// Submit the array script `array`, then `gather` depending on it (`after`); the job ids go
+/// into `record`. Returns `(array job id, gather job id)`.
+pub fn submit_files(
+    array: &Path,
+    gather: &Path,
+    record: &Path,
+    after: GatherAfter,
+) -> anyhow::Result<(String, String)> {
+    let array = sbatch(&[&array.display().to_string()])?;
     let gather = sbatch(&[
         &format!("--dependency={}:{array}", after.dependency()),
-        &dir.join("gather.sbatch").display().to_string(),
+        &gather.display().to_string(),
     ])?;
-    std::fs::write(
-        dir.join("slurm-jobs.txt"),
-        format!("array {array}\ngather {gather}\n"),
-    )?;
+    std::fs::write(record, format!("array {array}\ngather {gather}\n"))?;
     Ok((array, gather))
 }
 
@@ -236,15 +280,46 @@ pub fn job_state(id: &str) -> Option<(String, String)> {
 /// Wait (at most `timeout_s`) until the gather job `gather` of the campaign in `dir` ends.
 /// Fails when it cannot run (a run failed under `afterok`) or ends other than `COMPLETED`.
 pub fn wait(dir: &Path, gather: &str, timeout_s: f64) -> anyhow::Result<()> {
+    wait_for(
+        &AfterJob {
+            id: gather,
+            logs: &dir.join("logs"),
+            result: &dir.join("stats.json"),
+            retry: format!(
+                "gather what finished with `sim-host campaign gather {}`",
+                dir.display()
+            ),
+        },
+        timeout_s,
+    )
+}
+
+/// The job that runs after an array, for [`wait_for`].
+#[derive(Debug)]
+pub struct AfterJob<'a> {
+    /// Its job id.
+    pub id: &'a str,
+    /// The folder of the logs.
+    pub logs: &'a Path,
+    /// The file it writes (when the job is gone from `scontrol`, it ended if this exists).
+    pub result: &'a Path,
+    /// What to do when it will never start (a task failed under `afterok`).
+    pub retry: String,
+}
+
+/// Wait (at most `timeout_s`) until `job` ends. Fails when it cannot run (a task of the array
+/// failed under `afterok`) or ends other than `COMPLETED`.
+pub fn wait_for(job: &AfterJob, timeout_s: f64) -> anyhow::Result<()> {
     let start = std::time::Instant::now();
     let mut last = String::new();
+    let id = job.id;
     loop {
-        match job_state(gather) {
+        match job_state(id) {
             Some((state, reason)) => {
                 let now = format!("{state} {reason}");
                 if now != last {
                     println!(
-                        "gather job {gather}: {state} ({reason}) after {:.0} s",
+                        "job {id}: {state} ({reason}) after {:.0} s",
                         start.elapsed().as_secs_f64()
                     );
                     last = now;
@@ -252,32 +327,31 @@ pub fn wait(dir: &Path, gather: &str, timeout_s: f64) -> anyhow::Result<()> {
                 match state.as_str() {
                     "COMPLETED" => return Ok(()),
                     "PENDING" if reason == "DependencyNeverSatisfied" => anyhow::bail!(
-                        "a run of the array failed, so the gather job {gather} will never start \
-                         (cancel it with `scancel {gather}`); logs in {}; gather what finished \
-                         with `sim-host campaign gather {}`",
-                        dir.join("logs").display(),
-                        dir.display()
+                        "a task of the array failed, so job {id} will never start (cancel it \
+                         with `scancel {id}`); logs in {}; {}",
+                        job.logs.display(),
+                        job.retry
                     ),
                     "PENDING" | "RUNNING" | "CONFIGURING" | "COMPLETING" | "SUSPENDED"
                     | "REQUEUED" | "RESIZING" => {}
                     other => anyhow::bail!(
-                        "the gather job {gather} ended {other}: see {} and {}",
-                        dir.join("logs").join("gather.out").display(),
-                        dir.join("report.html").display()
+                        "job {id} ended {other}: see the logs in {}",
+                        job.logs.display()
                     ),
                 }
             }
             None => {
                 anyhow::ensure!(
-                    dir.join("stats.json").exists(),
-                    "the gather job {gather} is gone and there is no stats.json"
+                    job.result.exists(),
+                    "job {id} is gone and there is no {}",
+                    job.result.display()
                 );
                 return Ok(());
             }
         }
         anyhow::ensure!(
             start.elapsed().as_secs_f64() < timeout_s,
-            "timed out after {timeout_s} s waiting for the gather job {gather}"
+            "timed out after {timeout_s} s waiting for job {id}"
         );
         std::thread::sleep(std::time::Duration::from_secs(2));
     }

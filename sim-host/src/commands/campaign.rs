@@ -77,6 +77,15 @@ pub struct SlurmArgs {
     /// Number of runs (default: the spec's).
     #[arg(long)]
     pub runs: Option<u64>,
+    /// The job array, the job after it, and their submission.
+    #[command(flatten)]
+    pub batch: BatchArgs,
+}
+
+/// Options of a Slurm job array and of the job that runs after it (the campaign's gather, the
+/// SIL's merge); shared by `campaign slurm` and `sil --slurm`.
+#[derive(Debug, Clone, Args)]
+pub struct BatchArgs {
     /// Array tasks running at once (the `%` of --array); 0: no limit.
     #[arg(long, default_value_t = 0)]
     pub throttle: u64,
@@ -96,7 +105,7 @@ pub struct SlurmArgs {
     /// Time limit of each array task.
     #[arg(long, default_value = "00:30:00")]
     pub time: String,
-    /// Time limit of the gather job.
+    /// Time limit of the job after the array (gather, merge).
     #[arg(long, default_value = "00:30:00")]
     pub gather_time: String,
     /// CPUs per array task (the renderer's threads).
@@ -105,7 +114,7 @@ pub struct SlurmArgs {
     /// Memory per task.
     #[arg(long, default_value = "1G")]
     pub mem: String,
-    /// Start the gather after every task succeeded (ok) or after every task ended (any).
+    /// Start the job after the array when every task succeeded (ok) or ended (any).
     #[arg(long, value_enum, default_value_t = After::Ok)]
     pub gather_after: After,
     /// More #SBATCH options for both scripts (repeatable), e.g. --sbatch=--constraint=x86.
@@ -117,12 +126,45 @@ pub struct SlurmArgs {
     /// Submit with sbatch and print the job ids.
     #[arg(long)]
     pub submit: bool,
-    /// With --submit: wait until the gather job ends (fails if it fails or cannot start).
+    /// With --submit: wait until the job after the array ends (fails if it fails or cannot
+    /// start).
     #[arg(long, requires = "submit")]
     pub wait: bool,
     /// With --wait: give up after this many seconds.
     #[arg(long, default_value_t = 7200.0)]
     pub timeout: f64,
+}
+
+impl BatchArgs {
+    /// The scripts' options (the binary made absolute).
+    pub fn options(&self) -> anyhow::Result<slurm::SlurmOptions> {
+        Ok(slurm::SlurmOptions {
+            bin: match &self.bin {
+                Some(b) => slurm::absolute(b)?,
+                None => std::env::current_exe()?,
+            },
+            tasks: self.tasks,
+            throttle: self.throttle,
+            partition: self.partition.clone(),
+            account: self.account.clone(),
+            qos: self.qos.clone(),
+            time: self.time.clone(),
+            gather_time: self.gather_time.clone(),
+            cpus_per_task: self.cpus_per_task,
+            mem: self.mem.clone(),
+            gather_after: self.gather_after.into(),
+            extra: self.extra.clone(),
+        })
+    }
+}
+
+impl From<After> for slurm::GatherAfter {
+    fn from(a: After) -> Self {
+        match a {
+            After::Ok => slurm::GatherAfter::Ok,
+            After::Any => slurm::GatherAfter::Any,
+        }
+    }
 }
 
 /// `--gather-after`.
@@ -251,46 +293,13 @@ fn submit_slurm(args: SlurmArgs) -> anyhow::Result<bool> {
         spec,
         out,
         runs,
-        throttle,
-        tasks,
-        partition,
-        account,
-        qos,
-        time,
-        gather_time,
-        cpus_per_task,
-        mem,
-        gather_after,
-        extra,
-        bin,
-        submit,
-        wait,
-        timeout,
+        batch,
     } = args;
     let manifest = plan::plan_to_dir(&spec, &out, runs)?;
     let dir = slurm::absolute(&out)?;
-    let bin = match bin {
-        Some(b) => slurm::absolute(&b)?,
-        None => std::env::current_exe()?,
-    };
-    let after = match gather_after {
-        After::Ok => slurm::GatherAfter::Ok,
-        After::Any => slurm::GatherAfter::Any,
-    };
-    let options = slurm::SlurmOptions {
-        bin,
-        tasks,
-        throttle,
-        partition,
-        account,
-        qos,
-        time,
-        gather_time,
-        cpus_per_task,
-        mem,
-        gather_after: after,
-        extra,
-    };
+    let options = batch.options()?;
+    let after = options.gather_after;
+    let (submit, wait, timeout) = (batch.submit, batch.wait, batch.timeout);
     slurm::write_scripts(&manifest.campaign, manifest.runs, &dir, &options)?;
     println!(
         "campaign {}: {} runs planned; wrote {} and {}",

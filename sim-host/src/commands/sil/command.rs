@@ -52,6 +52,18 @@ pub struct SilArgs {
     /// (for comparing the runs of two builds, `tools/behaviour.sh`).
     #[arg(long)]
     pub summaries: Option<PathBuf>,
+    /// Fail unless every row (run or merged) equals the row of the same case and seed in
+    /// this file (values, final mode and metrics; the wall time aside), e.g. the release rows.
+    #[arg(long)]
+    pub expect: Option<PathBuf>,
+    /// Write the tier as a Slurm job array into this folder (on a filesystem every node sees):
+    /// `sil.sbatch` runs the shards, `merge.sbatch` makes the rows (`--rows`) and the page
+    /// (`--out`) after it (`docs/sil.md`).
+    #[arg(long, conflicts_with_all = ["shard", "merge", "seed"])]
+    pub slurm: Option<PathBuf>,
+    /// With `--slurm`: the job array and its submission.
+    #[command(flatten)]
+    pub batch: crate::commands::campaign::BatchArgs,
 }
 
 /// Run `sim-host sil`.
@@ -61,9 +73,12 @@ pub fn main(args: SilArgs) -> anyhow::Result<()> {
     }
     // The commit of the code that runs (read before the runs, which take a while).
     let commit = args.made_from.clone().unwrap_or_else(commit);
+    if let Some(dir) = &args.slurm {
+        return super::batch::write_and_submit(&args, dir, &commit);
+    }
     if args.shard.is_some() || args.skip_seeds > 0 {
-        run_tier(&args)?;
-        return Ok(());
+        let rows = run_tier(&args)?;
+        return expect(&args, &rows);
     }
     let rows = if args.merge.is_empty() {
         run_tier(&args)?
@@ -74,18 +89,43 @@ pub fn main(args: SilArgs) -> anyhow::Result<()> {
         }
         rows
     };
-    // A run of one case writes its rows and page beside the release tier's, not over them.
-    let (rows_path, out) = match &args.case {
+    expect(&args, &rows)?;
+    let (rows_path, out) = output_paths(&args);
+    write(&rows_path, &seeds::rows_text(&rows)?)?;
+    write(&out, &super::page::markdown(&rows, &commit))?;
+    println!("{}", super::page::digest(&rows));
+    println!("rows in {}, page in {}", rows_path.display(), out.display());
+    Ok(())
+}
+
+/// The rows and the page a tier writes: `--rows` and `--out`, or for one case (`--case`) files
+/// beside them, not over the release tier's.
+pub(super) fn output_paths(args: &SilArgs) -> (PathBuf, PathBuf) {
+    match &args.case {
         Some(id) => (
             args.rows.with_file_name(format!("sil-seeds-{id}.jsonl")),
             args.out.with_file_name(format!("sil-results-{id}.md")),
         ),
         None => (args.rows.clone(), args.out.clone()),
+    }
+}
+
+/// With `--expect FILE`: every row must equal its row in `FILE` (`seeds::differences`).
+fn expect(args: &SilArgs, rows: &[SeedRow]) -> anyhow::Result<()> {
+    let Some(path) = &args.expect else {
+        return Ok(());
     };
-    write(&rows_path, &seeds::rows_text(&rows)?)?;
-    write(&out, &super::page::markdown(&rows, &commit))?;
-    println!("{}", super::page::digest(&rows));
-    println!("rows in {}, page in {}", rows_path.display(), out.display());
+    let reference = seeds::read_rows(path)?;
+    let diff = seeds::differences(rows, &reference);
+    anyhow::ensure!(
+        diff.is_empty(),
+        "{} of {} rows differ from {}:\n{}",
+        diff.len(),
+        rows.len(),
+        path.display(),
+        diff.join("\n")
+    );
+    println!("{} rows equal to {}", rows.len(), path.display());
     Ok(())
 }
 
@@ -109,20 +149,34 @@ fn commit() -> String {
         })
 }
 
-/// Every (case, seed) run of the tier (or of the shard), in parallel, with a progress bar.
-fn run_tier(args: &SilArgs) -> anyhow::Result<Vec<SeedRow>> {
-    use indicatif::{ProgressBar, ProgressStyle};
-    use rayon::prelude::*;
+/// The cases of the tier (`--case`: that one).
+pub(super) fn tier_cases(args: &SilArgs) -> anyhow::Result<Vec<super::Case>> {
     let cases: Vec<_> = CASES
         .iter()
         .filter(|c| args.case.as_deref().is_none_or(|id| c.id == id))
         .copied()
         .collect();
     anyhow::ensure!(!cases.is_empty(), "no SIL case {:?}", args.case);
-    let mut todo: Vec<(super::Case, u64)> = seeds::acceptance_seeds(args.seeds)
+    Ok(cases)
+}
+
+/// The (case, seed) runs of the tier, in the order the shards split (`--skip-seeds` applied).
+pub(super) fn tier_runs(
+    args: &SilArgs,
+    cases: &[super::Case],
+) -> anyhow::Result<Vec<(super::Case, u64)>> {
+    Ok(seeds::acceptance_seeds(args.seeds)
         .skip(usize::try_from(args.skip_seeds)?)
         .flat_map(|s| cases.iter().map(move |c| (*c, s)))
-        .collect();
+        .collect())
+}
+
+/// Every (case, seed) run of the tier (or of the shard), in parallel, with a progress bar.
+fn run_tier(args: &SilArgs) -> anyhow::Result<Vec<SeedRow>> {
+    use indicatif::{ProgressBar, ProgressStyle};
+    use rayon::prelude::*;
+    let cases = tier_cases(args)?;
+    let mut todo = tier_runs(args, &cases)?;
     if let Some(shard) = &args.shard {
         let (k, n) = crate::campaign::exec::parse_shard(shard)?;
         todo = todo

@@ -18,6 +18,7 @@ use crate::output::summary::{summarise, Summary};
 use crate::scenario::Scenario;
 use std::path::Path;
 
+pub mod batch;
 pub mod cases;
 pub mod command;
 pub mod page;

@@ -24,11 +24,17 @@ fn f(v: Option<f64>, digits: usize) -> String {
     v.map_or("-".to_string(), |x| format!("{x:.digits$}"))
 }
 
-/// Requirements, open ones, and the runs' summed wall time (s).
-fn counts(rows: &[SeedRow]) -> (usize, usize, f64) {
-    let checks: usize = CASES.iter().map(|c| c.checks.len()).sum();
-    let open = CASES
+/// The cases that have rows (every case for the release tier, one for `sil --case`).
+fn present<'a>(rows: &'a [SeedRow]) -> impl Iterator<Item = &'static super::Case> + 'a {
+    CASES
         .iter()
+        .filter(move |c| rows.iter().any(|r| r.case == c.id))
+}
+
+/// Requirements, open ones (of the cases with rows), and the runs' summed wall time (s).
+fn counts(rows: &[SeedRow]) -> (usize, usize, f64) {
+    let checks: usize = present(rows).map(|c| c.checks.len()).sum();
+    let open = present(rows)
         .map(|c| (0..c.checks.len()).filter(|&k| c.is_open(k)).count())
         .sum();
     let wall = rows.iter().map(|r| r.metrics.wall_time_s).sum();
@@ -38,8 +44,7 @@ fn counts(rows: &[SeedRow]) -> (usize, usize, f64) {
 /// One line for the terminal.
 pub fn digest(rows: &[SeedRow]) -> String {
     let (checks, _, wall) = counts(rows);
-    let failing: usize = CASES
-        .iter()
+    let failing: usize = present(rows)
         .map(|c| judge_case(c, rows).iter().filter(|j| !j.pass).count())
         .sum();
     format!(
@@ -56,8 +61,7 @@ pub fn markdown(rows: &[SeedRow], commit: &str) -> String {
     let mut seeds: Vec<u64> = rows.iter().map(|r| r.seed).collect();
     seeds.sort_unstable();
     seeds.dedup();
-    let per_case = CASES
-        .iter()
+    let per_case = present(rows)
         .map(|c| rows.iter().filter(|r| r.case == c.id).count())
         .min()
         .unwrap_or(0);
@@ -93,7 +97,7 @@ pub fn markdown(rows: &[SeedRow], commit: &str) -> String {
 /// One row per check of every case, at its statistic, with the worst seed.
 fn check_rows(rows: &[SeedRow]) -> String {
     let mut s = String::new();
-    for case in &CASES {
+    for case in present(rows) {
         let mut notes = case.variant.label();
         if case.no_slip_comp {
             notes = if notes.is_empty() {

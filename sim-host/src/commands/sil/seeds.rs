@@ -146,6 +146,30 @@ pub fn read_rows(path: &Path) -> anyhow::Result<Vec<SeedRow>> {
         .collect()
 }
 
+/// The rows of `rows` that differ from the row of the same case and seed in `reference`, or
+/// have none there: one line each. Rows compare as their JSON lines with the wall time set
+/// to 0 (a run's figures are deterministic, its wall time is not; a non-finite value is
+/// `null` in both).
+pub fn differences(rows: &[SeedRow], reference: &[SeedRow]) -> Vec<String> {
+    let line = |r: &SeedRow| {
+        let mut r = r.clone();
+        r.metrics.wall_time_s = 0.0;
+        serde_json::to_string(&r).unwrap_or_default()
+    };
+    rows.iter()
+        .filter_map(|r| {
+            let Some(want) = reference
+                .iter()
+                .find(|x| x.case == r.case && x.seed == r.seed)
+            else {
+                return Some(format!("{} seed {}: not in the reference", r.case, r.seed));
+            };
+            let (got, want) = (line(r), line(want));
+            (got != want).then(|| format!("{} seed {}: {got}\n  expected {want}", r.case, r.seed))
+        })
+        .collect()
+}
+
 /// Rows as JSON lines, sorted by case (table order) and seed.
 pub fn rows_text(rows: &[SeedRow]) -> anyhow::Result<String> {
     let mut sorted: Vec<&SeedRow> = rows.iter().collect();
@@ -398,6 +422,25 @@ mod tests {
 
     /// Shards merged in any order give the rows of one run: sorted by case (table order) and
     /// seed.
+    /// A row equal to its reference but for the wall time is no difference; a changed value
+    /// or a row the reference lacks is.
+    #[test]
+    fn differences_ignore_the_wall_time_only() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("..")
+            .join(RELEASE_ROWS);
+        let rows = read_rows(&path).expect("release rows");
+        let mut same = rows[0].clone();
+        same.metrics.wall_time_s += 3.0;
+        assert!(differences(&[same.clone()], &rows).is_empty());
+        let mut changed = same.clone();
+        changed.values[0] = Some(changed.values[0].unwrap_or(0.0) + 1e-12);
+        assert_eq!(differences(&[changed], &rows).len(), 1);
+        let mut absent = same;
+        absent.seed = 1;
+        assert_eq!(differences(&[absent], &rows).len(), 1);
+    }
+
     #[test]
     fn merged_rows_are_in_table_order() {
         let row = |case: &str, seed| SeedRow {
