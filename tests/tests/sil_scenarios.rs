@@ -130,6 +130,11 @@ fn sil_kin_6_rock_field_crawl() {
 }
 
 #[test]
+fn sil_kin_7_fig17_short_crawl() {
+    check("SIL-KIN-7");
+}
+
+#[test]
 fn sil_slip_1_lumped_slope_reference() {
     check("SIL-SLIP-1");
 }

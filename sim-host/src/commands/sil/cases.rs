@@ -310,7 +310,7 @@ const EKF_HALF_PERCENT: Check = req(
 );
 
 /// The SIL cases (H04 sec. 6, H05 sec. VI; issue thresholds).
-pub const CASES: [Case; 31] = [
+pub const CASES: [Case; 32] = [
     Case {
         id: "SIL-GNC-1",
         scenario: "slope-10-cross",
@@ -691,6 +691,33 @@ pub const CASES: [Case; 31] = [
         checks: &[
             HONEST_END,
             GOAL_REACHED,
+            KIN2D_H04,
+            KIN3D_H04,
+        ],
+    },
+    Case {
+        id: "SIL-KIN-7",
+        scenario: "fig17-crawl",
+        no_slip_comp: false,
+        paired: false,
+        variant: KINEMATIC,
+        title: "H04 Fig. 17 as H04 ran it: about 0.15 m of x travel with three wheels climbing \
+                boulders that turn the rocker and both bogies, no slip, judged over the run",
+        checks: &[
+            every(
+                "true distance driven (the case's 0.15 m, at least)",
+                |s| Some(s.distance_m),
+                Compare::AtLeast,
+                0.1,
+                "m",
+            ),
+            every(
+                "true distance driven (the case's 0.15 m, at most)",
+                |s| Some(s.distance_m),
+                Compare::AtMost,
+                0.2,
+                "m",
+            ),
             KIN2D_H04,
             KIN3D_H04,
         ],
