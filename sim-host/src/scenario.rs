@@ -489,6 +489,7 @@ mod tests {
             "step-climb",
             "rock-crawl",
             "rock-field-crawl",
+            "fig17-crawl",
             "undulating",
             "flat-firm",
             "rockfield-goal",

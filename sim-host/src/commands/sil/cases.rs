@@ -181,6 +181,8 @@ pub const OPEN: &[(&str, usize, &str)] = &[
     ("SIL-KIN-6", 1, "goal reached"),
     ("SIL-KIN-6", 2, "2D kinematics error / distance"),
     ("SIL-KIN-6", 3, "3D kinematics error / distance"),
+    ("SIL-KIN-7", 2, "2D kinematics error / distance"),
+    ("SIL-KIN-7", 3, "3D kinematics error / distance"),
     ("SIL-LOC-1", 4, "fused fix position error max"),
     (
         "SIL-LOC-2",
